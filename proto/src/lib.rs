@@ -1,0 +1,1 @@
+//! gRPC contracts of calib: generated from `calib/v1/*.proto`.

@@ -1,0 +1,216 @@
+//! The contract every hosted model implements.
+//!
+//! A model declares its parameters (name, unit, default, bounds), its outputs and its
+//! effects, and simulates onto a time grid. Effects are extra physics with a parameter
+//! whose value 0 means "absent": they are listed separately so that diagnosis can find
+//! them, but they are passed to [`Model::simulate`] like any other parameter, after the
+//! base parameters, in the order of [`ModelInfo::effects`].
+//!
+//! The optimisers, the objective and the dispatcher only ever see this trait, so new
+//! models slot in without touching them.
+
+use serde::Serialize;
+
+/// A scalar the model takes as input.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ParameterSpec {
+    pub name: String,
+    pub unit: String,
+    pub default: f64,
+    /// Physically admissible range; campaigns may narrow it but not widen it.
+    pub min: f64,
+    pub max: f64,
+    pub description: String,
+}
+
+/// A signal the model produces on the time grid.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct OutputSpec {
+    pub name: String,
+    pub unit: String,
+    pub description: String,
+}
+
+/// Extra physics the base model lacks, switched on by a parameter that is 0 when absent.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct EffectSpec {
+    /// Name as campaigns and diagnosis reports use it, e.g. `viscous_friction.arm`.
+    pub name: String,
+    pub unit: String,
+    /// Admissible range of the effect's parameter; 0 (absent) lies inside it.
+    pub min: f64,
+    pub max: f64,
+    pub description: String,
+}
+
+/// Everything a client needs to know to drive a model.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ModelInfo {
+    pub name: String,
+    /// Bumped whenever a change alters simulated values: invalidates cached evaluations.
+    pub version: u32,
+    pub description: String,
+    pub parameters: Vec<ParameterSpec>,
+    pub outputs: Vec<OutputSpec>,
+    pub effects: Vec<EffectSpec>,
+}
+
+impl ModelInfo {
+    /// Index of a base parameter or effect in the full parameter vector.
+    pub fn parameter_index(&self, name: &str) -> Option<usize> {
+        self.parameters
+            .iter()
+            .position(|p| p.name == name)
+            .or_else(|| {
+                self.effects
+                    .iter()
+                    .position(|e| e.name == name)
+                    .map(|i| self.parameters.len() + i)
+            })
+    }
+
+    pub fn output_index(&self, name: &str) -> Option<usize> {
+        self.outputs.iter().position(|o| o.name == name)
+    }
+
+    /// Length of the full parameter vector: base parameters, then effects.
+    pub fn full_len(&self) -> usize {
+        self.parameters.len() + self.effects.len()
+    }
+
+    /// Defaults for every base parameter, 0 (absent) for every effect.
+    pub fn default_vector(&self) -> Vec<f64> {
+        self.parameters
+            .iter()
+            .map(|p| p.default)
+            .chain(self.effects.iter().map(|_| 0.0))
+            .collect()
+    }
+
+    /// Name of the entry at `index` of the full parameter vector.
+    pub fn name_at(&self, index: usize) -> &str {
+        if index < self.parameters.len() {
+            &self.parameters[index].name
+        } else {
+            &self.effects[index - self.parameters.len()].name
+        }
+    }
+
+    /// Admissible bounds of the entry at `index` of the full parameter vector.
+    pub fn bounds_at(&self, index: usize) -> (f64, f64) {
+        if index < self.parameters.len() {
+            let p = &self.parameters[index];
+            (p.min, p.max)
+        } else {
+            let e = &self.effects[index - self.parameters.len()];
+            (e.min, e.max)
+        }
+    }
+}
+
+/// Accuracy settings of a simulation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolverOptions {
+    pub rtol: f64,
+    pub atol: f64,
+    /// Upper bound on accepted plus rejected steps before the run is abandoned.
+    pub max_steps: usize,
+}
+
+impl Default for SolverOptions {
+    /// The calibration tolerance: tight enough that the solver's error is far below
+    /// sensor noise, loose enough to keep one `furuta` simulation well under a millisecond.
+    fn default() -> Self {
+        Self {
+            rtol: 1e-8,
+            atol: 1e-10,
+            max_steps: 200_000,
+        }
+    }
+}
+
+/// Outputs sampled on the requested grid: `values[output][sample]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Trajectory {
+    pub time: Vec<f64>,
+    pub values: Vec<Vec<f64>>,
+    /// Solver statistics, for benchmarks and diagnostics.
+    pub stats: SolverStats,
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SolverStats {
+    pub accepted_steps: usize,
+    pub rejected_steps: usize,
+    pub rhs_evaluations: usize,
+    pub events: usize,
+}
+
+/// Why a simulation produced no trajectory. A typed result, never a panic: the
+/// objective turns it into a large finite penalty.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SimulationError {
+    #[error("step limit of {limit} steps reached at t = {time} s")]
+    StepLimit { limit: usize, time: f64 },
+    #[error("step size underflow at t = {time} s")]
+    StepTooSmall { time: f64 },
+    #[error("solution diverged (non-finite state) at t = {time} s")]
+    Diverged { time: f64 },
+    #[error("invalid request: {0}")]
+    InvalidInput(String),
+}
+
+/// A hosted model.
+pub trait Model: Send + Sync {
+    fn info(&self) -> &ModelInfo;
+
+    /// Simulate with the full parameter vector `params` (base parameters then effects,
+    /// see [`ModelInfo::full_len`]) from t = 0 and return the outputs listed in
+    /// `outputs` (indices into [`ModelInfo::outputs`]) at the times of `grid`
+    /// (non-decreasing, all ≥ 0).
+    fn simulate(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError>;
+}
+
+/// Checks shared by every model before it simulates.
+pub fn check_request(
+    info: &ModelInfo,
+    params: &[f64],
+    grid: &[f64],
+    outputs: &[usize],
+) -> Result<(), SimulationError> {
+    if params.len() != info.full_len() {
+        return Err(SimulationError::InvalidInput(format!(
+            "model `{}` takes {} parameters, got {}",
+            info.name,
+            info.full_len(),
+            params.len()
+        )));
+    }
+    if let Some(i) = params.iter().position(|v| !v.is_finite()) {
+        return Err(SimulationError::InvalidInput(format!(
+            "parameter `{}` is not finite",
+            info.name_at(i)
+        )));
+    }
+    if grid.is_empty() {
+        return Err(SimulationError::InvalidInput("empty time grid".into()));
+    }
+    if grid.iter().any(|t| !t.is_finite() || *t < 0.0) || grid.windows(2).any(|w| w[1] < w[0]) {
+        return Err(SimulationError::InvalidInput(
+            "time grid must be finite, non-negative and non-decreasing".into(),
+        ));
+    }
+    if let Some(o) = outputs.iter().find(|o| **o >= info.outputs.len()) {
+        return Err(SimulationError::InvalidInput(format!(
+            "model `{}` has no output #{o}",
+            info.name
+        )));
+    }
+    Ok(())
+}

@@ -1,0 +1,20 @@
+//! The hosted models. Each lives in its own module and implements [`crate::Model`].
+
+
+
+use crate::Model;
+use std::sync::OnceLock;
+
+/// Every hosted model, in the order `calib models` lists them.
+pub fn all() -> &'static [Box<dyn Model>] {
+    static MODELS: OnceLock<Vec<Box<dyn Model>>> = OnceLock::new();
+    MODELS.get_or_init(|| Vec::new())
+}
+
+/// The hosted model called `name`.
+pub fn find(name: &str) -> Option<&'static dyn Model> {
+    all()
+        .iter()
+        .find(|m| m.info().name == name)
+        .map(|m| m.as_ref())
+}

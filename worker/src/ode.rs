@@ -1,0 +1,528 @@
+//! Dormand–Prince 5(4) with dense output and event location, for hybrid systems.
+//!
+//! An explicit embedded Runge–Kutta pair of order 5 with an error estimate of order 4,
+//! local extrapolation, a PI step-size controller and the continuous extension of order 4
+//! from Hairer's `DOPRI5`. Outputs are read off the dense output at the requested times, so
+//! the step size is set by accuracy alone, never by the output grid.
+//!
+//! Hybrid systems (mode switches such as stick–slip friction) declare event functions
+//! `g_k(t, y)`. An event fires when `g_k` goes from `≥ 0` to `< 0` within an accepted step;
+//! its time is located on the dense output by the Illinois variant of regula falsi, the step
+//! is cut there, the system switches mode (and may reset the state), and integration restarts
+//! from the event with a fresh first stage. The right-hand side is therefore always smooth
+//! inside a step, which is what the error control assumes.
+//!
+//! References:
+//! - J. R. Dormand, P. J. Prince, "A family of embedded Runge–Kutta formulae",
+//!   J. Comp. Appl. Math. 6 (1980) 19–26.
+//! - E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*,
+//!   2nd ed., Springer 1993, §II.4–II.6 (step control, dense output) and the `DOPRI5` code.
+//! - L. F. Shampine, S. Thompson, "Event location for ordinary differential equations",
+//!   Computers & Mathematics with Applications 39 (2000) 43–54.
+
+use crate::model::{SimulationError, SolverOptions, SolverStats};
+
+/// A system of first-order ODEs, possibly with discrete modes switched at events.
+pub trait HybridSystem {
+    /// Dimension of the state.
+    fn dim(&self) -> usize;
+
+    /// `dy = f(t, y)` in the current mode.
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]);
+
+    /// Number of event functions (constant for the life of the system).
+    fn event_count(&self) -> usize {
+        0
+    }
+
+    /// Event functions in the current mode; event `k` fires when `g[k]` goes from `≥ 0` to `< 0`.
+    fn events(&self, _t: f64, _y: &[f64], _g: &mut [f64]) {}
+
+    /// Called at a located event: switch mode, and adjust the state if the physics demands it.
+    fn on_event(&mut self, _t: f64, _y: &mut [f64], _event: usize) {}
+}
+
+// Dormand–Prince 5(4) tableau.
+const C2: f64 = 1.0 / 5.0;
+const C3: f64 = 3.0 / 10.0;
+const C4: f64 = 4.0 / 5.0;
+const C5: f64 = 8.0 / 9.0;
+const A21: f64 = 1.0 / 5.0;
+const A31: f64 = 3.0 / 40.0;
+const A32: f64 = 9.0 / 40.0;
+const A41: f64 = 44.0 / 45.0;
+const A42: f64 = -56.0 / 15.0;
+const A43: f64 = 32.0 / 9.0;
+const A51: f64 = 19372.0 / 6561.0;
+const A52: f64 = -25360.0 / 2187.0;
+const A53: f64 = 64448.0 / 6561.0;
+const A54: f64 = -212.0 / 729.0;
+const A61: f64 = 9017.0 / 3168.0;
+const A62: f64 = -355.0 / 33.0;
+const A63: f64 = 46732.0 / 5247.0;
+const A64: f64 = 49.0 / 176.0;
+const A65: f64 = -5103.0 / 18656.0;
+const A71: f64 = 35.0 / 384.0;
+const A73: f64 = 500.0 / 1113.0;
+const A74: f64 = 125.0 / 192.0;
+const A75: f64 = -2187.0 / 6784.0;
+const A76: f64 = 11.0 / 84.0;
+const E1: f64 = 71.0 / 57600.0;
+const E3: f64 = -71.0 / 16695.0;
+const E4: f64 = 71.0 / 1920.0;
+const E5: f64 = -17253.0 / 339200.0;
+const E6: f64 = 22.0 / 525.0;
+const E7: f64 = -1.0 / 40.0;
+const D1: f64 = -12715105075.0 / 11282082432.0;
+const D3: f64 = 87487479700.0 / 32700410799.0;
+const D4: f64 = -10690763975.0 / 1880347072.0;
+const D5: f64 = 701980252875.0 / 199316789632.0;
+const D6: f64 = -1453857185.0 / 822651844.0;
+const D7: f64 = 69997945.0 / 29380423.0;
+
+// Step-size controller (Hairer's defaults).
+const SAFETY: f64 = 0.9;
+const BETA: f64 = 0.04;
+const EXPO1: f64 = 0.2 - BETA * 0.75;
+const FAC_MIN: f64 = 0.2; // smallest ratio h_new / h
+const FAC_MAX: f64 = 10.0; // largest ratio h_new / h
+
+/// Most event locations per step before the solver gives up on a chattering system.
+const MAX_EVENTS_AT_ONE_TIME: usize = 64;
+
+/// The continuous extension of one accepted step.
+struct Dense {
+    t0: f64,
+    h: f64,
+    r: [Vec<f64>; 5],
+}
+
+impl Dense {
+    fn new(n: usize) -> Self {
+        Self {
+            t0: 0.0,
+            h: 0.0,
+            r: std::array::from_fn(|_| vec![0.0; n]),
+        }
+    }
+
+    fn eval(&self, t: f64, out: &mut [f64]) {
+        let theta = (t - self.t0) / self.h;
+        let theta1 = 1.0 - theta;
+        let [r1, r2, r3, r4, r5] = &self.r;
+        for i in 0..out.len() {
+            out[i] = r1[i] + theta * (r2[i] + theta1 * (r3[i] + theta * (r4[i] + theta1 * r5[i])));
+        }
+    }
+}
+
+/// Integrate `system` from `t = 0`, state `y0`, and call `out(i, y)` with the state at each
+/// `grid[i]` (non-decreasing, ≥ 0).
+pub fn integrate<S, F>(
+    system: &mut S,
+    y0: &[f64],
+    grid: &[f64],
+    options: &SolverOptions,
+    mut out: F,
+) -> Result<SolverStats, SimulationError>
+where
+    S: HybridSystem,
+    F: FnMut(usize, &[f64]),
+{
+    let n = system.dim();
+    assert_eq!(y0.len(), n, "state dimension");
+    let mut stats = SolverStats::default();
+    let Some(&t_end) = grid.last() else {
+        return Ok(stats);
+    };
+
+    let mut t = 0.0;
+    let mut y = y0.to_vec();
+    let mut next_out = 0;
+    while next_out < grid.len() && grid[next_out] <= t {
+        out(next_out, &y);
+        next_out += 1;
+    }
+    if next_out == grid.len() {
+        return Ok(stats);
+    }
+
+    let ne = system.event_count();
+    let mut g_old = vec![0.0; ne];
+    let mut g_new = vec![0.0; ne];
+    let mut g_tmp = vec![0.0; ne];
+
+    let mut k: [Vec<f64>; 7] = std::array::from_fn(|_| vec![0.0; n]);
+    let mut ytmp = vec![0.0; n];
+    let mut ynew = vec![0.0; n];
+    let mut yerr = vec![0.0; n];
+    let mut dense = Dense::new(n);
+
+    system.rhs(t, &y, &mut k[0]);
+    stats.rhs_evaluations += 1;
+    system.events(t, &y, &mut g_old);
+
+    let mut h = initial_step(system, t, &y, &k[0], t_end - t, options, &mut stats);
+    let mut fac_old: f64 = 1e-4;
+    let mut last_rejected = false;
+    let mut events_here = 0usize;
+    let mut last_event_t = f64::NAN;
+
+    loop {
+        if stats.accepted_steps + stats.rejected_steps >= options.max_steps {
+            return Err(SimulationError::StepLimit {
+                limit: options.max_steps,
+                time: t,
+            });
+        }
+        let remaining = t_end - t;
+        let mut last_step = false;
+        if h >= remaining * (1.0 - 1e-12) {
+            h = remaining;
+            last_step = true;
+        }
+        if h <= 1e-14 * t.abs().max(1.0) {
+            return Err(SimulationError::StepTooSmall { time: t });
+        }
+
+        // Stages 2..7 (stage 1 is k[0], first-same-as-last).
+        {
+            let (k1, rest) = k.split_first_mut().expect("seven stages");
+            let [k2, k3, k4, k5, k6, k7] = rest else {
+                unreachable!()
+            };
+            for i in 0..n {
+                ytmp[i] = y[i] + h * A21 * k1[i];
+            }
+            system.rhs(t + C2 * h, &ytmp, k2);
+            for i in 0..n {
+                ytmp[i] = y[i] + h * (A31 * k1[i] + A32 * k2[i]);
+            }
+            system.rhs(t + C3 * h, &ytmp, k3);
+            for i in 0..n {
+                ytmp[i] = y[i] + h * (A41 * k1[i] + A42 * k2[i] + A43 * k3[i]);
+            }
+            system.rhs(t + C4 * h, &ytmp, k4);
+            for i in 0..n {
+                ytmp[i] = y[i] + h * (A51 * k1[i] + A52 * k2[i] + A53 * k3[i] + A54 * k4[i]);
+            }
+            system.rhs(t + C5 * h, &ytmp, k5);
+            for i in 0..n {
+                ytmp[i] = y[i]
+                    + h * (A61 * k1[i] + A62 * k2[i] + A63 * k3[i] + A64 * k4[i] + A65 * k5[i]);
+            }
+            system.rhs(t + h, &ytmp, k6);
+            for i in 0..n {
+                ynew[i] = y[i]
+                    + h * (A71 * k1[i] + A73 * k3[i] + A74 * k4[i] + A75 * k5[i] + A76 * k6[i]);
+            }
+            system.rhs(t + h, &ynew, k7);
+            stats.rhs_evaluations += 6;
+            for i in 0..n {
+                yerr[i] = h
+                    * (E1 * k1[i] + E3 * k3[i] + E4 * k4[i] + E5 * k5[i] + E6 * k6[i] + E7 * k7[i]);
+            }
+        }
+
+        let mut err = 0.0;
+        for i in 0..n {
+            let sk = options.atol + options.rtol * y[i].abs().max(ynew[i].abs());
+            let e = yerr[i] / sk;
+            err += e * e;
+        }
+        let err = (err / n as f64).sqrt();
+        if !err.is_finite() || ynew.iter().any(|v| !v.is_finite()) {
+            // Shrink hard; a truly diverging state ends in a step-size underflow.
+            if ynew.iter().any(|v| !v.is_finite()) && h < 1e-10 {
+                return Err(SimulationError::Diverged { time: t });
+            }
+            stats.rejected_steps += 1;
+            h *= FAC_MIN;
+            last_rejected = true;
+            continue;
+        }
+
+        let fac11 = err.powf(EXPO1);
+        if err > 1.0 {
+            stats.rejected_steps += 1;
+            h /= (fac11 / SAFETY).min(1.0 / FAC_MIN);
+            last_rejected = true;
+            continue;
+        }
+
+        // Accepted: build the dense output of [t, t + h].
+        stats.accepted_steps += 1;
+        dense.t0 = t;
+        dense.h = h;
+        for i in 0..n {
+            let ydiff = ynew[i] - y[i];
+            let bspl = h * k[0][i] - ydiff;
+            dense.r[0][i] = y[i];
+            dense.r[1][i] = ydiff;
+            dense.r[2][i] = bspl;
+            dense.r[3][i] = ydiff - h * k[6][i] - bspl;
+            dense.r[4][i] = h
+                * (D1 * k[0][i]
+                    + D3 * k[2][i]
+                    + D4 * k[3][i]
+                    + D5 * k[4][i]
+                    + D6 * k[5][i]
+                    + D7 * k[6][i]);
+        }
+        let t_new = if last_step { t_end } else { t + h };
+
+        // Events: the earliest event function to change sign from ≥ 0 to < 0.
+        let mut event: Option<(usize, f64)> = None;
+        if ne > 0 {
+            system.events(t_new, &ynew, &mut g_new);
+            for e in 0..ne {
+                if g_old[e] >= 0.0 && g_new[e] < 0.0 {
+                    let te = locate_event(system, &dense, e, t, t_new, g_old[e], g_new[e], &mut ytmp, &mut g_tmp);
+                    if event.is_none_or(|(_, best)| te < best) {
+                        event = Some((e, te));
+                    }
+                }
+            }
+        }
+
+        let t_stop = event.map_or(t_new, |(_, te)| te);
+        while next_out < grid.len() && grid[next_out] <= t_stop {
+            if grid[next_out] == t_new && event.is_none() {
+                out(next_out, &ynew);
+            } else {
+                dense.eval(grid[next_out], &mut ytmp);
+                out(next_out, &ytmp);
+            }
+            next_out += 1;
+        }
+
+        match event {
+            None => {
+                t = t_new;
+                std::mem::swap(&mut y, &mut ynew);
+                k.swap(0, 6);
+                std::mem::swap(&mut g_old, &mut g_new);
+                if next_out == grid.len() {
+                    return Ok(stats);
+                }
+                let mut fac = fac11 / fac_old.powf(BETA);
+                fac = (fac / SAFETY).clamp(1.0 / FAC_MAX, 1.0 / FAC_MIN);
+                let mut h_new = h / fac;
+                if last_rejected {
+                    h_new = h_new.min(h);
+                }
+                fac_old = err.max(1e-4);
+                h = h_new;
+                last_rejected = false;
+                events_here = 0;
+            }
+            Some((e, te)) => {
+                stats.events += 1;
+                if te == last_event_t {
+                    events_here += 1;
+                    if events_here > MAX_EVENTS_AT_ONE_TIME {
+                        return Err(SimulationError::StepTooSmall { time: te });
+                    }
+                } else {
+                    events_here = 0;
+                }
+                last_event_t = te;
+                dense.eval(te, &mut y);
+                t = te;
+                system.on_event(t, &mut y, e);
+                if next_out == grid.len() {
+                    return Ok(stats);
+                }
+                system.rhs(t, &y, &mut k[0]);
+                stats.rhs_evaluations += 1;
+                system.events(t, &y, &mut g_old);
+                // Restart with the step that reached the event, at least a fraction of the
+                // accepted one so the controller does not crawl after every switch.
+                h = (te - dense.t0).max(0.1 * h).max(1e-6);
+                fac_old = 1e-4;
+                last_rejected = false;
+            }
+        }
+    }
+}
+
+/// Time of the zero of event `e` in `[ta, tb]`, where `g(ta) ≥ 0 > g(tb)`: the returned time
+/// is on the negative side, so the event condition holds there.
+#[allow(clippy::too_many_arguments)]
+fn locate_event<S: HybridSystem>(
+    system: &S,
+    dense: &Dense,
+    e: usize,
+    mut ta: f64,
+    mut tb: f64,
+    mut ga: f64,
+    mut gb: f64,
+    y: &mut [f64],
+    g: &mut [f64],
+) -> f64 {
+    let tol = 1e-13 * tb.abs().max(1.0);
+    let mut side = 0i8;
+    for _ in 0..100 {
+        if tb - ta <= tol {
+            break;
+        }
+        let mut tc = (ta * gb - tb * ga) / (gb - ga);
+        if !(tc > ta && tc < tb) {
+            tc = 0.5 * (ta + tb);
+        }
+        dense.eval(tc, y);
+        system.events(tc, y, g);
+        let gc = g[e];
+        if gc < 0.0 {
+            tb = tc;
+            gb = gc;
+            if side == -1 {
+                ga *= 0.5;
+            }
+            side = -1;
+        } else {
+            ta = tc;
+            ga = gc;
+            if side == 1 {
+                gb *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    tb
+}
+
+/// Hairer's starting step: the step whose explicit Euler error would be about the tolerance.
+fn initial_step<S: HybridSystem>(
+    system: &S,
+    t: f64,
+    y: &[f64],
+    f0: &[f64],
+    span: f64,
+    options: &SolverOptions,
+    stats: &mut SolverStats,
+) -> f64 {
+    let n = y.len();
+    let sk = |i: usize| options.atol + options.rtol * y[i].abs();
+    let norm = |v: &dyn Fn(usize) -> f64| ((0..n).map(|i| v(i).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let d0 = norm(&|i| y[i] / sk(i));
+    let d1 = norm(&|i| f0[i] / sk(i));
+    let mut h0 = if d0 < 1e-5 || d1 < 1e-5 {
+        1e-6
+    } else {
+        0.01 * d0 / d1
+    };
+    h0 = h0.min(span);
+    let y1: Vec<f64> = (0..n).map(|i| y[i] + h0 * f0[i]).collect();
+    let mut f1 = vec![0.0; n];
+    system.rhs(t + h0, &y1, &mut f1);
+    stats.rhs_evaluations += 1;
+    let d2 = norm(&|i| (f1[i] - f0[i]) / sk(i)) / h0;
+    let h1 = if d1.max(d2) <= 1e-15 {
+        (h0 * 1e-3).max(1e-6)
+    } else {
+        (0.01 / d1.max(d2)).powf(0.2)
+    };
+    (100.0 * h0).min(h1).min(span)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Harmonic;
+    impl HybridSystem for Harmonic {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
+            dy[0] = y[1];
+            dy[1] = -y[0];
+        }
+    }
+
+    #[test]
+    fn harmonic_oscillator_matches_closed_form_on_the_grid() {
+        let grid: Vec<f64> = (0..=200).map(|i| i as f64 * 0.1).collect();
+        let opts = SolverOptions {
+            rtol: 1e-10,
+            atol: 1e-12,
+            max_steps: 100_000,
+        };
+        let mut worst: f64 = 0.0;
+        integrate(&mut Harmonic, &[1.0, 0.0], &grid, &opts, |i, y| {
+            worst = worst.max((y[0] - grid[i].cos()).abs());
+            worst = worst.max((y[1] + grid[i].sin()).abs());
+        })
+        .unwrap();
+        assert!(worst < 1e-8, "max error {worst}");
+    }
+
+    #[test]
+    fn error_falls_with_tolerance_at_fifth_order() {
+        let grid = [10.0];
+        let mut errs = Vec::new();
+        for rtol in [1e-5, 1e-8] {
+            let opts = SolverOptions {
+                rtol,
+                atol: rtol * 1e-2,
+                max_steps: 100_000,
+            };
+            let mut e = 0.0;
+            integrate(&mut Harmonic, &[1.0, 0.0], &grid, &opts, |_, y| {
+                e = (y[0] - 10f64.cos()).abs();
+            })
+            .unwrap();
+            errs.push(e);
+        }
+        assert!(errs[1] < errs[0] / 100.0, "errors {errs:?}");
+    }
+
+    /// A ball dropped from 1 m bouncing with restitution 0.5: event times in closed form.
+    struct Ball {
+        bounces: Vec<f64>,
+    }
+    impl HybridSystem for Ball {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
+            dy[0] = y[1];
+            dy[1] = -9.81;
+        }
+        fn event_count(&self) -> usize {
+            1
+        }
+        fn events(&self, _t: f64, y: &[f64], g: &mut [f64]) {
+            // Fires when the ball, falling, reaches the floor.
+            g[0] = if y[1] < 0.0 { y[0] } else { 1.0 };
+        }
+        fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
+            self.bounces.push(t);
+            y[0] = 0.0;
+            y[1] = -0.5 * y[1];
+        }
+    }
+
+    #[test]
+    fn events_are_located_on_the_dense_output() {
+        let mut ball = Ball { bounces: vec![] };
+        let opts = SolverOptions::default();
+        integrate(&mut ball, &[1.0, 0.0], &[2.0], &opts, |_, _| {}).unwrap();
+        let t1 = (2.0f64 / 9.81).sqrt();
+        let v1 = 9.81 * t1;
+        let t2 = t1 + 2.0 * 0.5 * v1 / 9.81;
+        assert!((ball.bounces[0] - t1).abs() < 1e-9, "{:?}", ball.bounces);
+        assert!((ball.bounces[1] - t2).abs() < 1e-9, "{:?}", ball.bounces);
+    }
+
+    #[test]
+    fn step_limit_is_a_typed_error() {
+        let opts = SolverOptions {
+            max_steps: 5,
+            ..SolverOptions::default()
+        };
+        let r = integrate(&mut Harmonic, &[1.0, 0.0], &[100.0], &opts, |_, _| {});
+        assert!(matches!(r, Err(SimulationError::StepLimit { .. })));
+    }
+}
