@@ -1,1 +1,67 @@
-fn main() {}
+//! `calib`: calibrate physical models against measured data.
+
+mod commands;
+
+use clap::{Parser, Subcommand};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "calib",
+    version,
+    about = "Calibrate physical simulation models against measured data",
+    long_about = "calib fits the parameters of a simulation model (a Furuta pendulum, a heat \
+exchanger test bench, ...) to measured data: weighted least squares over a time window, \
+bounded parameters, Nelder-Mead, Powell and differential evolution from several start \
+points at once. Run `calib models` to see the hosted models and `calib calibrate \
+examples/furuta.toml` for a first campaign.",
+    propagate_version = true
+)]
+struct Cli {
+    /// Log filter (e.g. `info`, `calib_coordinator=debug`); also read from RUST_LOG.
+    #[arg(long, global = true, value_name = "FILTER")]
+    log: Option<String>,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List the hosted models: parameters (unit, default, bounds), outputs and effects.
+    Models(commands::models::Args),
+    /// Simulate a model and write its outputs over time as CSV.
+    Simulate(commands::simulate::Args),
+    /// Run a calibration campaign in this process (all cores, no network).
+    Calibrate(commands::calibrate::Args),
+    /// Measure simulation and calibration speed and print the figures.
+    Bench(commands::bench::Args),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = cli
+        .log
+        .clone()
+        .or_else(|| std::env::var("RUST_LOG").ok())
+        .unwrap_or_else(|| "warn".into());
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_new(&filter)
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let outcome = match cli.command {
+        Command::Models(args) => commands::models::run(args),
+        Command::Simulate(args) => commands::simulate::run(args),
+        Command::Calibrate(args) => commands::calibrate::run(args),
+        Command::Bench(args) => commands::bench::run(args),
+    };
+    match outcome {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(failure) => {
+            eprintln!("error: {}", failure.message);
+            ExitCode::from(failure.code)
+        }
+    }
+}

@@ -277,7 +277,9 @@ where
             system.events(t_new, &ynew, &mut g_new);
             for e in 0..ne {
                 if g_old[e] >= 0.0 && g_new[e] < 0.0 {
-                    let te = locate_event(system, &dense, e, t, t_new, g_old[e], g_new[e], &mut ytmp, &mut g_tmp);
+                    let te = locate_event(
+                        system, &dense, e, t, t_new, g_old[e], g_new[e], &mut ytmp, &mut g_tmp,
+                    );
                     if event.is_none_or(|(_, best)| te < best) {
                         event = Some((e, te));
                     }
@@ -404,7 +406,8 @@ fn initial_step<S: HybridSystem>(
 ) -> f64 {
     let n = y.len();
     let sk = |i: usize| options.atol + options.rtol * y[i].abs();
-    let norm = |v: &dyn Fn(usize) -> f64| ((0..n).map(|i| v(i).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let norm =
+        |v: &dyn Fn(usize) -> f64| ((0..n).map(|i| v(i).powi(2)).sum::<f64>() / n as f64).sqrt();
     let d0 = norm(&|i| y[i] / sk(i));
     let d1 = norm(&|i| f0[i] / sk(i));
     let mut h0 = if d0 < 1e-5 || d1 < 1e-5 {
@@ -478,7 +481,8 @@ mod tests {
         assert!(errs[1] < errs[0] / 100.0, "errors {errs:?}");
     }
 
-    /// A ball dropped from 1 m bouncing with restitution 0.5: event times in closed form.
+    /// A ball dropped from 1 m bouncing with restitution 0.5: event times in closed form
+    /// (the bounces accumulate at 3·t1 ≈ 1.35 s, so the run stops before).
     struct Ball {
         bounces: Vec<f64>,
     }
@@ -508,7 +512,7 @@ mod tests {
     fn events_are_located_on_the_dense_output() {
         let mut ball = Ball { bounces: vec![] };
         let opts = SolverOptions::default();
-        integrate(&mut ball, &[1.0, 0.0], &[2.0], &opts, |_, _| {}).unwrap();
+        integrate(&mut ball, &[1.0, 0.0], &[1.2], &opts, |_, _| {}).unwrap();
         let t1 = (2.0f64 / 9.81).sqrt();
         let v1 = 9.81 * t1;
         let t2 = t1 + 2.0 * 0.5 * v1 / 9.81;

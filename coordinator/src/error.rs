@@ -1,0 +1,38 @@
+//! The coordinator's error type.
+
+use crate::campaign::CampaignError;
+use crate::measurement::MeasurementError;
+use std::path::PathBuf;
+
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// The campaign file is wrong: the user must fix it.
+    #[error(transparent)]
+    Campaign(#[from] CampaignError),
+    /// The measurement is missing or malformed: the user must fix it.
+    #[error(transparent)]
+    Measurement(#[from] MeasurementError),
+    /// A request names something that does not exist or a value out of range.
+    #[error("{0}")]
+    InvalidRequest(String),
+    #[error("cannot write {path}: {source}")]
+    Write {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("optimiser failed: {0}")]
+    Optimiser(String),
+}
+
+impl Error {
+    /// True when the error comes from what the user gave us (campaign, data, request), as
+    /// opposed to a failure of the machine or of calib itself.
+    pub fn is_bad_input(&self) -> bool {
+        matches!(
+            self,
+            Error::Campaign(_) | Error::Measurement(_) | Error::InvalidRequest(_)
+        )
+    }
+}
+
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,194 @@
+//! The calibration objective: weighted least squares over the time window.
+//!
+//! `f(p) = Σ_i k_i Σ_t (y_i(p, t) − w_i(t))²` with `y_i` the model output read at the
+//! measurement times `t` inside the window and `w_i` the measured column mapped to it.
+//! A simulation that fails (diverged, step limit) is not an error here: it evaluates to a
+//! large finite penalty, so optimisers move away from it and never stop on it.
+
+use crate::campaign::{Campaign, CampaignError};
+use crate::measurement::Measurement;
+use calib_worker::{Model, SolverOptions};
+
+/// Objective value given to parameter sets whose simulation failed: finite, so optimisers
+/// that compare or average costs keep working, and far above any real fit.
+pub const FAILURE_PENALTY: f64 = 1e30;
+
+/// One point's outcome.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    pub objective: f64,
+    /// Unweighted sum of squared errors per output, in campaign order.
+    pub sse: Vec<f64>,
+    /// Why the simulation failed, when it did (then `objective` is the penalty).
+    pub failure: Option<String>,
+}
+
+impl Evaluation {
+    pub fn failed(outputs: usize, why: String) -> Self {
+        Self {
+            objective: FAILURE_PENALTY,
+            sse: vec![f64::NAN; outputs],
+            failure: Some(why),
+        }
+    }
+}
+
+/// Everything needed to score a parameter vector: the model, the fixed parameters, the
+/// measured series on the window's grid and the weights.
+pub struct Objective {
+    pub model: &'static dyn Model,
+    /// Full parameter vector with the free entries at their nominal values.
+    pub base: Vec<f64>,
+    /// Positions of the free parameters in the full vector.
+    pub free: Vec<usize>,
+    /// Measurement times inside the window.
+    pub grid: Vec<f64>,
+    /// Model output indices, in campaign order.
+    pub outputs: Vec<usize>,
+    pub weights: Vec<f64>,
+    /// Measured series on `grid`, one per output.
+    pub measured: Vec<Vec<f64>>,
+    pub solver: SolverOptions,
+    fingerprint: [u8; 32],
+}
+
+impl Objective {
+    /// Build the objective of `campaign` on `measurement` (which must hold every mapped column).
+    pub fn new(campaign: &Campaign, measurement: &Measurement) -> Result<Self, CampaignError> {
+        let (start, stop) = campaign.window;
+        let time = &measurement.time;
+        let window_error = |message: String| CampaignError {
+            file: campaign.source.clone().unwrap_or_default(),
+            line: None,
+            field: "window".into(),
+            message,
+        };
+        let (first, last) = (time[0], time[time.len() - 1]);
+        let slack = 1e-9 * last.abs().max(1.0);
+        if start < first - slack || stop > last + slack {
+            return Err(window_error(format!(
+                "[{start}, {stop}] s lies outside the data of {} (time runs from {first} to {last} s)",
+                measurement.source.display()
+            )));
+        }
+        let rows: Vec<usize> = (0..time.len())
+            .filter(|&i| time[i] >= start - slack && time[i] <= stop + slack)
+            .collect();
+        if rows.len() < 2 {
+            return Err(window_error(format!(
+                "[{start}, {stop}] s holds {} samples of {}: too few to fit",
+                rows.len(),
+                measurement.source.display()
+            )));
+        }
+        if time[rows[0]] < 0.0 {
+            return Err(window_error(
+                "the model starts at t = 0: the window must not reach negative times".into(),
+            ));
+        }
+        let grid: Vec<f64> = rows.iter().map(|&i| time[i]).collect();
+        let measured = campaign
+            .outputs
+            .iter()
+            .map(|o| {
+                let column = measurement
+                    .column(&o.measured)
+                    .expect("the measurement was loaded with every mapped column");
+                rows.iter().map(|&i| column[i]).collect()
+            })
+            .collect();
+        let mut objective = Self {
+            model: campaign.model,
+            base: campaign.base.clone(),
+            free: campaign.free.iter().map(|p| p.index).collect(),
+            grid,
+            outputs: campaign.outputs.iter().map(|o| o.model_index).collect(),
+            weights: campaign.outputs.iter().map(|o| o.weight).collect(),
+            measured,
+            solver: campaign.solver,
+            fingerprint: [0; 32],
+        };
+        objective.fingerprint = objective.compute_fingerprint(&measurement.content_hash());
+        Ok(objective)
+    }
+
+    /// A hash of everything that changes the value of the objective at a given point: model
+    /// and version, fixed parameters, which parameters are free, grid, measured data,
+    /// output mapping, weights and solver settings.
+    pub fn fingerprint(&self) -> [u8; 32] {
+        self.fingerprint
+    }
+
+    fn compute_fingerprint(&self, measurement_hash: &[u8; 32]) -> [u8; 32] {
+        let info = self.model.info();
+        let mut h = blake3::Hasher::new();
+        h.update(b"calib-objective-v1");
+        h.update(info.name.as_bytes());
+        h.update(&info.version.to_le_bytes());
+        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
+            h.update(&(v.len() as u64).to_le_bytes());
+            for x in v {
+                h.update(&x.to_bits().to_le_bytes());
+            }
+        };
+        let usizes = |h: &mut blake3::Hasher, v: &[usize]| {
+            h.update(&(v.len() as u64).to_le_bytes());
+            for x in v {
+                h.update(&(*x as u64).to_le_bytes());
+            }
+        };
+        let mut fixed = self.base.clone();
+        for &i in &self.free {
+            fixed[i] = 0.0;
+        }
+        f64s(&mut h, &fixed);
+        usizes(&mut h, &self.free);
+        f64s(&mut h, &self.grid);
+        h.update(measurement_hash);
+        usizes(&mut h, &self.outputs);
+        f64s(&mut h, &self.weights);
+        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
+        h.update(&(self.solver.max_steps as u64).to_le_bytes());
+        *h.finalize().as_bytes()
+    }
+
+    /// The full parameter vector with the free parameters set to `free_values`.
+    pub fn full_parameters(&self, free_values: &[f64]) -> Vec<f64> {
+        let mut full = self.base.clone();
+        for (&i, v) in self.free.iter().zip(free_values) {
+            full[i] = *v;
+        }
+        full
+    }
+
+    /// Simulate at `free_values` and score against the measurement.
+    pub fn evaluate(&self, free_values: &[f64]) -> Evaluation {
+        let params = self.full_parameters(free_values);
+        match self
+            .model
+            .simulate(&params, &self.grid, &self.outputs, &self.solver)
+        {
+            Err(e) => Evaluation::failed(self.outputs.len(), e.to_string()),
+            Ok(trajectory) => self.score(&trajectory.values),
+        }
+    }
+
+    /// Score simulated series (one per output, on the grid).
+    pub fn score(&self, simulated: &[Vec<f64>]) -> Evaluation {
+        let sse: Vec<f64> = simulated
+            .iter()
+            .zip(&self.measured)
+            .map(|(y, w)| y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum())
+            .collect();
+        let objective: f64 = sse.iter().zip(&self.weights).map(|(s, k)| s * k).sum();
+        if objective.is_finite() {
+            Evaluation {
+                objective,
+                sse,
+                failure: None,
+            }
+        } else {
+            Evaluation::failed(self.outputs.len(), "simulated output is not finite".into())
+        }
+    }
+}

@@ -1,0 +1,224 @@
+//! Multistart: every method from every start point, run concurrently; minima clustered.
+//!
+//! Start points: the nominal point first, then points of a scrambled Sobol sequence
+//! (Burley's Owen-scrambled Sobol, seeded by the campaign) so that extra starts cover the box
+//! evenly. A run is one method from one start; all runs are independent and deterministic
+//! for a given seed, so running them concurrently changes nothing but the wall time.
+//!
+//! I. M. Sobol', "On the distribution of points in a cube and the approximate evaluation of
+//! integrals", USSR Comput. Math. Math. Phys. 7 (1967) 86–112; B. Burley, "Practical
+//! Hash-based Owen Scrambling", JCGT 9(4) (2020).
+
+use super::budget::Budgeted;
+use super::problem::{Progress, RunLog, RunProblem};
+use super::space::UnitBox;
+use super::{differential_evolution, nelder_mead, powell};
+use crate::campaign::Method;
+use crate::evaluator::Evaluator;
+use crate::objective::Objective;
+use argmin::core::{Executor, IterState, PopulationState, Solver, State, TerminationStatus};
+use rayon::prelude::*;
+use serde::Serialize;
+
+/// Hard cap on iterations, far above what any budget allows; argmin needs one.
+const MAX_ITERS: u64 = 1_000_000;
+
+/// Start points in the unit box: the nominal point, then `starts − 1` Sobol points.
+pub fn start_points(nominal_unit: &[f64], starts: usize, seed: u64) -> Vec<Vec<f64>> {
+    let mut points = vec![nominal_unit.to_vec()];
+    let dim = nominal_unit.len() as u32;
+    let scramble = (seed ^ (seed >> 32)) as u32;
+    for i in 1..starts {
+        points.push(
+            (0..dim)
+                .map(|d| f64::from(sobol_burley::sample(i as u32, d, scramble)))
+                .collect(),
+        );
+    }
+    points
+}
+
+/// One method from one start point.
+#[derive(Debug, Clone)]
+pub struct RunSpec {
+    pub method: Method,
+    pub start: usize,
+    pub start_unit: Vec<f64>,
+    pub seed: u64,
+}
+
+/// What a run found.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunOutcome {
+    pub method: Method,
+    pub start: usize,
+    /// Physical values of the free parameters at the start.
+    pub start_point: Vec<f64>,
+    /// Physical values at the best point the run saw.
+    pub point: Vec<f64>,
+    pub objective: f64,
+    pub evaluations: usize,
+    pub iterations: u64,
+    pub termination: String,
+}
+
+/// Every method × start of a campaign, in a fixed order.
+pub fn plan(methods: &[Method], starts: &[Vec<f64>], seed: u64) -> Vec<RunSpec> {
+    let mut runs = Vec::new();
+    for &method in methods {
+        for (start, unit) in starts.iter().enumerate() {
+            runs.push(RunSpec {
+                method,
+                start,
+                start_unit: unit.clone(),
+                seed: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(start as u64),
+            });
+        }
+    }
+    runs
+}
+
+/// Settings shared by the runs of a campaign.
+pub struct RunContext<'a> {
+    pub objective: &'a Objective,
+    pub evaluator: &'a dyn Evaluator,
+    pub space: &'a UnitBox,
+    /// Objective at the nominal point: solver tolerances are relative to it.
+    pub scale: f64,
+    pub max_evaluations: usize,
+    pub progress: &'a dyn Progress,
+}
+
+/// Run all `runs` concurrently; outcomes in the order of `runs`.
+pub fn run_all(context: &RunContext, runs: &[RunSpec]) -> Result<Vec<RunOutcome>, argmin::core::Error> {
+    runs.par_iter().map(|spec| run_one(context, spec)).collect()
+}
+
+/// Run one method from one start.
+pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmin::core::Error> {
+    let problem = RunProblem::new(
+        context.objective,
+        context.evaluator,
+        context.space,
+        context.scale,
+        context.progress,
+    );
+    let budget = context.max_evaluations as u64;
+    let (log, iterations, termination) = match spec.method {
+        Method::NelderMead => {
+            let inner = nelder_mead::solver(&problem, &spec.start_unit)?;
+            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s)?
+        }
+        Method::Powell => {
+            let inner = powell::Powell::new(spec.start_unit.clone());
+            let start = spec.start_unit.clone();
+            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s.param(start))?
+        }
+        Method::DifferentialEvolution => {
+            let inner = differential_evolution::DifferentialEvolution::new(spec.start_unit.clone(), spec.seed);
+            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s)?
+        }
+    };
+    Ok(RunOutcome {
+        method: spec.method,
+        start: spec.start,
+        start_point: context.space.to_physical(&spec.start_unit),
+        point: log.best_point,
+        objective: log.best_objective,
+        evaluations: log.evaluations,
+        iterations,
+        termination,
+    })
+}
+
+/// Run `solver` on `problem` to termination; the run's log, iterations and why it stopped.
+fn execute<'a, S, I>(
+    problem: RunProblem<'a>,
+    solver: S,
+    configure: impl FnOnce(I) -> I,
+) -> Result<(RunLog, u64, String), argmin::core::Error>
+where
+    S: Solver<RunProblem<'a>, I>,
+    I: State<Float = f64> + MaxIters,
+{
+    let mut result = Executor::new(problem, solver)
+        .configure(|state| configure(state.with_max_iters(MAX_ITERS)))
+        .run()?;
+    let iterations = result.state().get_iter();
+    let termination = describe(result.state().get_termination_status());
+    let log = result
+        .problem
+        .take_problem()
+        .map(|p| p.take_log())
+        .unwrap_or_default();
+    Ok((log, iterations, termination))
+}
+
+/// The states of argmin that take an iteration cap.
+pub trait MaxIters {
+    fn with_max_iters(self, iters: u64) -> Self;
+}
+
+impl MaxIters for IterState<Vec<f64>, (), (), (), (), f64> {
+    fn with_max_iters(self, iters: u64) -> Self {
+        self.max_iters(iters)
+    }
+}
+
+impl MaxIters for PopulationState<Vec<f64>, f64> {
+    fn with_max_iters(self, iters: u64) -> Self {
+        self.max_iters(iters)
+    }
+}
+
+fn describe(status: &TerminationStatus) -> String {
+    match status {
+        TerminationStatus::Terminated(reason) => reason.to_string(),
+        TerminationStatus::NotTerminated => "not terminated".into(),
+    }
+}
+
+/// Runs whose optima coincide.
+#[derive(Debug, Clone, Serialize)]
+pub struct Cluster {
+    /// Index (into the runs) of the cluster's best run.
+    pub best_run: usize,
+    pub objective: f64,
+    pub point: Vec<f64>,
+    /// Indices of every run in the cluster.
+    pub runs: Vec<usize>,
+}
+
+/// Group runs whose best points lie within `radius` of each other in the unit box
+/// (max-norm), best cluster first.
+pub fn cluster(outcomes: &[RunOutcome], space: &UnitBox, radius: f64) -> Vec<Cluster> {
+    let mut order: Vec<usize> = (0..outcomes.len()).collect();
+    order.sort_by(|&a, &b| outcomes[a].objective.total_cmp(&outcomes[b].objective));
+    let mut clusters: Vec<(Vec<f64>, Cluster)> = Vec::new();
+    for i in order {
+        let outcome = &outcomes[i];
+        if outcome.point.is_empty() {
+            continue;
+        }
+        let u = space.to_unit(&outcome.point);
+        let home = clusters.iter_mut().find(|(centre, _)| {
+            centre
+                .iter()
+                .zip(&u)
+                .all(|(a, b)| (a - b).abs() <= radius)
+        });
+        match home {
+            Some((_, c)) => c.runs.push(i),
+            None => clusters.push((
+                u,
+                Cluster {
+                    best_run: i,
+                    objective: outcome.objective,
+                    point: outcome.point.clone(),
+                    runs: vec![i],
+                },
+            )),
+        }
+    }
+    clusters.into_iter().map(|(_, c)| c).collect()
+}

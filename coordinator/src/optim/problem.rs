@@ -1,0 +1,119 @@
+//! One run's view of the objective: the unit box, the evaluator, and a log of what it saw.
+
+use super::space::UnitBox;
+use crate::evaluator::Evaluator;
+use crate::objective::Objective;
+use argmin::core::{CostFunction, Error, SyncAlias};
+use std::borrow::Borrow;
+use std::sync::Mutex;
+
+/// Told of every batch a run evaluates, for progress display.
+pub trait Progress: Sync {
+    fn evaluated(&self, count: usize, best_objective: f64);
+}
+
+/// Progress that goes nowhere.
+pub struct Silent;
+
+impl Progress for Silent {
+    fn evaluated(&self, _count: usize, _best_objective: f64) {}
+}
+
+/// What a run has seen so far.
+#[derive(Debug, Clone, Default)]
+pub struct RunLog {
+    pub evaluations: usize,
+    pub best_objective: f64,
+    /// Physical values of the free parameters at the best point.
+    pub best_point: Vec<f64>,
+}
+
+/// The cost function the solvers of a run see: unit-box points in, scaled objective out.
+pub struct RunProblem<'a> {
+    pub objective: &'a Objective,
+    pub evaluator: &'a dyn Evaluator,
+    pub space: &'a UnitBox,
+    /// Divisor applied to the objective so that solver tolerances are relative to the
+    /// objective at the nominal point.
+    pub scale: f64,
+    pub progress: &'a dyn Progress,
+    pub log: Mutex<RunLog>,
+}
+
+impl<'a> RunProblem<'a> {
+    pub fn new(
+        objective: &'a Objective,
+        evaluator: &'a dyn Evaluator,
+        space: &'a UnitBox,
+        scale: f64,
+        progress: &'a dyn Progress,
+    ) -> Self {
+        Self {
+            objective,
+            evaluator,
+            space,
+            scale,
+            progress,
+            log: Mutex::new(RunLog {
+                evaluations: 0,
+                best_objective: f64::INFINITY,
+                best_point: Vec::new(),
+            }),
+        }
+    }
+
+    /// Evaluate unit-box points, returning the scaled objectives.
+    pub fn batch(&self, units: &[&Vec<f64>]) -> Vec<f64> {
+        let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
+        let evaluations = self.evaluator.evaluate(self.objective, &points);
+        let mut log = self.log.lock().expect("run log lock");
+        log.evaluations += points.len();
+        for (point, e) in points.iter().zip(&evaluations) {
+            if e.objective < log.best_objective {
+                log.best_objective = e.objective;
+                log.best_point = point.clone();
+            }
+        }
+        self.progress.evaluated(points.len(), log.best_objective);
+        evaluations
+            .iter()
+            .map(|e| {
+                if e.objective.is_nan() {
+                    f64::MAX
+                } else {
+                    e.objective / self.scale
+                }
+            })
+            .collect()
+    }
+
+    /// Evaluate points ahead of the solver asking for them one by one (they are then
+    /// answered from the cache); not counted as the run's evaluations until asked for.
+    pub fn prefetch(&self, units: &[Vec<f64>]) {
+        let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
+        self.evaluator.evaluate(self.objective, &points);
+    }
+
+    pub fn take_log(&self) -> RunLog {
+        self.log.lock().expect("run log lock").clone()
+    }
+}
+
+impl CostFunction for RunProblem<'_> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
+        Ok(self.batch(&[u])[0])
+    }
+
+    fn bulk_cost<P>(&self, params: &[P]) -> Result<Vec<f64>, Error>
+    where
+        P: Borrow<Vec<f64>> + SyncAlias,
+        f64: argmin::core::SendAlias,
+        Self: SyncAlias,
+    {
+        let units: Vec<&Vec<f64>> = params.iter().map(|p| p.borrow()).collect();
+        Ok(self.batch(&units))
+    }
+}

@@ -1,0 +1,128 @@
+//! What a calibration leaves behind: `result.json`, a table for the terminal, SVG plots.
+
+pub mod plot;
+pub mod table;
+
+use crate::calibration::Calibration;
+use crate::error::{Error, Result};
+use serde_json::{json, Map, Value};
+use std::path::{Path, PathBuf};
+
+/// Relative distance to the best objective within which a run counts as having found it.
+pub const SPREAD_TOLERANCE: f64 = 0.01;
+
+fn named(names: &[String], values: &[f64]) -> Value {
+    Value::Object(
+        names
+            .iter()
+            .zip(values)
+            .map(|(n, v)| (n.clone(), json!(v)))
+            .collect::<Map<_, _>>(),
+    )
+}
+
+/// The machine-readable result of a calibration (`result.json`).
+pub fn result_json(c: &Calibration) -> Value {
+    let names: Vec<String> = c.campaign.free.iter().map(|p| p.name.clone()).collect();
+    let best = c.best_run();
+    let samples = c.objective.grid.len() as f64;
+    let per_output = |values: &[f64]| {
+        Value::Object(
+            c.campaign
+                .outputs
+                .iter()
+                .zip(values)
+                .map(|(o, v)| (o.model.clone(), json!(v)))
+                .collect(),
+        )
+    };
+    let rms: Vec<f64> = c
+        .best_evaluation
+        .sse
+        .iter()
+        .map(|s| (s / samples).sqrt())
+        .collect();
+    let runs: Vec<Value> = c
+        .runs
+        .iter()
+        .map(|r| {
+            json!({
+                "method": r.method.name(),
+                "start": r.start,
+                "start_point": named(&names, &r.start_point),
+                "parameters": named(&names, &r.point),
+                "objective": r.objective,
+                "evaluations": r.evaluations,
+                "iterations": r.iterations,
+                "termination": r.termination,
+            })
+        })
+        .collect();
+    let clusters: Vec<Value> = c
+        .clusters
+        .iter()
+        .map(|k| {
+            json!({
+                "objective": k.objective,
+                "parameters": named(&names, &k.point),
+                "runs": k.runs,
+            })
+        })
+        .collect();
+    // Spread of the parameters over the runs that reached the best objective.
+    let threshold = best.objective * (1.0 + SPREAD_TOLERANCE) + f64::MIN_POSITIVE;
+    let agreeing: Vec<_> = c.runs.iter().filter(|r| r.objective <= threshold).collect();
+    let spread: Map<String, Value> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let values = agreeing.iter().map(|r| r.point[i]);
+            let min = values.clone().fold(f64::INFINITY, f64::min);
+            let max = values.fold(f64::NEG_INFINITY, f64::max);
+            (n.clone(), json!({ "min": min, "max": max }))
+        })
+        .collect();
+    let evaluations = c.evaluations() as u64;
+    json!({
+        "campaign": c.campaign.name,
+        "model": c.campaign.model.info().name,
+        "model_version": c.campaign.model.info().version,
+        "measurement": c.measurement.source.display().to_string(),
+        "window": { "start": c.campaign.window.0, "stop": c.campaign.window.1, "samples": c.objective.grid.len() },
+        "free_parameters": c.campaign.free,
+        "nominal_objective": c.nominal.objective,
+        "best": {
+            "parameters": named(&names, &best.point),
+            "objective": best.objective,
+            "method": best.method.name(),
+            "start": best.start,
+            "sse": per_output(&c.best_evaluation.sse),
+            "rms": per_output(&rms),
+        },
+        "evaluations": evaluations,
+        "simulated": c.stats.simulated,
+        "cached": evaluations.saturating_sub(c.stats.simulated),
+        "runs": runs,
+        "clusters": clusters,
+        "spread": { "runs_within_1_percent": agreeing.len(), "parameters": spread },
+        "elapsed_seconds": c.elapsed.as_secs_f64(),
+    })
+}
+
+/// Write `result.json` and one plot per output into `dir`; the paths written.
+pub fn write(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Write {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    let path = dir.join("result.json");
+    let text = serde_json::to_string_pretty(&result_json(c)).expect("json of plain values");
+    std::fs::write(&path, text + "\n").map_err(|source| Error::Write {
+        path: path.clone(),
+        source,
+    })?;
+    written.push(path);
+    written.extend(plot::write_fit_plots(c, dir)?);
+    Ok(written)
+}

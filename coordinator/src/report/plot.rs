@@ -1,0 +1,173 @@
+//! SVG plots: measured, nominal and calibrated over time, one file per output, as the
+//! seed's figures show them. The fitted window is shaded.
+
+use crate::calibration::Calibration;
+use crate::error::{Error, Result};
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// Points per simulated curve.
+const CURVE_POINTS: usize = 2000;
+
+/// One series of a time plot.
+pub struct Series<'a> {
+    pub label: &'a str,
+    pub time: &'a [f64],
+    pub values: &'a [f64],
+    pub color: RGBColor,
+    pub width: u32,
+}
+
+/// A time plot of several series, the window `shade` (start, stop) shaded.
+pub fn time_plot(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    series: &[Series],
+    shade: Option<(f64, f64)>,
+) -> Result<()> {
+    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for s in series {
+        for (&t, &v) in s.time.iter().zip(s.values) {
+            if t.is_finite() && v.is_finite() {
+                x0 = x0.min(t);
+                x1 = x1.max(t);
+                y0 = y0.min(v);
+                y1 = y1.max(v);
+            }
+        }
+    }
+    if !(x0 < x1) {
+        x1 = x0 + 1.0;
+    }
+    if !(y0 < y1) {
+        y0 -= 0.5;
+        y1 += 0.5;
+    }
+    let pad = 0.05 * (y1 - y0);
+    let (y0, y1) = (y0 - pad, y1 + pad);
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = SVGBackend::new(path, (1000, 500)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(y_label)
+            .light_line_style(WHITE.mix(0.0))
+            .draw()?;
+        if let Some((a, b)) = shade {
+            chart.draw_series(std::iter::once(Rectangle::new(
+                [(a.max(x0), y0), (b.min(x1), y1)],
+                RGBColor(235, 242, 250).filled(),
+            )))?;
+        }
+        for s in series {
+            let color = s.color;
+            let width = s.width;
+            chart
+                .draw_series(LineSeries::new(
+                    s.time
+                        .iter()
+                        .zip(s.values)
+                        .filter(|(t, v)| t.is_finite() && v.is_finite())
+                        .map(|(&t, &v)| (t, v)),
+                    color.stroke_width(width),
+                ))?
+                .label(s.label)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| Error::Write {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    })
+}
+
+/// A uniform grid over `[0, stop]`.
+pub fn uniform_grid(stop: f64, points: usize) -> Vec<f64> {
+    (0..points)
+        .map(|i| stop * i as f64 / (points - 1) as f64)
+        .collect()
+}
+
+/// One plot per output: measured, nominal model, calibrated model.
+pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
+    let campaign = &c.campaign;
+    let info = campaign.model.info();
+    let grid = uniform_grid(campaign.stop_time, CURVE_POINTS);
+    let outputs: Vec<usize> = campaign.outputs.iter().map(|o| o.model_index).collect();
+    let simulate = |free: &[f64]| {
+        campaign
+            .model
+            .simulate(&campaign.full_parameters(free), &grid, &outputs, &campaign.solver)
+            .map(|t| t.values)
+            .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; outputs.len()])
+    };
+    let nominal = simulate(&campaign.nominal());
+    let calibrated = simulate(&c.best_run().point);
+    let measured_time: Vec<f64> = c
+        .measurement
+        .time
+        .iter()
+        .copied()
+        .filter(|t| *t <= campaign.stop_time)
+        .collect();
+    let mut written = Vec::new();
+    for (k, o) in campaign.outputs.iter().enumerate() {
+        let measured = &c.measurement.column(&o.measured).unwrap_or(&[])[..measured_time.len()];
+        let unit = &info.outputs[o.model_index].unit;
+        let path = dir.join(format!("{}.svg", sanitize(&o.model)));
+        time_plot(
+            &path,
+            &format!("{}: {} vs measured {}", campaign.name, o.model, o.measured),
+            &format!("{} [{unit}]", o.model),
+            &[
+                Series {
+                    label: "measured",
+                    time: &measured_time,
+                    values: measured,
+                    color: RGBColor(120, 120, 120),
+                    width: 1,
+                },
+                Series {
+                    label: "nominal",
+                    time: &grid,
+                    values: &nominal[k],
+                    color: RGBColor(220, 50, 47),
+                    width: 1,
+                },
+                Series {
+                    label: "calibrated",
+                    time: &grid,
+                    values: &calibrated[k],
+                    color: RGBColor(38, 139, 210),
+                    width: 2,
+                },
+            ],
+            Some(campaign.window),
+        )?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// A file name from an output name (`armJoint.phi` → `armJoint.phi`, `a/b` → `a_b`).
+pub fn sanitize(name: &str) -> String {
+    name.chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' || c == '_' { c } else { '_' })
+        .collect()
+}

@@ -1,0 +1,77 @@
+//! The calibration summary printed on the terminal.
+
+use crate::calibration::Calibration;
+use std::fmt::Write;
+
+/// Runs, best first, then the best point and the error before and after.
+pub fn summary(c: &Calibration) -> String {
+    let mut s = String::new();
+    let names: Vec<&str> = c.campaign.free.iter().map(|p| p.name.as_str()).collect();
+    let width = names.iter().map(|n| n.len()).max().unwrap_or(8).max(12);
+    let mut order: Vec<usize> = (0..c.runs.len()).collect();
+    order.sort_by(|&a, &b| c.runs[a].objective.total_cmp(&c.runs[b].objective));
+
+    let _ = write!(s, "{:<24} {:>5} ", "method", "start");
+    for n in &names {
+        let _ = write!(s, "{n:>width$} ");
+    }
+    let _ = writeln!(s, "{:>13} {:>6} {:>6}", "objective", "evals", "iters");
+    for i in order {
+        let r = &c.runs[i];
+        let _ = write!(s, "{:<24} {:>5} ", r.method.name(), r.start);
+        for v in &r.point {
+            let _ = write!(s, "{:>width$.6e} ", v);
+        }
+        let mark = if i == c.best { " *" } else { "" };
+        let _ = writeln!(
+            s,
+            "{:>13.6e} {:>6} {:>6}{mark}",
+            r.objective, r.evaluations, r.iterations
+        );
+    }
+    let best = c.best_run();
+    let _ = writeln!(s);
+    let _ = writeln!(
+        s,
+        "best ({} from start {}):",
+        best.method.name(),
+        best.start
+    );
+    for (p, v) in c.campaign.free.iter().zip(&best.point) {
+        let _ = writeln!(s, "  {:<width$} = {:.6e}   (nominal {:.6e})", p.name, v, p.nominal);
+    }
+    let _ = writeln!(
+        s,
+        "objective {:.6e} -> {:.6e} ({:.1}x lower)",
+        c.nominal.objective,
+        best.objective,
+        c.nominal.objective / best.objective
+    );
+    let n = c.objective.grid.len() as f64;
+    for ((o, before), after) in c
+        .campaign
+        .outputs
+        .iter()
+        .zip(&c.nominal.sse)
+        .zip(&c.best_evaluation.sse)
+    {
+        let _ = writeln!(
+            s,
+            "  rms {:<22} {:.4e} -> {:.4e}",
+            o.model,
+            (before / n).sqrt(),
+            (after / n).sqrt()
+        );
+    }
+    let _ = writeln!(
+        s,
+        "{} minima found by {} runs; {} evaluations, {} simulated, {} from cache, {:.2} s",
+        c.clusters.len(),
+        c.runs.len(),
+        c.evaluations(),
+        c.stats.simulated,
+        (c.evaluations() as u64).saturating_sub(c.stats.simulated),
+        c.elapsed.as_secs_f64()
+    );
+    s
+}

@@ -1,0 +1,120 @@
+//! `calib bench`: speed figures, measured in one run and printed as medians and ratios.
+//!
+//! Timings are never asserted by tests (machines are shared and noisy); this command is where
+//! speed is measured. The reference figures are those of the seed's tool chain (scipy's
+//! Nelder–Mead over `solve_ivp`) measured on the same kind of machine.
+
+use super::{Failure, Outcome};
+use calib_coordinator::calibration;
+use calib_coordinator::campaign::{Campaign, Method};
+use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::problem::Silent;
+use calib_worker::{models, SolverOptions};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+/// The seed's tool chain: one evaluation, and one calibration of the two frictions.
+const SEED_EVALUATION: Duration = Duration::from_millis(300);
+const SEED_CALIBRATION: Duration = Duration::from_secs(25);
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Repetitions of each measurement (the median is reported).
+    #[arg(long, default_value_t = 21)]
+    repeat: usize,
+    /// Campaign of the calibration benchmarks.
+    #[arg(long, default_value = "examples/furuta_real.toml")]
+    campaign: PathBuf,
+}
+
+fn median(mut samples: Vec<Duration>) -> Duration {
+    samples.sort();
+    samples[samples.len() / 2]
+}
+
+fn time<T>(repeat: usize, mut f: impl FnMut() -> T) -> (Duration, T) {
+    let mut samples = Vec::with_capacity(repeat);
+    let mut last = None;
+    for _ in 0..repeat.max(1) {
+        let start = Instant::now();
+        last = Some(f());
+        samples.push(start.elapsed());
+    }
+    (median(samples), last.expect("at least one repetition"))
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+pub fn run(args: Args) -> Outcome {
+    let model = models::find("furuta").expect("furuta is hosted");
+    let params = model.info().default_vector();
+    let grid: Vec<f64> = (0..=4000).map(|i| i as f64 * 0.01).collect();
+    let options = SolverOptions::default();
+    let (sim, trajectory) = time(args.repeat * 10, || {
+        model
+            .simulate(&params, &grid, &[0, 1], &options)
+            .map_err(|e| Failure::internal(format!("simulation failed: {e}")))
+    });
+    let stats = trajectory?.stats;
+    println!("furuta, one 40 s simulation (rtol {:e}, 4001 output points):", options.rtol);
+    println!(
+        "  median {:.3} ms  ({} steps, {} rejected, {} events, {} rhs)  seed: {:.0} ms  -> {:.0}x faster",
+        ms(sim),
+        stats.accepted_steps,
+        stats.rejected_steps,
+        stats.events,
+        stats.rhs_evaluations,
+        ms(SEED_EVALUATION),
+        SEED_EVALUATION.as_secs_f64() / sim.as_secs_f64()
+    );
+
+    let mut campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let single = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| Failure::internal(e.to_string()))?;
+    let full = campaign.search.clone();
+    campaign.search.methods = vec![Method::NelderMead];
+    campaign.search.starts = 1;
+    let (nm, result) = time(args.repeat.div_ceil(4), || {
+        single.install(|| calibration::calibrate(&campaign, LocalEvaluator, &Silent))
+    });
+    let c = result?;
+    let run = c.best_run();
+    println!(
+        "{}: one Nelder-Mead calibration from the nominal point, one core:",
+        campaign.name
+    );
+    println!(
+        "  median {:.1} ms  ({} evaluations, {} iterations, objective {:.4} -> {:.4})  seed: {:.0} s  -> {:.0}x faster",
+        ms(nm),
+        run.evaluations,
+        run.iterations,
+        c.nominal.objective,
+        run.objective,
+        SEED_CALIBRATION.as_secs_f64(),
+        SEED_CALIBRATION.as_secs_f64() / nm.as_secs_f64()
+    );
+
+    campaign.search = full;
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let (multi, result) = time(3, || calibration::calibrate(&campaign, LocalEvaluator, &Silent));
+    let c = result?;
+    println!(
+        "{}: full multistart ({} methods x {} starts), {} cores:",
+        campaign.name,
+        campaign.search.methods.len(),
+        campaign.search.starts,
+        cores
+    );
+    println!(
+        "  median {:.1} ms  ({} evaluations, {} simulated, best objective {:.4})",
+        ms(multi),
+        c.evaluations(),
+        c.stats.simulated,
+        c.best_run().objective
+    );
+    Ok(())
+}

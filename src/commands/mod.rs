@@ -1,0 +1,43 @@
+//! One module per subcommand: parse nothing, call the library, print.
+
+pub mod bench;
+pub mod calibrate;
+pub mod models;
+pub mod simulate;
+
+/// A command's failure: the message for the user and the process exit code.
+#[derive(Debug)]
+pub struct Failure {
+    pub message: String,
+    pub code: u8,
+}
+
+impl Failure {
+    /// Bad input: a campaign, data file or argument the user must fix (exit code 2).
+    pub fn input(message: impl Into<String>) -> Self {
+        Self {
+            message: message.into(),
+            code: 2,
+        }
+    }
+
+    /// Anything else (exit code 1).
+    pub fn internal(message: impl Into<String>) -> Self {
+        Self {
+            message: message.into(),
+            code: 1,
+        }
+    }
+}
+
+impl From<calib_coordinator::Error> for Failure {
+    fn from(e: calib_coordinator::Error) -> Self {
+        if e.is_bad_input() {
+            Failure::input(e.to_string())
+        } else {
+            Failure::internal(e.to_string())
+        }
+    }
+}
+
+pub type Outcome = Result<(), Failure>;

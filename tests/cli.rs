@@ -1,0 +1,216 @@
+//! The `calib` command line: what users see, including every kind of bad input.
+
+mod common;
+
+use common::*;
+use std::path::Path;
+
+/// Run `calib calibrate` on a campaign and expect a clean failure with exit code 2 whose
+/// message contains every fragment.
+fn expect_bad_input(campaign: &Path, fragments: &[&str]) {
+    let out = calib(&["calibrate", campaign.to_str().unwrap(), "--out", "/dev/null/never"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    for f in fragments {
+        assert!(stderr.contains(f), "`{f}` missing from: {stderr}");
+    }
+}
+
+/// A clean campaign with one text replacement, written to a temporary folder.
+fn campaign_with(dir: &Path, from: &str, to: &str) -> std::path::PathBuf {
+    let text = clean_campaign("methods = [\"nelder-mead\"]\nmax_evaluations = 50");
+    let changed = text.replacen(from, to, 1);
+    assert_ne!(changed, text, "`{from}` not in the campaign");
+    write(dir, "c.toml", &changed)
+}
+
+/// A campaign over a CSV file with the given content.
+fn campaign_on_csv(dir: &Path, csv: &str) -> std::path::PathBuf {
+    let data = write(dir, "data.csv", csv);
+    let clean = repo().join("examples/data/furuta_clean.csv");
+    campaign_with(dir, clean.to_str().unwrap(), data.to_str().unwrap())
+}
+
+#[test]
+fn missing_campaign_file() {
+    let dir = tempfile::tempdir().unwrap();
+    expect_bad_input(&dir.path().join("nope.toml"), &["nope.toml"]);
+}
+
+#[test]
+fn unknown_key_is_rejected_with_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "stop = 40.0", "stop = 40.0\ncolour = \"red\"");
+    expect_bad_input(&c, &["c.toml:", "colour"]);
+}
+
+#[test]
+fn unknown_model() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "name = \"furuta\"", "name = \"furuta9\"");
+    expect_bad_input(&c, &["c.toml:4", "unknown model `furuta9`"]);
+}
+
+#[test]
+fn unknown_parameter() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "name = \"armFriction\"", "name = \"armFrict\"");
+    expect_bad_input(&c, &["c.toml:", "armFrict", "no parameter"]);
+}
+
+#[test]
+fn unknown_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "model = \"armJoint.phi\"", "model = \"armJoint.angle\"");
+    expect_bad_input(&c, &["c.toml:", "armJoint.angle", "no output"]);
+}
+
+#[test]
+fn nominal_outside_bounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "nominal = 0.012", "nominal = 1.2");
+    expect_bad_input(&c, &["c.toml:", "armFriction", "outside its bounds"]);
+}
+
+#[test]
+fn min_not_below_max() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "min = 0.0\nmax = 0.9", "min = 0.9\nmax = 0.9");
+    expect_bad_input(&c, &["c.toml:", "armFriction", "must be below max"]);
+}
+
+#[test]
+fn window_outside_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_with(dir.path(), "stop = 40.0", "stop = 50.0");
+    expect_bad_input(&c, &["c.toml", "window", "outside the data"]);
+}
+
+#[test]
+fn missing_measurement_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let clean = repo().join("examples/data/furuta_clean.csv");
+    let c = campaign_with(dir.path(), clean.to_str().unwrap(), "/nonexistent/rig.csv");
+    expect_bad_input(&c, &["/nonexistent/rig.csv"]);
+}
+
+#[test]
+fn missing_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_on_csv(dir.path(), "time_s,arm_angle_rad\n0,0\n1,0\n");
+    expect_bad_input(&c, &["data.csv", "pendulum_angle_rad"]);
+}
+
+#[test]
+fn non_numeric_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_on_csv(
+        dir.path(),
+        "time_s,arm_angle_rad,pendulum_angle_rad\n0,0,0.5\n1,zero,0.5\n2,0,0.5\n",
+    );
+    expect_bad_input(&c, &["data.csv", "3", "zero"]);
+}
+
+#[test]
+fn time_not_increasing() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_on_csv(
+        dir.path(),
+        "time_s,arm_angle_rad,pendulum_angle_rad\n0,0,0.5\n2,0,0.5\n1,0,0.5\n",
+    );
+    expect_bad_input(&c, &["data.csv", "4"]);
+}
+
+#[test]
+fn nan_in_the_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_on_csv(
+        dir.path(),
+        "time_s,arm_angle_rad,pendulum_angle_rad\n0,0,0.5\n1,NaN,0.5\n2,0,0.5\n",
+    );
+    expect_bad_input(&c, &["data.csv", "3", "arm_angle_rad"]);
+}
+
+#[test]
+fn empty_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = campaign_on_csv(dir.path(), "time_s,arm_angle_rad,pendulum_angle_rad\n");
+    expect_bad_input(&c, &["data.csv"]);
+}
+
+#[test]
+fn models_lists_the_furuta_contract() {
+    let out = calib(&["models"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    for name in [
+        "furuta",
+        "armFriction",
+        "pendulumFriction",
+        "pend_Ixx",
+        "armJoint.phi",
+        "pendulumJoint.w",
+        "viscous_friction.arm",
+    ] {
+        assert!(text.contains(name), "`{name}` missing from: {text}");
+    }
+    let out = calib(&["models", "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json[0]["name"], "furuta");
+}
+
+#[test]
+fn simulate_writes_a_trajectory_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("sim.csv");
+    let out = calib(&[
+        "simulate",
+        "furuta",
+        "--set",
+        "armFriction=0.01",
+        "--stop",
+        "40",
+        "--step",
+        "0.01",
+        "--out",
+        path.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "time,armJoint.phi,pendulumJoint.phi,armJoint.w,pendulumJoint.w"
+    );
+    assert_eq!(lines.count(), 4001);
+    let bad = calib(&["simulate", "furuta", "--set", "armFriction=x"]);
+    assert_eq!(bad.status.code(), Some(2));
+    let bad = calib(&["simulate", "furuta", "--set", "nope=1"]);
+    assert_eq!(bad.status.code(), Some(2));
+}
+
+#[test]
+fn calibrate_writes_the_result_and_plots() {
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\"]\nstarts = 1\nmax_evaluations = 200";
+    let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let out = calib(&["calibrate", campaign.to_str().unwrap(), "--json"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let results = dir.path().join("results/clean");
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(results.join("result.json")).unwrap()).unwrap();
+    assert_eq!(json, written);
+    assert!(json["best"]["objective"].as_f64().unwrap() < json["nominal_objective"].as_f64().unwrap());
+    assert!(json["best"]["parameters"]["armFriction"].is_f64());
+    let run = &json["runs"][0];
+    for key in ["method", "start", "parameters", "objective", "evaluations", "iterations"] {
+        assert!(!run[key].is_null(), "runs[0].{key} missing");
+    }
+    assert!(json["evaluations"].as_u64().unwrap() > 10);
+    for plot in ["armJoint.phi.svg", "pendulumJoint.phi.svg"] {
+        let svg = std::fs::read_to_string(results.join(plot)).unwrap();
+        assert!(svg.contains("<svg") && svg.contains("calibrated"), "{plot}");
+    }
+}

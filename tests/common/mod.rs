@@ -1,0 +1,96 @@
+//! Shared test harness: paths, campaign files in temporary folders, the `calib` binary.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The shared data folder beside the repository (real record and synthetic records).
+pub fn shared_data() -> PathBuf {
+    repo().join("../shared/data")
+}
+
+/// The real Furuta record, or `None` (with the reason printed) where the shared folder is absent.
+pub fn real_record() -> Option<PathBuf> {
+    let path = shared_data().join("real/FurutaData.mat");
+    if path.exists() {
+        Some(path)
+    } else {
+        eprintln!("skipped: {} is absent (it lives beside the repository, never in it)", path.display());
+        None
+    }
+}
+
+/// Noise floor of the synthetic records: outputs × samples × (σ² + q²/12), q = 2π/4096.
+pub fn synthetic_noise_floor(outputs: usize, samples: usize) -> f64 {
+    let q = 2.0 * std::f64::consts::PI / 4096.0;
+    outputs as f64 * samples as f64 * (0.002f64.powi(2) + q * q / 12.0)
+}
+
+/// True frictions of the synthetic records.
+pub fn true_frictions() -> (f64, f64) {
+    let rig: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(repo().join("examples/data/furuta_rig.json")).unwrap(),
+    )
+    .unwrap();
+    (
+        rig["true_friction"]["armFriction"].as_f64().unwrap(),
+        rig["true_friction"]["pendulumFriction"].as_f64().unwrap(),
+    )
+}
+
+/// A campaign for the clean synthetic record; `search` is the `[search]` body.
+pub fn clean_campaign(search: &str) -> String {
+    format!(
+        r#"
+name = "clean"
+[model]
+name = "furuta"
+[measurement]
+file = "{}"
+time_column = "time_s"
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "pendulum_angle_rad"
+[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 0.0
+max = 0.9
+[[parameters]]
+name = "pendulumFriction"
+nominal = 0.002
+min = 0.0
+max = 0.9
+[window]
+start = 0.0
+stop = 40.0
+[search]
+{search}
+"#,
+        repo().join("examples/data/furuta_clean.csv").display()
+    )
+}
+
+/// Write `text` as `name` in `dir` and return its path.
+pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+/// Run the `calib` binary.
+pub fn calib(args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args(args)
+        .output()
+        .expect("run calib")
+}

@@ -1,0 +1,615 @@
+//! `furuta`: a Furuta (rotary inverted) pendulum in free swing, with stick–slip bearings.
+//!
+//! The model of the Lund University rig used by the seed (`Furuta.mo`, a Modelica MultiBody
+//! model shipped with the JModelica.org examples), written as ordinary differential equations.
+//!
+//! State `[φ, θ, φ̇, θ̇]`: arm angle about the vertical axis and pendulum angle about the arm
+//! axis, `θ = 0` with the pendulum upright (it falls and settles at π). With `s = sin θ`,
+//! `c = cos θ`, arm length `L1` (arm joint to pendulum joint), arm inertia `J` about the
+//! vertical axis, pendulum mass `m`, joint-to-centre-of-mass distance `l` and the pendulum's
+//! principal inertias about its centre of mass `Ixx` (swing axis), `Iyy` (long axis), `Izz`:
+//!
+//! ```text
+//! A(θ) = J + m·L1² + m·l²·s² + Iyy·c² + Izz·s²      A'(θ) = 2·(m·l² + Izz − Iyy)·s·c
+//! B = Ixx + m·l²                                    C = m·L1·l
+//! [ A     −C·c ] [φ̈]   [ τ1 − A'·θ̇·φ̇ − C·s·θ̇²  ]
+//! [ −C·c   B   ] [θ̈] = [ τ2 + ½·A'·φ̇² + m·g·l·s ]
+//! ```
+//!
+//! The mass matrix is that of the kinetic energy
+//! `T = ½·A·φ̇² − C·c·φ̇·θ̇ + ½·B·θ̇²` and the potential is `V = m·g·l·c`, so with no torques
+//! `E = T + V` is conserved (a test checks it).
+//!
+//! ## Bearing friction: Coulomb with stick–slip
+//!
+//! As Modelica's `BearingFriction` with a constant friction table and `peak = 1`, each joint is
+//! in one of three modes: sliding forward (`τ = −F`), sliding backward (`τ = +F`) or stuck.
+//! A stuck joint has zero speed and zero acceleration; its friction torque is whatever holds
+//! it, found by solving the 2×2 system with that joint's acceleration fixed at 0. Events,
+//! located on the dense output of the integrator, switch the modes:
+//! - a sliding joint whose speed crosses zero stops there; it stays stuck if the holding
+//!   torque is within `F`, otherwise it slides on in the direction the net torque drives it;
+//! - a stuck joint breaks away when its holding torque exceeds `F`.
+//!
+//! No smoothing is involved: a joint whose driving torque stays below its friction does not
+//! creep (a test checks it).
+//!
+//! ## Effects (absent at 0)
+//!
+//! Per joint (`arm`: q = φ, `pendulum`: q = θ), each subtracted from that joint's torque:
+//! `viscous_friction.<joint>` d·ω, `quadratic_drag.<joint>` c·ω·|ω|, `stiffness.<joint>`
+//! k·q, `torque_bias.<joint>` t0. Viscous friction and drag vanish while a joint is stuck;
+//! stiffness and bias act as driving torques the friction must hold.
+
+use crate::model::{
+    check_request, EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
+    SolverOptions, Trajectory,
+};
+use crate::ode::{integrate, HybridSystem};
+use std::f64::consts::PI;
+
+/// Indices of the full parameter vector (base parameters, then effects).
+mod idx {
+    pub const ARM_FRICTION: usize = 0;
+    pub const PENDULUM_FRICTION: usize = 1;
+    pub const ARM_LENGTH: usize = 2;
+    pub const ARM_INERTIA: usize = 3;
+    pub const PEND_MASS: usize = 4;
+    pub const PEND_COM: usize = 5;
+    pub const PEND_IXX: usize = 6;
+    pub const PEND_IYY: usize = 7;
+    pub const PEND_IZZ: usize = 8;
+    pub const G: usize = 9;
+    pub const PHI0: usize = 10;
+    pub const THETA0: usize = 11;
+    pub const DPHI0: usize = 12;
+    pub const DTHETA0: usize = 13;
+    pub const BASE: usize = 14;
+    // Effects, arm then pendulum for each kind.
+    pub const VISCOUS: usize = BASE;
+    pub const QUADRATIC: usize = BASE + 2;
+    pub const STIFFNESS: usize = BASE + 4;
+    pub const BIAS: usize = BASE + 6;
+}
+
+pub const JOINTS: [&str; 2] = ["arm", "pendulum"];
+
+pub struct Furuta {
+    info: ModelInfo,
+}
+
+impl Default for Furuta {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Furuta {
+    pub fn new() -> Self {
+        let p = |name: &str, unit: &str, default: f64, min: f64, max: f64, description: &str| {
+            ParameterSpec {
+                name: name.into(),
+                unit: unit.into(),
+                default,
+                min,
+                max,
+                description: description.into(),
+            }
+        };
+        let parameters = vec![
+            p(
+                "armFriction",
+                "N.m",
+                0.012,
+                0.0,
+                0.9,
+                "Coulomb friction torque of the arm bearing",
+            ),
+            p(
+                "pendulumFriction",
+                "N.m",
+                0.002,
+                0.0,
+                0.9,
+                "Coulomb friction torque of the pendulum bearing",
+            ),
+            p(
+                "arm_length",
+                "m",
+                0.245,
+                1e-3,
+                5.0,
+                "arm joint to pendulum joint (L1)",
+            ),
+            p(
+                "arm_inertia",
+                "kg.m2",
+                0.001,
+                1e-7,
+                10.0,
+                "arm inertia about the vertical axis (J)",
+            ),
+            p("pend_mass", "kg", 0.035, 1e-5, 100.0, "pendulum mass (m)"),
+            p(
+                "pend_com",
+                "m",
+                0.2105,
+                1e-4,
+                5.0,
+                "pendulum joint to pendulum centre of mass (l)",
+            ),
+            p(
+                "pend_Ixx",
+                "kg.m2",
+                0.00384,
+                0.0,
+                10.0,
+                "pendulum inertia about its centre of mass, swing axis",
+            ),
+            p(
+                "pend_Iyy",
+                "kg.m2",
+                0.001,
+                0.0,
+                10.0,
+                "pendulum inertia about its centre of mass, long axis",
+            ),
+            p(
+                "pend_Izz",
+                "kg.m2",
+                0.001,
+                0.0,
+                10.0,
+                "pendulum inertia about its centre of mass, third axis",
+            ),
+            p("g", "m/s2", 9.81, 0.0, 30.0, "gravitational acceleration"),
+            p("phi0", "rad", 0.0, -100.0, 100.0, "initial arm angle"),
+            p(
+                "theta0",
+                "rad",
+                PI / 6.0,
+                -100.0,
+                100.0,
+                "initial pendulum angle (0 = upright)",
+            ),
+            p("dphi0", "rad/s", 0.0, -100.0, 100.0, "initial arm speed"),
+            p(
+                "dtheta0",
+                "rad/s",
+                0.0,
+                -100.0,
+                100.0,
+                "initial pendulum speed",
+            ),
+        ];
+        let mut effects = Vec::new();
+        let kinds: [(&str, &str, f64, f64, &str); 4] = [
+            (
+                "viscous_friction",
+                "N.m.s/rad",
+                0.0,
+                1.0,
+                "viscous friction: tau -= d*w",
+            ),
+            (
+                "quadratic_drag",
+                "N.m.s2/rad2",
+                0.0,
+                1.0,
+                "quadratic drag: tau -= c*w*|w|",
+            ),
+            (
+                "stiffness",
+                "N.m/rad",
+                -10.0,
+                10.0,
+                "torsional stiffness: tau -= k*q",
+            ),
+            (
+                "torque_bias",
+                "N.m",
+                -1.0,
+                1.0,
+                "constant torque: tau -= t0",
+            ),
+        ];
+        for (kind, unit, min, max, description) in kinds {
+            for joint in JOINTS {
+                effects.push(EffectSpec {
+                    name: format!("{kind}.{joint}"),
+                    unit: unit.into(),
+                    min,
+                    max,
+                    description: format!("{description} on the {joint} joint"),
+                });
+            }
+        }
+        let o = |name: &str, unit: &str, description: &str| OutputSpec {
+            name: name.into(),
+            unit: unit.into(),
+            description: description.into(),
+        };
+        let outputs = vec![
+            o("armJoint.phi", "rad", "arm angle"),
+            o("pendulumJoint.phi", "rad", "pendulum angle, 0 upright"),
+            o("armJoint.w", "rad/s", "arm angular speed"),
+            o("pendulumJoint.w", "rad/s", "pendulum angular speed"),
+        ];
+        Self {
+            info: ModelInfo {
+                name: "furuta".into(),
+                version: 1,
+                description:
+                    "Furuta pendulum in free swing with stick-slip Coulomb bearing friction".into(),
+                parameters,
+                outputs,
+                effects,
+            },
+        }
+    }
+}
+
+impl Model for Furuta {
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+
+    fn simulate(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError> {
+        check_request(&self.info, params, grid, outputs)?;
+        let mut system = FurutaSystem::new(params)?;
+        let y0 = [
+            params[idx::PHI0],
+            params[idx::THETA0],
+            params[idx::DPHI0],
+            params[idx::DTHETA0],
+        ];
+        system.settle_modes(&y0);
+        let mut values = vec![vec![0.0; grid.len()]; outputs.len()];
+        let stats = integrate(&mut system, &y0, grid, options, |i, y| {
+            for (series, &o) in values.iter_mut().zip(outputs) {
+                series[i] = y[o];
+            }
+        })?;
+        Ok(Trajectory {
+            time: grid.to_vec(),
+            values,
+            stats,
+        })
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Forward,
+    Backward,
+    Stuck,
+}
+
+/// The equations of motion with the current bearing modes.
+pub(crate) struct FurutaSystem {
+    friction: [f64; 2],
+    viscous: [f64; 2],
+    quadratic: [f64; 2],
+    stiffness: [f64; 2],
+    bias: [f64; 2],
+    /// J + m·L1² + Iyy, the θ-independent part of A.
+    a0: f64,
+    /// m·l² + Izz − Iyy: A = a0 + a1·s².
+    a1: f64,
+    b: f64,
+    c: f64,
+    mgl: f64,
+    modes: [Mode; 2],
+}
+
+/// Accelerations and bearing friction torques in one mode configuration.
+struct Dynamics {
+    acc: [f64; 2],
+    friction: [f64; 2],
+}
+
+impl FurutaSystem {
+    fn new(p: &[f64]) -> Result<Self, SimulationError> {
+        let (l1, j, m, l) = (
+            p[idx::ARM_LENGTH],
+            p[idx::ARM_INERTIA],
+            p[idx::PEND_MASS],
+            p[idx::PEND_COM],
+        );
+        let (ixx, iyy, izz) = (p[idx::PEND_IXX], p[idx::PEND_IYY], p[idx::PEND_IZZ]);
+        let pair = |i: usize| [p[i], p[i + 1]];
+        let system = Self {
+            friction: [p[idx::ARM_FRICTION], p[idx::PENDULUM_FRICTION]],
+            viscous: pair(idx::VISCOUS),
+            quadratic: pair(idx::QUADRATIC),
+            stiffness: pair(idx::STIFFNESS),
+            bias: pair(idx::BIAS),
+            a0: j + m * l1 * l1 + iyy,
+            a1: m * l * l + izz - iyy,
+            b: ixx + m * l * l,
+            c: m * l1 * l,
+            mgl: m * p[idx::G] * l,
+            modes: [Mode::Forward; 2],
+        };
+        if system.friction.iter().any(|f| *f < 0.0) {
+            return Err(SimulationError::InvalidInput(
+                "Coulomb friction must be non-negative".into(),
+            ));
+        }
+        // The mass matrix must stay positive definite for every θ: A·B > C² at its minimum.
+        let a_min = system.a0 + system.a1.min(0.0);
+        if !(a_min > 0.0 && system.b > 0.0 && a_min * system.b > system.c * system.c) {
+            return Err(SimulationError::InvalidInput(
+                "inertia parameters give a singular mass matrix".into(),
+            ));
+        }
+        Ok(system)
+    }
+
+    /// Right-hand side of the equations of motion without bearing friction, and the
+    /// mass matrix entries `(A, C·c)`.
+    fn free_forces(&self, y: &[f64]) -> ([f64; 2], f64, f64) {
+        let (s, c) = y[1].sin_cos();
+        let (w1, w2) = (y[2], y[3]);
+        let a = self.a0 + self.a1 * s * s;
+        let da = 2.0 * self.a1 * s * c;
+        let mut r = [
+            -da * w2 * w1 - self.c * s * w2 * w2,
+            0.5 * da * w1 * w1 + self.mgl * s,
+        ];
+        for (joint, rj) in r.iter_mut().enumerate() {
+            let (q, w) = (y[joint], y[joint + 2]);
+            *rj -= self.viscous[joint] * w
+                + self.quadratic[joint] * w * w.abs()
+                + self.stiffness[joint] * q
+                + self.bias[joint];
+        }
+        (r, a, self.c * c)
+    }
+
+    /// Accelerations and friction torques with the joints in `modes`.
+    fn dynamics(&self, y: &[f64], modes: [Mode; 2]) -> Dynamics {
+        let (r, a, cc) = self.free_forces(y);
+        let sliding = |joint: usize| match modes[joint] {
+            Mode::Forward => -self.friction[joint],
+            Mode::Backward => self.friction[joint],
+            Mode::Stuck => 0.0,
+        };
+        match modes {
+            [Mode::Stuck, Mode::Stuck] => Dynamics {
+                acc: [0.0, 0.0],
+                friction: [-r[0], -r[1]],
+            },
+            [Mode::Stuck, _] => {
+                let f2 = sliding(1);
+                let a2 = (r[1] + f2) / self.b;
+                Dynamics {
+                    acc: [0.0, a2],
+                    friction: [-cc * a2 - r[0], f2],
+                }
+            }
+            [_, Mode::Stuck] => {
+                let f1 = sliding(0);
+                let a1 = (r[0] + f1) / a;
+                Dynamics {
+                    acc: [a1, 0.0],
+                    friction: [f1, -cc * a1 - r[1]],
+                }
+            }
+            _ => {
+                let f = [sliding(0), sliding(1)];
+                let (r1, r2) = (r[0] + f[0], r[1] + f[1]);
+                let det = a * self.b - cc * cc;
+                Dynamics {
+                    acc: [(self.b * r1 + cc * r2) / det, (cc * r1 + a * r2) / det],
+                    friction: f,
+                }
+            }
+        }
+    }
+
+    /// Bring the modes in line with the state: joints at rest stick if their friction can
+    /// hold them and slide the way they are driven otherwise; moving joints slide.
+    fn settle_modes(&mut self, y: &[f64]) {
+        for joint in 0..2 {
+            let w = y[joint + 2];
+            if w != 0.0 || self.friction[joint] == 0.0 {
+                self.modes[joint] = if w >= 0.0 {
+                    Mode::Forward
+                } else {
+                    Mode::Backward
+                };
+            } else {
+                self.modes[joint] = Mode::Stuck;
+            }
+        }
+        // Release stuck joints that cannot be held, one at a time (releasing one changes what
+        // holds the other), until the configuration is consistent.
+        for _ in 0..3 {
+            let d = self.dynamics(y, self.modes);
+            let overloaded = (0..2)
+                .filter(|&j| self.modes[j] == Mode::Stuck)
+                .map(|j| (j, d.friction[j].abs() - self.friction[j]))
+                .filter(|(_, excess)| *excess > 0.0)
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            let Some((joint, _)) = overloaded else {
+                return;
+            };
+            self.modes[joint] = if d.friction[joint] > 0.0 {
+                Mode::Backward
+            } else {
+                Mode::Forward
+            };
+        }
+    }
+}
+
+impl HybridSystem for FurutaSystem {
+    fn dim(&self) -> usize {
+        4
+    }
+
+    fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
+        let d = self.dynamics(y, self.modes);
+        dy[0] = y[2];
+        dy[1] = y[3];
+        dy[2] = d.acc[0];
+        dy[3] = d.acc[1];
+    }
+
+    fn event_count(&self) -> usize {
+        2
+    }
+
+    fn events(&self, _t: f64, y: &[f64], g: &mut [f64]) {
+        let mut holding = None;
+        for joint in 0..2 {
+            g[joint] = match self.modes[joint] {
+                _ if self.friction[joint] == 0.0 => 1.0,
+                Mode::Forward => y[joint + 2],
+                Mode::Backward => -y[joint + 2],
+                Mode::Stuck => {
+                    let d = holding.get_or_insert_with(|| self.dynamics(y, self.modes));
+                    self.friction[joint] - d.friction[joint].abs()
+                }
+            };
+        }
+    }
+
+    fn on_event(&mut self, _t: f64, y: &mut [f64], event: usize) {
+        if self.modes[event] != Mode::Stuck {
+            // The joint came to rest.
+            y[event + 2] = 0.0;
+        }
+        for joint in 0..2 {
+            if self.modes[joint] == Mode::Stuck {
+                y[joint + 2] = 0.0;
+            }
+        }
+        self.settle_modes(y);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn defaults() -> Vec<f64> {
+        Furuta::new().info().default_vector()
+    }
+
+    fn grid(stop: f64, step: f64) -> Vec<f64> {
+        let n = (stop / step).round() as usize;
+        (0..=n).map(|i| i as f64 * step).collect()
+    }
+
+    fn energy(s: &FurutaSystem, y: &[f64]) -> f64 {
+        let (sn, c) = y[1].sin_cos();
+        let a = s.a0 + s.a1 * sn * sn;
+        0.5 * a * y[2] * y[2] - s.c * c * y[2] * y[3] + 0.5 * s.b * y[3] * y[3] + s.mgl * c
+    }
+
+    #[test]
+    fn frictionless_swing_conserves_energy() {
+        let mut p = defaults();
+        p[idx::ARM_FRICTION] = 0.0;
+        p[idx::PENDULUM_FRICTION] = 0.0;
+        p[idx::DPHI0] = 1.0; // excite both joints
+        let model = Furuta::new();
+        let t = grid(40.0, 0.01);
+        let traj = model
+            .simulate(&p, &t, &[0, 1, 2, 3], &SolverOptions::default())
+            .unwrap();
+        let system = FurutaSystem::new(&p).unwrap();
+        let e0 = energy(&system, &[p[10], p[11], p[12], p[13]]);
+        let worst = (0..t.len())
+            .map(|i| {
+                let y: Vec<f64> = traj.values.iter().map(|v| v[i]).collect();
+                ((energy(&system, &y) - e0) / e0).abs()
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-6, "relative energy drift {worst:e}");
+    }
+
+    #[test]
+    fn tight_tolerance_matches_calibration_tolerance() {
+        let model = Furuta::new();
+        let p = defaults();
+        let t = grid(40.0, 0.01);
+        let calib = SolverOptions::default();
+        let tight = SolverOptions {
+            rtol: 1e-12,
+            atol: 1e-14,
+            max_steps: 10_000_000,
+        };
+        let a = model.simulate(&p, &t, &[0, 1], &calib).unwrap();
+        let b = model.simulate(&p, &t, &[0, 1], &tight).unwrap();
+        let worst = a
+            .values
+            .iter()
+            .flatten()
+            .zip(b.values.iter().flatten())
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        // Angles are O(1) rad: the global error must stay within the calibration tolerance's
+        // reach, far below the 2 mrad sensor noise.
+        assert!(worst < 1e-5, "max deviation {worst:e} rad");
+    }
+
+    #[test]
+    fn a_joint_driven_below_its_friction_does_not_creep() {
+        // Pendulum hanging at rest, arm pushed by a constant bias below its Coulomb friction.
+        let mut p = defaults();
+        p[idx::THETA0] = PI;
+        p[idx::ARM_FRICTION] = 0.012;
+        p[idx::BIAS] = 0.011; // torque −0.011 N·m on the arm
+        let model = Furuta::new();
+        let t = grid(40.0, 0.1);
+        let traj = model
+            .simulate(&p, &t, &[0, 2], &SolverOptions::default())
+            .unwrap();
+        assert!(traj.values[0].iter().all(|phi| *phi == 0.0));
+        assert!(traj.values[1].iter().all(|w| *w == 0.0));
+        // Just above the friction it must move.
+        p[idx::BIAS] = 0.013;
+        let traj = model
+            .simulate(&p, &t, &[0], &SolverOptions::default())
+            .unwrap();
+        assert!(traj.values[0].last().unwrap() < &-0.1);
+    }
+
+    #[test]
+    fn swing_settles_hanging_down_and_sticks() {
+        let model = Furuta::new();
+        let p = defaults();
+        let t = grid(120.0, 0.5);
+        let traj = model
+            .simulate(&p, &t, &[1, 3, 2], &SolverOptions::default())
+            .unwrap();
+        let theta_end = *traj.values[0].last().unwrap();
+        assert!((theta_end - PI).abs() < 0.1, "θ(end) = {theta_end}");
+        // Coulomb friction stops the motion in finite time: exactly zero speed at the end.
+        assert_eq!(*traj.values[1].last().unwrap(), 0.0);
+        assert_eq!(*traj.values[2].last().unwrap(), 0.0);
+    }
+
+    #[test]
+    fn bad_parameters_are_typed_errors() {
+        let model = Furuta::new();
+        let mut p = defaults();
+        p[idx::PEND_IXX] = -1.0;
+        p[idx::PEND_MASS] = 1.0;
+        let r = model.simulate(&p, &[1.0], &[0], &SolverOptions::default());
+        assert!(matches!(r, Err(SimulationError::InvalidInput(_))), "{r:?}");
+        let mut p = defaults();
+        p[0] = f64::NAN;
+        let r = model.simulate(&p, &[1.0], &[0], &SolverOptions::default());
+        assert!(matches!(r, Err(SimulationError::InvalidInput(_))));
+    }
+}
