@@ -1,0 +1,19 @@
+//! Derivative-free optimisers for calibration, written as argmin [`Solver`]s.
+//!
+//! All solvers search the unit box `[0, 1]^n`: the caller maps every physical
+//! parameter from its bounds onto `[0, 1]` before optimising and back afterwards.
+//! The solvers never ask the problem to evaluate a point outside the box.
+//! Independent evaluations are requested in batches through
+//! [`Problem::bulk_cost`], so a problem that overrides
+//! [`CostFunction::bulk_cost`] can evaluate them in parallel.
+//!
+//! * [`Powell`]: Powell's conjugate-direction method, a local method for smooth
+//!   objectives ([`powell`]).
+//!
+//! [`Solver`]: argmin::core::Solver
+//! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
+//! [`CostFunction::bulk_cost`]: argmin::core::CostFunction::bulk_cost
+
+pub mod powell;
+
+pub use powell::Powell;
