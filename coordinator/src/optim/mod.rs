@@ -9,11 +9,16 @@
 //!
 //! * [`Powell`]: Powell's conjugate-direction method, a local method for smooth
 //!   objectives ([`powell`]).
+//! * [`DifferentialEvolution`]: differential evolution after Storn and Price
+//!   (rand/1/bin or best/1/bin), a global population-based method
+//!   ([`differential_evolution`]).
 //!
 //! [`Solver`]: argmin::core::Solver
 //! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
 //! [`CostFunction::bulk_cost`]: argmin::core::CostFunction::bulk_cost
 
+pub mod differential_evolution;
 pub mod powell;
 
+pub use differential_evolution::{DifferentialEvolution, Strategy};
 pub use powell::Powell;
