@@ -8,7 +8,12 @@ use std::path::Path;
 /// Run `calib calibrate` on a campaign and expect a clean failure with exit code 2 whose
 /// message contains every fragment.
 fn expect_bad_input(campaign: &Path, fragments: &[&str]) {
-    let out = calib(&["calibrate", campaign.to_str().unwrap(), "--out", "/dev/null/never"]);
+    let out = calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--out",
+        "/dev/null/never",
+    ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "stderr: {stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
@@ -62,7 +67,11 @@ fn unknown_parameter() {
 #[test]
 fn unknown_output() {
     let dir = tempfile::tempdir().unwrap();
-    let c = campaign_with(dir.path(), "model = \"armJoint.phi\"", "model = \"armJoint.angle\"");
+    let c = campaign_with(
+        dir.path(),
+        "model = \"armJoint.phi\"",
+        "model = \"armJoint.angle\"",
+    );
     expect_bad_input(&c, &["c.toml:", "armJoint.angle", "no output"]);
 }
 
@@ -176,7 +185,11 @@ fn simulate_writes_a_trajectory_csv() {
         "--out",
         path.to_str().unwrap(),
     ]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines();
     assert_eq!(
@@ -196,16 +209,30 @@ fn calibrate_writes_the_result_and_plots() {
     let search = "methods = [\"nelder-mead\"]\nstarts = 1\nmax_evaluations = 200";
     let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
     let out = calib(&["calibrate", campaign.to_str().unwrap(), "--json"]);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let results = dir.path().join("results/clean");
     let written: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(results.join("result.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(results.join("result.json")).unwrap())
+            .unwrap();
     assert_eq!(json, written);
-    assert!(json["best"]["objective"].as_f64().unwrap() < json["nominal_objective"].as_f64().unwrap());
+    assert!(
+        json["best"]["objective"].as_f64().unwrap() < json["nominal_objective"].as_f64().unwrap()
+    );
     assert!(json["best"]["parameters"]["armFriction"].is_f64());
     let run = &json["runs"][0];
-    for key in ["method", "start", "parameters", "objective", "evaluations", "iterations"] {
+    for key in [
+        "method",
+        "start",
+        "parameters",
+        "objective",
+        "evaluations",
+        "iterations",
+    ] {
         assert!(!run[key].is_null(), "runs[0].{key} missing");
     }
     assert!(json["evaluations"].as_u64().unwrap() > 10);

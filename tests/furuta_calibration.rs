@@ -24,13 +24,21 @@ fn calibrate_clean(method: &str) {
         best.objective,
         c.evaluations()
     );
-    assert!((best.point[0] / arm - 1.0).abs() < 0.01, "armFriction {}", best.point[0]);
+    assert!(
+        (best.point[0] / arm - 1.0).abs() < 0.01,
+        "armFriction {}",
+        best.point[0]
+    );
     assert!(
         (best.point[1] / pendulum - 1.0).abs() < 0.01,
         "pendulumFriction {}",
         best.point[1]
     );
-    assert!(best.objective < 1.3 * floor, "objective {} vs floor {floor}", best.objective);
+    assert!(
+        best.objective < 1.3 * floor,
+        "objective {} vs floor {floor}",
+        best.objective
+    );
     assert!(c.nominal.objective > 10.0 * best.objective);
 }
 
@@ -80,6 +88,14 @@ fn the_real_rig_fits_better_than_the_seed() {
         best.start,
         c.evaluations()
     );
-    assert!(c.nominal.objective > 150.0, "nominal objective {}", c.nominal.objective);
-    assert!(best.objective < 2.729, "calibrated objective {}", best.objective);
+    assert!(
+        c.nominal.objective > 150.0,
+        "nominal objective {}",
+        c.nominal.objective
+    );
+    assert!(
+        best.objective < 2.729,
+        "calibrated objective {}",
+        best.objective
+    );
 }

@@ -58,7 +58,10 @@ pub fn run(args: Args) -> Outcome {
             .map_err(|e| Failure::internal(format!("simulation failed: {e}")))
     });
     let stats = trajectory?.stats;
-    println!("furuta, one 40 s simulation (rtol {:e}, 4001 output points):", options.rtol);
+    println!(
+        "furuta, one 40 s simulation (rtol {:e}, 4001 output points):",
+        options.rtol
+    );
     println!(
         "  median {:.3} ms  ({} steps, {} rejected, {} events, {} rhs)  seed: {:.0} ms  -> {:.0}x faster",
         ms(sim),
@@ -100,7 +103,9 @@ pub fn run(args: Args) -> Outcome {
 
     campaign.search = full;
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-    let (multi, result) = time(3, || calibration::calibrate(&campaign, LocalEvaluator, &Silent));
+    let (multi, result) = time(3, || {
+        calibration::calibrate(&campaign, LocalEvaluator, &Silent)
+    });
     let c = result?;
     println!(
         "{}: full multistart ({} methods x {} starts), {} cores:",

@@ -17,7 +17,10 @@ pub fn run(args: Args) -> Outcome {
         .filter(|i| args.model.as_ref().is_none_or(|n| *n == i.name))
         .collect();
     if selected.is_empty() {
-        let known: Vec<_> = models::all().iter().map(|m| m.info().name.clone()).collect();
+        let known: Vec<_> = models::all()
+            .iter()
+            .map(|m| m.info().name.clone())
+            .collect();
         return Err(super::Failure::input(format!(
             "unknown model `{}` (hosted: {})",
             args.model.unwrap_or_default(),
@@ -25,11 +28,17 @@ pub fn run(args: Args) -> Outcome {
         )));
     }
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&selected).expect("plain data"));
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&selected).expect("plain data")
+        );
         return Ok(());
     }
     for info in selected {
-        println!("{} (version {}): {}", info.name, info.version, info.description);
+        println!(
+            "{} (version {}): {}",
+            info.name, info.version, info.description
+        );
         println!("  parameters:");
         for p in &info.parameters {
             println!(
@@ -43,7 +52,10 @@ pub fn run(args: Args) -> Outcome {
         }
         println!("  effects (0 = absent):");
         for e in &info.effects {
-            println!("    {:<28} [{}, {}] {:<12} {}", e.name, e.min, e.max, e.unit, e.description);
+            println!(
+                "    {:<28} [{}, {}] {:<12} {}",
+                e.name, e.min, e.max, e.unit, e.description
+            );
         }
         println!();
     }

@@ -32,7 +32,10 @@ const MAX_ROWS: f64 = 1e7;
 
 pub fn run(args: Args) -> Outcome {
     let Some(model) = models::find(&args.model) else {
-        let known: Vec<_> = models::all().iter().map(|m| m.info().name.clone()).collect();
+        let known: Vec<_> = models::all()
+            .iter()
+            .map(|m| m.info().name.clone())
+            .collect();
         return Err(Failure::input(format!(
             "unknown model `{}` (hosted: {})",
             args.model,
@@ -43,7 +46,9 @@ pub fn run(args: Args) -> Outcome {
     let mut params = info.default_vector();
     for assignment in &args.set {
         let Some((name, value)) = assignment.split_once('=') else {
-            return Err(Failure::input(format!("--set {assignment}: expected NAME=VALUE")));
+            return Err(Failure::input(format!(
+                "--set {assignment}: expected NAME=VALUE"
+            )));
         };
         let (name, value) = (name.trim(), value.trim());
         let Some(index) = info.parameter_index(name) else {
@@ -52,9 +57,9 @@ pub fn run(args: Args) -> Outcome {
                 info.name
             )));
         };
-        let v: f64 = value
-            .parse()
-            .map_err(|_| Failure::input(format!("--set {assignment}: `{value}` is not a number")))?;
+        let v: f64 = value.parse().map_err(|_| {
+            Failure::input(format!("--set {assignment}: `{value}` is not a number"))
+        })?;
         let (lo, hi) = info.bounds_at(index);
         if !v.is_finite() || v < lo || v > hi {
             return Err(Failure::input(format!(
@@ -64,7 +69,10 @@ pub fn run(args: Args) -> Outcome {
         params[index] = v;
     }
     if !(args.stop > 0.0 && args.stop.is_finite()) {
-        return Err(Failure::input(format!("--stop {}: must be a positive time", args.stop)));
+        return Err(Failure::input(format!(
+            "--stop {}: must be a positive time",
+            args.stop
+        )));
     }
     if !(args.step > 0.0 && args.stop / args.step <= MAX_ROWS) {
         return Err(Failure::input(format!(
@@ -73,7 +81,10 @@ pub fn run(args: Args) -> Outcome {
         )));
     }
     if !(args.rtol > 0.0 && args.rtol < 1.0) {
-        return Err(Failure::input(format!("--rtol {}: must be in (0, 1)", args.rtol)));
+        return Err(Failure::input(format!(
+            "--rtol {}: must be in (0, 1)",
+            args.rtol
+        )));
     }
     let outputs: Vec<usize> = if args.outputs.is_empty() {
         (0..info.outputs.len()).collect()
@@ -82,7 +93,10 @@ pub fn run(args: Args) -> Outcome {
             .iter()
             .map(|name| {
                 info.output_index(name).ok_or_else(|| {
-                    Failure::input(format!("--outputs: model `{}` has no output `{name}`", info.name))
+                    Failure::input(format!(
+                        "--outputs: model `{}` has no output `{name}`",
+                        info.name
+                    ))
                 })
             })
             .collect::<Result<_, _>>()?
@@ -99,9 +113,10 @@ pub fn run(args: Args) -> Outcome {
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
 
     let sink: Box<dyn Write> = match &args.out {
-        Some(path) => Box::new(std::fs::File::create(path).map_err(|e| {
-            Failure::internal(format!("cannot write {}: {e}", path.display()))
-        })?),
+        Some(path) => Box::new(
+            std::fs::File::create(path)
+                .map_err(|e| Failure::internal(format!("cannot write {}: {e}", path.display())))?,
+        ),
         None => Box::new(std::io::stdout().lock()),
     };
     let mut csv = csv::Writer::from_writer(std::io::BufWriter::new(sink));

@@ -21,7 +21,10 @@ pub fn real_record() -> Option<PathBuf> {
     if path.exists() {
         Some(path)
     } else {
-        eprintln!("skipped: {} is absent (it lives beside the repository, never in it)", path.display());
+        eprintln!(
+            "skipped: {} is absent (it lives beside the repository, never in it)",
+            path.display()
+        );
         None
     }
 }

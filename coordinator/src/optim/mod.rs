@@ -1,8 +1,20 @@
-//! The optimisers and the multistart that drives them.
+//! Derivative-free optimisers for calibration, and the multistart that drives them.
 //!
-//! Every solver searches the unit box (see [`space`]): each free parameter mapped from its
-//! bounds to [0, 1]. Nelder–Mead is argmin's; Powell and differential evolution are argmin
-//! `Solver`s of ours, so one executor and one termination story serve all three.
+//! All solvers search the unit box `[0, 1]^n` ([`space`]): every physical parameter is
+//! mapped from its bounds onto `[0, 1]` before optimising and back afterwards, so one step
+//! size and one tolerance fit parameters of any scale, and bounds always hold.
+//! Independent evaluations are requested in batches through [`Problem::bulk_cost`], which
+//! [`problem::RunProblem`] overrides to evaluate them in parallel.
+//!
+//! * [`nelder_mead`]: argmin's Nelder–Mead simplex, its initial simplex evaluated as a batch.
+//! * [`Powell`]: Powell's conjugate-direction method, a local method for smooth
+//!   objectives ([`powell`]).
+//! * [`DifferentialEvolution`]: differential evolution after Storn and Price
+//!   (rand/1/bin or best/1/bin), a global population-based method
+//!   ([`differential_evolution`]).
+//! * [`multistart`]: every method from every start point, concurrently; minima clustered.
+//!
+//! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
 
 pub mod budget;
 pub mod differential_evolution;
@@ -11,3 +23,6 @@ pub mod nelder_mead;
 pub mod powell;
 pub mod problem;
 pub mod space;
+
+pub use differential_evolution::{DifferentialEvolution, Strategy};
+pub use powell::Powell;

@@ -11,7 +11,7 @@
 
 use super::budget::Budgeted;
 use super::problem::{Progress, RunLog, RunProblem};
-use super::space::UnitBox;
+use super::space::{self, UnitBox};
 use super::{differential_evolution, nelder_mead, powell};
 use crate::campaign::Method;
 use crate::evaluator::Evaluator;
@@ -110,7 +110,8 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s)?
         }
         Method::Powell => {
-            let inner = powell::Powell::new(spec.start_unit.clone());
+            let inner = powell::Powell::new(spec.start_unit.clone())
+                .with_initial_steps(space::initial_steps(&spec.start_unit))?;
             let start = spec.start_unit.clone();
             execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s.param(start))?
         }
@@ -139,10 +140,10 @@ fn execute<'a, S, I>(
 ) -> Result<(RunLog, u64, String), argmin::core::Error>
 where
     S: Solver<RunProblem<'a>, I>,
-    I: State<Float = f64> + MaxIters,
+    I: State<Float = f64> + Capped,
 {
     let mut result = Executor::new(problem, solver)
-        .configure(|state| configure(state.with_max_iters(MAX_ITERS)))
+        .configure(|state| configure(state.capped(MAX_ITERS)))
         .run()?;
     let iterations = result.state().get_iter();
     let termination = describe(result.state().get_termination_status());
@@ -154,20 +155,21 @@ where
     Ok((log, iterations, termination))
 }
 
-/// The states of argmin that take an iteration cap.
-pub trait MaxIters {
-    fn with_max_iters(self, iters: u64) -> Self;
+/// The states of argmin that take an iteration cap and count evaluations (the evaluation
+/// budget reads the counts, which argmin leaves empty unless asked to keep them).
+pub trait Capped {
+    fn capped(self, iters: u64) -> Self;
 }
 
-impl MaxIters for IterState<Vec<f64>, (), (), (), (), f64> {
-    fn with_max_iters(self, iters: u64) -> Self {
-        self.max_iters(iters)
+impl Capped for IterState<Vec<f64>, (), (), (), (), f64> {
+    fn capped(self, iters: u64) -> Self {
+        self.max_iters(iters).counting(true)
     }
 }
 
-impl MaxIters for PopulationState<Vec<f64>, f64> {
-    fn with_max_iters(self, iters: u64) -> Self {
-        self.max_iters(iters)
+impl Capped for PopulationState<Vec<f64>, f64> {
+    fn capped(self, iters: u64) -> Self {
+        self.max_iters(iters).counting(true)
     }
 }
 

@@ -6,31 +6,19 @@
 //! that argmin's own evaluations of it are answered from the evaluation cache.
 
 use super::problem::RunProblem;
+use super::space::initial_steps;
 use argmin::core::Error;
 use argmin::solver::neldermead::NelderMead;
-
-/// Relative size of the initial simplex: each vertex moves one coordinate by this fraction
-/// of its distance from the lower bound (the convention of `scipy.optimize.minimize`, which
-/// the seed used, measured in the unit box).
-pub const RELATIVE_STEP: f64 = 0.05;
-
-/// Step of a coordinate that sits on its lower bound.
-pub const STEP_AT_BOUND: f64 = 0.00025;
 
 /// Convergence: standard deviation of the (scaled) costs over the simplex.
 pub const SD_TOLERANCE: f64 = 1e-12;
 
 /// The initial simplex around `start`: one vertex per axis, that coordinate moved by
-/// [`RELATIVE_STEP`] of itself (towards the inside of the box when at the upper bound).
+/// its [`initial_steps`] (towards the inside of the box when at the upper bound).
 pub fn initial_simplex(start: &[f64]) -> Vec<Vec<f64>> {
     let mut vertices = vec![start.to_vec()];
-    for i in 0..start.len() {
+    for (i, step) in initial_steps(start).into_iter().enumerate() {
         let mut v = start.to_vec();
-        let step = if start[i] > 0.0 {
-            RELATIVE_STEP * start[i]
-        } else {
-            STEP_AT_BOUND
-        };
         v[i] = if start[i] + step <= 1.0 {
             start[i] + step
         } else {

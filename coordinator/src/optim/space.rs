@@ -45,6 +45,29 @@ impl UnitBox {
     }
 }
 
+/// Relative size of the first steps of local methods: each coordinate moves by this fraction
+/// of its distance from the lower bound (the convention of `scipy.optimize.minimize`'s
+/// Nelder–Mead, which the seed used), measured in the unit box.
+pub const RELATIVE_STEP: f64 = 0.05;
+
+/// First step of a coordinate that sits on its lower bound.
+pub const STEP_AT_BOUND: f64 = 0.00025;
+
+/// First steps of a local method started at `start` (unit box): small and scaled to each
+/// coordinate, so a start near a bound explores near it instead of across the box.
+pub fn initial_steps(start: &[f64]) -> Vec<f64> {
+    start
+        .iter()
+        .map(|&u| {
+            if u > 0.0 {
+                (RELATIVE_STEP * u).min(0.5)
+            } else {
+                STEP_AT_BOUND
+            }
+        })
+        .collect()
+}
+
 /// Mirror `u` into [0, 1]: periodic with period 2, identity on [0, 1].
 fn fold(u: f64) -> f64 {
     if (0.0..=1.0).contains(&u) {
