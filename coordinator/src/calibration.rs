@@ -42,7 +42,11 @@ impl Calibration {
 
 /// Load the measured columns a campaign maps.
 pub fn load_measurement(campaign: &Campaign) -> Result<Measurement> {
-    let columns: Vec<&str> = campaign.outputs.iter().map(|o| o.measured.as_str()).collect();
+    let columns: Vec<&str> = campaign
+        .outputs
+        .iter()
+        .map(|o| o.measured.as_str())
+        .collect();
     Ok(Measurement::load(
         &campaign.measurement_file,
         &campaign.time_column,

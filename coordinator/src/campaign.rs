@@ -101,7 +101,7 @@ fn default_time_column() -> String {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct OutputEntry {
-    model: String,
+    model: Spanned<String>,
     measured: String,
     #[serde(default = "one")]
     weight: f64,
@@ -114,7 +114,7 @@ fn one() -> f64 {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct ParameterEntry {
-    name: String,
+    name: Spanned<String>,
     nominal: Option<f64>,
     min: f64,
     max: f64,
@@ -271,10 +271,19 @@ struct Locator<'a> {
 impl Locator<'_> {
     fn line(&self, offset: usize) -> usize {
         let end = offset.min(self.text.len());
-        self.text.as_bytes()[..end].iter().filter(|b| **b == b'\n').count() + 1
+        self.text.as_bytes()[..end]
+            .iter()
+            .filter(|b| **b == b'\n')
+            .count()
+            + 1
     }
 
-    fn error<T>(&self, span: std::ops::Range<usize>, field: &str, message: String) -> Result<T, CampaignError> {
+    fn error<T>(
+        &self,
+        span: std::ops::Range<usize>,
+        field: &str,
+        message: String,
+    ) -> Result<T, CampaignError> {
         Err(CampaignError {
             file: self.path.to_path_buf(),
             line: Some(self.line(span.start)),
@@ -289,11 +298,17 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
     let model_section = file.model.into_inner();
     let model_name = model_section.name.get_ref();
     let Some(model) = models::find(model_name) else {
-        let known: Vec<_> = models::all().iter().map(|m| m.info().name.clone()).collect();
+        let known: Vec<_> = models::all()
+            .iter()
+            .map(|m| m.info().name.clone())
+            .collect();
         return at.error(
             model_section.name.span(),
             "model.name",
-            format!("unknown model `{model_name}` (hosted: {})", known.join(", ")),
+            format!(
+                "unknown model `{model_name}` (hosted: {})",
+                known.join(", ")
+            ),
         );
     };
     let info = model.info();
@@ -312,13 +327,22 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             return at.error(
                 name.span(),
                 &field,
-                format!("model `{}` has no parameter `{}` (it has: {})", info.name, name.get_ref(), known_parameters()),
+                format!(
+                    "model `{}` has no parameter `{}` (it has: {})",
+                    info.name,
+                    name.get_ref(),
+                    known_parameters()
+                ),
             );
         };
         let v = *value.get_ref();
         let (lo, hi) = info.bounds_at(index);
         if !v.is_finite() || v < lo || v > hi {
-            return at.error(value.span(), &field, format!("value {v} is outside the admissible range [{lo}, {hi}]"));
+            return at.error(
+                value.span(),
+                &field,
+                format!("value {v} is outside the admissible range [{lo}, {hi}]"),
+            );
         }
         base[index] = v;
         fixed_names.push(name.get_ref().clone());
@@ -329,32 +353,48 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
     for (i, entry) in file.parameters.iter().enumerate() {
         let span = entry.span();
         let p = entry.get_ref();
-        let field = format!("parameters[{i}] ({})", p.name);
-        let Some(index) = info.parameter_index(&p.name) else {
+        let name = p.name.get_ref();
+        let field = format!("parameters[{i}] ({name})");
+        let Some(index) = info.parameter_index(name) else {
             return at.error(
-                span,
+                p.name.span(),
                 &field,
-                format!("model `{}` has no parameter `{}` (it has: {})", info.name, p.name, known_parameters()),
+                format!(
+                    "model `{}` has no parameter `{name}` (it has: {})",
+                    info.name,
+                    known_parameters()
+                ),
             );
         };
         if free.iter().any(|f| f.index == index) {
             return at.error(span, &field, "is listed twice".into());
         }
-        if fixed_names.contains(&p.name) {
-            return at.error(span, &field, "is both fixed in [model.parameters] and free here".into());
+        if fixed_names.contains(name) {
+            return at.error(
+                span,
+                &field,
+                "is both fixed in [model.parameters] and free here".into(),
+            );
         }
         if !p.min.is_finite() || !p.max.is_finite() {
             return at.error(span, &field, "min and max must be finite numbers".into());
         }
         if p.min >= p.max {
-            return at.error(span, &field, format!("min ({}) must be below max ({})", p.min, p.max));
+            return at.error(
+                span,
+                &field,
+                format!("min ({}) must be below max ({})", p.min, p.max),
+            );
         }
         let (lo, hi) = info.bounds_at(index);
         if p.min < lo || p.max > hi {
             return at.error(
                 span,
                 &field,
-                format!("bounds [{}, {}] exceed the model's admissible range [{lo}, {hi}]", p.min, p.max),
+                format!(
+                    "bounds [{}, {}] exceed the model's admissible range [{lo}, {hi}]",
+                    p.min, p.max
+                ),
             );
         }
         let nominal = p.nominal.unwrap_or(base[index]);
@@ -362,12 +402,15 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             return at.error(
                 span,
                 &field,
-                format!("nominal {nominal} is outside its bounds [{}, {}]", p.min, p.max),
+                format!(
+                    "nominal {nominal} is outside its bounds [{}, {}]",
+                    p.min, p.max
+                ),
             );
         }
         base[index] = nominal;
         free.push(FreeParameter {
-            name: p.name.clone(),
+            name: name.clone(),
             index,
             nominal,
             min: p.min,
@@ -395,20 +438,29 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
     let mut outputs = Vec::new();
     for (i, entry) in file.outputs.iter().enumerate() {
         let o = entry.get_ref();
-        let field = format!("outputs[{i}] ({})", o.model);
-        let Some(model_index) = info.output_index(&o.model) else {
+        let output = o.model.get_ref();
+        let field = format!("outputs[{i}] ({output})");
+        let Some(model_index) = info.output_index(output) else {
             let known: Vec<_> = info.outputs.iter().map(|o| o.name.as_str()).collect();
             return at.error(
-                entry.span(),
+                o.model.span(),
                 &field,
-                format!("model `{}` has no output `{}` (it has: {})", info.name, o.model, known.join(", ")),
+                format!(
+                    "model `{}` has no output `{output}` (it has: {})",
+                    info.name,
+                    known.join(", ")
+                ),
             );
         };
         if !o.weight.is_finite() || o.weight < 0.0 {
-            return at.error(entry.span(), &field, format!("weight {} must be a finite number ≥ 0", o.weight));
+            return at.error(
+                entry.span(),
+                &field,
+                format!("weight {} must be a finite number ≥ 0", o.weight),
+            );
         }
         outputs.push(OutputMapping {
-            model: o.model.clone(),
+            model: output.clone(),
             model_index,
             measured: o.measured.clone(),
             weight: o.weight,
@@ -436,14 +488,22 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
         Some(t) => {
             let v = *t.get_ref();
             if !v.is_finite() || v < stop {
-                return at.error(t.span(), "model.stop_time", format!("{v} must be ≥ the window's stop ({stop})"));
+                return at.error(
+                    t.span(),
+                    "model.stop_time",
+                    format!("{v} must be ≥ the window's stop ({stop})"),
+                );
             }
             v
         }
         None => stop,
     };
     if stop_time > 1e6 {
-        return at.error(model_span, "model.stop_time", format!("{stop_time} s is beyond what calib simulates (1e6 s)"));
+        return at.error(
+            model_span,
+            "model.stop_time",
+            format!("{stop_time} s is beyond what calib simulates (1e6 s)"),
+        );
     }
 
     // Search.
@@ -467,7 +527,11 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
                 return at.error(
                     span,
                     "search.max_evaluations",
-                    format!("{} is too few for {} parameters", s.max_evaluations, free.len()),
+                    format!(
+                        "{} is too few for {} parameters",
+                        s.max_evaluations,
+                        free.len()
+                    ),
                 );
             }
             let mut methods = s.methods;
@@ -592,7 +656,10 @@ seed = 7
         assert_eq!(c.model.info().name, "furuta");
         assert_eq!(c.free[0].index, 0);
         assert_eq!(c.outputs[0].model_index, 0);
-        assert_eq!(c.measurement_file, Path::new("/campaigns/data/furuta_clean.csv"));
+        assert_eq!(
+            c.measurement_file,
+            Path::new("/campaigns/data/furuta_clean.csv")
+        );
         assert_eq!(c.search.methods, vec![Method::NelderMead, Method::Powell]);
         assert_eq!(c.window, (0.0, 40.0));
     }
@@ -610,7 +677,7 @@ seed = 7
         assert!(e.to_string().contains("unknown model `furuta2`"), "{e}");
 
         let e = error_for("name = \"armFriction\"", "name = \"armFrction\"");
-        assert_eq!(e.line, Some(20), "{e}");
+        assert_eq!(e.line, Some(19), "{e}");
         assert!(e.message.contains("no parameter `armFrction`"), "{e}");
 
         let e = error_for("model = \"armJoint.phi\"", "model = \"arm.phi\"");
@@ -624,7 +691,7 @@ seed = 7
 
         let e = error_for("seed = 7", "seed = 7\ncolour = 3");
         assert!(e.message.contains("unknown field `colour`"), "{e}");
-        assert_eq!(e.line, Some(35), "{e}");
+        assert_eq!(e.line, Some(33), "{e}");
 
         let e = error_for("\"powell\"", "\"simplex\"");
         assert!(e.message.contains("simplex"), "{e}");

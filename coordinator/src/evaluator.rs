@@ -42,7 +42,7 @@ pub struct CacheStats {
 /// the point, so that concurrent runs and repeated points never simulate twice.
 pub struct CachedEvaluator<E> {
     inner: E,
-    entries: Mutex<HashMap<([u8; 32], Vec<u64>), Evaluation>>,
+    entries: Mutex<HashMap<CacheKey, Evaluation>>,
     requested: AtomicU64,
     simulated: AtomicU64,
 }
@@ -68,7 +68,10 @@ impl<E: Evaluator> CachedEvaluator<E> {
     }
 }
 
-fn key(objective: &Objective, point: &[f64]) -> ([u8; 32], Vec<u64>) {
+/// Objective fingerprint and the bits of the point.
+type CacheKey = ([u8; 32], Vec<u64>);
+
+fn key(objective: &Objective, point: &[f64]) -> CacheKey {
     (
         objective.fingerprint(),
         point.iter().map(|v| v.to_bits()).collect(),

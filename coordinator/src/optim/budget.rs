@@ -31,7 +31,11 @@ where
         if status.terminated() {
             return status;
         }
-        let used = state.get_func_counts().get("cost_count").copied().unwrap_or(0);
+        let used = state
+            .get_func_counts()
+            .get("cost_count")
+            .copied()
+            .unwrap_or(0);
         if used >= self.max_evaluations {
             return TerminationStatus::Terminated(TerminationReason::SolverExit(
                 "evaluation budget used".into(),

@@ -71,7 +71,9 @@ pub fn plan(methods: &[Method], starts: &[Vec<f64>], seed: u64) -> Vec<RunSpec> 
                 method,
                 start,
                 start_unit: unit.clone(),
-                seed: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15).wrapping_add(start as u64),
+                seed: seed
+                    .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+                    .wrapping_add(start as u64),
             });
         }
     }
@@ -90,7 +92,10 @@ pub struct RunContext<'a> {
 }
 
 /// Run all `runs` concurrently; outcomes in the order of `runs`.
-pub fn run_all(context: &RunContext, runs: &[RunSpec]) -> Result<Vec<RunOutcome>, argmin::core::Error> {
+pub fn run_all(
+    context: &RunContext,
+    runs: &[RunSpec],
+) -> Result<Vec<RunOutcome>, argmin::core::Error> {
     runs.par_iter().map(|spec| run_one(context, spec)).collect()
 }
 
@@ -107,17 +112,41 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
     let (log, iterations, termination) = match spec.method {
         Method::NelderMead => {
             let inner = nelder_mead::solver(&problem, &spec.start_unit)?;
-            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s)?
+            execute(
+                problem,
+                Budgeted {
+                    inner,
+                    max_evaluations: budget,
+                },
+                |s| s,
+            )?
         }
         Method::Powell => {
             let inner = powell::Powell::new(spec.start_unit.clone())
                 .with_initial_steps(space::initial_steps(&spec.start_unit))?;
             let start = spec.start_unit.clone();
-            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s.param(start))?
+            execute(
+                problem,
+                Budgeted {
+                    inner,
+                    max_evaluations: budget,
+                },
+                |s| s.param(start),
+            )?
         }
         Method::DifferentialEvolution => {
-            let inner = differential_evolution::DifferentialEvolution::new(spec.start_unit.clone(), spec.seed);
-            execute(problem, Budgeted { inner, max_evaluations: budget }, |s| s)?
+            let inner = differential_evolution::DifferentialEvolution::new(
+                spec.start_unit.clone(),
+                spec.seed,
+            );
+            execute(
+                problem,
+                Budgeted {
+                    inner,
+                    max_evaluations: budget,
+                },
+                |s| s,
+            )?
         }
     };
     Ok(RunOutcome {
@@ -203,12 +232,9 @@ pub fn cluster(outcomes: &[RunOutcome], space: &UnitBox, radius: f64) -> Vec<Clu
             continue;
         }
         let u = space.to_unit(&outcome.point);
-        let home = clusters.iter_mut().find(|(centre, _)| {
-            centre
-                .iter()
-                .zip(&u)
-                .all(|(a, b)| (a - b).abs() <= radius)
-        });
+        let home = clusters
+            .iter_mut()
+            .find(|(centre, _)| centre.iter().zip(&u).all(|(a, b)| (a - b).abs() <= radius));
         match home {
             Some((_, c)) => c.runs.push(i),
             None => clusters.push((

@@ -26,7 +26,12 @@ pub fn time_plot(
     series: &[Series],
     shade: Option<(f64, f64)>,
 ) -> Result<()> {
-    let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    let (mut x0, mut x1, mut y0, mut y1) = (
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+    );
     for s in series {
         for (&t, &v) in s.time.iter().zip(s.values) {
             if t.is_finite() && v.is_finite() {
@@ -37,10 +42,13 @@ pub fn time_plot(
             }
         }
     }
-    if !(x0 < x1) {
+    if !x0.is_finite() {
+        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
+    }
+    if x0 >= x1 {
         x1 = x0 + 1.0;
     }
-    if !(y0 < y1) {
+    if y0 >= y1 {
         y0 -= 0.5;
         y1 += 0.5;
     }
@@ -80,7 +88,9 @@ pub fn time_plot(
                     color.stroke_width(width),
                 ))?
                 .label(s.label)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+                });
         }
         chart
             .configure_series_labels()
@@ -113,7 +123,12 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     let simulate = |free: &[f64]| {
         campaign
             .model
-            .simulate(&campaign.full_parameters(free), &grid, &outputs, &campaign.solver)
+            .simulate(
+                &campaign.full_parameters(free),
+                &grid,
+                &outputs,
+                &campaign.solver,
+            )
             .map(|t| t.values)
             .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; outputs.len()])
     };
@@ -168,6 +183,12 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
 /// A file name from an output name (`armJoint.phi` → `armJoint.phi`, `a/b` → `a_b`).
 pub fn sanitize(name: &str) -> String {
     name.chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '.' || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '.' || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect()
 }

@@ -38,7 +38,11 @@ pub fn summary(c: &Calibration) -> String {
         best.start
     );
     for (p, v) in c.campaign.free.iter().zip(&best.point) {
-        let _ = writeln!(s, "  {:<width$} = {:.6e}   (nominal {:.6e})", p.name, v, p.nominal);
+        let _ = writeln!(
+            s,
+            "  {:<width$} = {:.6e}   (nominal {:.6e})",
+            p.name, v, p.nominal
+        );
     }
     let _ = writeln!(
         s,
