@@ -14,14 +14,15 @@
 //! | face (tube length × stack height) | 0.30 m × 0.24 m |
 //! | tubes, passes | 24 tubes, 4 passes of 6 tubes |
 //! | tube: depth × thickness, wall | 40 mm × 2.0 mm |
-//! | ports per tube, port size | 20 square ports, 1.0 mm × 1.0 mm (D_h = 1.0 mm) |
-//! | refrigerant path length, flow area | 1.2 m, 120 mm² (G ≈ 170 kg/(m² s) at 0.02 kg/s) |
+//! | ports per tube, port size | 20 square ports, 1.1 mm × 1.1 mm (D_h = 1.1 mm) |
+//! | refrigerant path length, flow area | 1.2 m, 145 mm² (G ≈ 145 kg/(m² s) at 0.021 kg/s) |
 //! | fins: pitch, thickness, height (gap) | 1.3 mm, 0.10 mm, 8.0 mm |
 //! | louvers: pitch, length, angle | 1.1 mm, 6.8 mm, 27° |
 //! | aluminium (3003): density, heat capacity, fin conductivity | 2730 kg/m³, 893 J/(kg K), 190 W/(m K) |
 //!
-//! Derived (see the unit test): refrigerant-side wetted area ≈ 0.58 m², air-side area
-//! ≈ 4.4 m² (fins ≈ 90 %), minimum free-flow area ≈ 0.054 m², wall heat capacity ≈ 1.25 kJ/K.
+//! Derived (see the unit test): refrigerant-side wetted area 0.634 m², air-side area
+//! 4.22 m² (fins 87 %), face 0.075 m² (1.7 m/s at 0.15 kg/s), minimum free-flow area
+//! 0.0554 m², wall heat capacity 1.43 kJ/K.
 
 /// Dimensions of the core (SI units).
 #[derive(Debug, Clone, Copy, PartialEq)]
