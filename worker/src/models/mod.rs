@@ -1,6 +1,7 @@
 //! The hosted models. Each lives in its own module and implements [`crate::Model`].
 
 pub mod furuta;
+pub mod hx;
 
 use crate::Model;
 use std::sync::OnceLock;
@@ -8,7 +9,13 @@ use std::sync::OnceLock;
 /// Every hosted model, in the order `calib models` lists them.
 pub fn all() -> &'static [Box<dyn Model>] {
     static MODELS: OnceLock<Vec<Box<dyn Model>>> = OnceLock::new();
-    MODELS.get_or_init(|| vec![Box::new(furuta::Furuta::new())])
+    MODELS.get_or_init(|| {
+        vec![
+            Box::new(furuta::Furuta::new()),
+            Box::new(hx::highfi()),
+            Box::new(hx::lowfi()),
+        ]
+    })
 }
 
 /// The hosted model called `name`.

@@ -1,0 +1,46 @@
+//! Median wall time of one 300 s simulation of each heat-exchanger model, all outputs on
+//! a 1 s and a 0.5 s grid, at the calibration tolerance.
+//!
+//! `cargo run --release -p calib-worker --example hx_timing`
+
+use calib_worker::models::hx;
+use calib_worker::{Model, SolverOptions};
+use std::time::Instant;
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let options = SolverOptions::default();
+    for model in [hx::highfi(), hx::lowfi()] {
+        let info = model.info();
+        let params = info.default_vector();
+        let outputs: Vec<usize> = (0..info.outputs.len()).collect();
+        for step in [1.0, 0.5] {
+            let grid: Vec<f64> = (0..=(300.0 / step) as usize)
+                .map(|i| i as f64 * step)
+                .collect();
+            let mut times = Vec::new();
+            let mut stats = None;
+            for _ in 0..21 {
+                let t0 = Instant::now();
+                let tr = model
+                    .simulate(&params, &grid, &outputs, &options)
+                    .expect("simulation");
+                times.push(t0.elapsed().as_secs_f64());
+                stats = Some(tr.stats);
+            }
+            let s = stats.expect("at least one run");
+            println!(
+                "{:10} grid {step:3} s: median {:7.2} ms  ({} steps, {} rejected, {} rhs)",
+                info.name,
+                median(times) * 1e3,
+                s.accepted_steps,
+                s.rejected_steps,
+                s.rhs_evaluations
+            );
+        }
+    }
+}

@@ -1,0 +1,476 @@
+//! The segmented evaporator: quasi-steady refrigerant march, ε-NTU air side, dynamic
+//! wall temperatures.
+//!
+//! See the module documentation of [`super`] for the equations. This file holds the
+//! march along the refrigerant path for given wall temperatures (used by the
+//! time integration) and the direct steady-state solve (used for the initial state).
+
+use std::cell::Cell;
+
+use super::boundary::{Inputs, Ramps};
+use super::correlations::{chen, colburn_j, fin_efficiency, louver_group, nusselt_gnielinski, Air};
+use super::geometry::Geometry;
+use super::pressure_drop;
+use super::refrigerant::{self, saturation, vapour};
+
+/// Which pressure-drop model, and how fine the segmentation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Fidelity {
+    /// Friedel two-phase friction, Churchill single-phase friction and the homogeneous
+    /// momentum term, marched segment by segment.
+    High,
+    /// The density-profile model around a nominal point; linear pressure profile.
+    Low,
+}
+
+/// The nominal point of the low-fidelity pressure-drop model (SI units).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NominalPoint {
+    pub p0: f64,
+    pub h0: f64,
+    pub mdot0: f64,
+    pub dp0: f64,
+}
+
+/// Everything that defines one simulation, in SI units.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Settings {
+    pub fidelity: Fidelity,
+    pub segments: usize,
+    pub geometry: Geometry,
+    pub cf_ref_ht: f64,
+    pub cf_air_ht: f64,
+    pub cf_ref_dp: f64,
+    pub cf_air_dp: f64,
+    pub ramps: Ramps,
+    /// Heat capacity of tubes and fins (J/K).
+    pub wall_capacity: f64,
+    /// Ambient temperature (K) and wall-to-ambient conductance (W/K, 0 = no loss).
+    pub t_ambient: f64,
+    pub ambient_conductance: f64,
+    /// Used by [`Fidelity::Low`] only.
+    pub nominal: NominalPoint,
+}
+
+/// Air side at one instant: per-segment capacity rate and effectiveness.
+#[derive(Debug, Clone, Copy)]
+pub struct AirSide {
+    pub t_in: f64,
+    /// `ṁ_a c_p / N` (W/K).
+    pub c_seg: f64,
+    pub effectiveness: f64,
+    /// Core pressure drop (Pa).
+    pub dp: f64,
+}
+
+/// One segment's result.
+#[derive(Debug, Clone, Copy)]
+struct Segment {
+    q_ref: f64,
+    h_out: f64,
+    /// Pressure drop over the segment (high fidelity only, else 0).
+    dp: f64,
+    /// Specific volume at the segment's mean enthalpy (low fidelity only, else 0).
+    v_mid: f64,
+}
+
+/// Totals of one march along the path.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct March {
+    pub p_in: f64,
+    pub p_end: f64,
+    pub h_out: f64,
+    pub q_ref: f64,
+    pub q_air: f64,
+    pub q_ambient: f64,
+    pub wall_mean: f64,
+    /// Low fidelity: the model's pressure drop for this march.
+    pub dp_model: f64,
+}
+
+/// Wall temperatures: given (time integration) or solved segment by segment (steady state).
+enum Walls<'a> {
+    Given(&'a [f64]),
+    Steady(&'a mut [f64]),
+}
+
+/// Pre-computed constants of one simulation.
+pub struct Evaporator {
+    pub settings: Settings,
+    n: usize,
+    seg_len: f64,
+    seg_area_ref: f64,
+    d: f64,
+    flow_area: f64,
+    louver_group: f64,
+    /// `ρ0` of the low-fidelity model, the density at `(p0, h0)`.
+    rho0: f64,
+    /// Set when a march leaves the property tables.
+    out_of_range: Cell<bool>,
+}
+
+/// Quality of dry-out inception: above it the boiling coefficient falls linearly to the
+/// vapour coefficient at x = 1 (Wojtan, Ursenbacher & Thome 2005).
+pub const X_DRYOUT: f64 = 0.9;
+
+/// Relative tolerance of the inlet-pressure iteration, on the pressure drop.
+const PRESSURE_TOL: f64 = 1e-10;
+const PRESSURE_ITER: usize = 60;
+
+fn specific_volume(p: f64, h: f64) -> f64 {
+    let s = saturation(p);
+    if h < s.h_v {
+        let x = s.quality(h).clamp(0.0, 1.0);
+        x / s.rho_v + (1.0 - x) / s.rho_l
+    } else {
+        1.0 / vapour(p, h, s.h_v).rho
+    }
+}
+
+impl Evaporator {
+    pub fn new(settings: Settings) -> Self {
+        let g = settings.geometry;
+        let n = settings.segments.max(1);
+        let nom = settings.nominal;
+        Self {
+            settings,
+            n,
+            seg_len: g.path_length() / n as f64,
+            seg_area_ref: g.refrigerant_area() / n as f64,
+            d: g.hydraulic_diameter(),
+            flow_area: g.flow_area(),
+            louver_group: louver_group(
+                g.louver_angle,
+                g.fin_pitch,
+                g.fin_height,
+                g.tube_depth,
+                g.louver_length,
+                g.fin_height + g.tube_thickness,
+                g.fin_thickness,
+                g.louver_pitch,
+            ),
+            rho0: 1.0 / specific_volume(nom.p0, nom.h0),
+            out_of_range: Cell::new(false),
+        }
+    }
+
+    pub fn segments(&self) -> usize {
+        self.n
+    }
+
+    pub fn out_of_range(&self) -> bool {
+        self.out_of_range.get()
+    }
+
+    /// ε-NTU of the finned air side against a wall at uniform temperature, per segment.
+    pub fn air_side(&self, inp: &Inputs) -> AirSide {
+        let g = &self.settings.geometry;
+        let air = Air::at(inp.t_air_in);
+        let a_min = g.air_min_flow_area();
+        let g_c = inp.mdot_air.max(1e-9) / a_min;
+        let re_lp = g_c * g.louver_pitch / air.mu;
+        let j = colburn_j(re_lp, self.louver_group);
+        let h = self.settings.cf_air_ht * j * g_c * air.cp / air.prandtl().powf(2.0 / 3.0);
+        let eta_f = fin_efficiency(h, g.fin_conductivity, g.fin_thickness, 0.5 * g.fin_height);
+        let area = g.air_area();
+        let eta_o = 1.0 - g.fin_area() / area * (1.0 - eta_f);
+        let c = inp.mdot_air.max(1e-9) * air.cp;
+        let ntu = eta_o * h * area / c;
+        AirSide {
+            t_in: inp.t_air_in,
+            c_seg: c / self.n as f64,
+            effectiveness: 1.0 - (-ntu).exp(),
+            dp: self.settings.cf_air_dp * pressure_drop::air_core(j, area / a_min, g_c, air.rho),
+        }
+    }
+
+    /// Refrigerant side of one segment at inlet pressure `p`, enthalpy `h`, wall `tw`.
+    fn segment(&self, p: f64, h: f64, tw: f64, mdot: f64) -> Segment {
+        let st = &self.settings;
+        let high = st.fidelity == Fidelity::High;
+        let s = saturation(p);
+        let g = mdot / self.flow_area;
+        let d = self.d;
+        let a = self.seg_area_ref;
+        let len = self.seg_len;
+        let (q_ref, h_out, dp) = if h < s.h_v {
+            let x_in = s.quality(h);
+            let dt = tw - s.t;
+            let c = chen(&s, x_in, g, d, dt);
+            let pr_v = s.cp_v * s.mu_v / s.k_v;
+            let alpha_v = st.cf_ref_ht * nusselt_gnielinski(g * d / s.mu_v, pr_v) * s.k_v / d;
+            let mut alpha = st.cf_ref_ht * (c.convective + c.nucleate);
+            if x_in > X_DRYOUT {
+                // Dry-out region: linear in quality down to the vapour value at x = 1.
+                let w = (1.0 - x_in) / (1.0 - X_DRYOUT);
+                alpha = w * alpha + (1.0 - w) * alpha_v;
+            }
+            let q_full = alpha * a * dt;
+            let to_dew = mdot * (s.h_v - h);
+            if q_full <= to_dew {
+                let h_out = h + q_full / mdot;
+                let dp = if high {
+                    let x_out = s.quality(h_out);
+                    let x_m = 0.5 * (x_in + x_out).max(0.0);
+                    let v_in = 1.0 / s.homogeneous_density(x_in);
+                    let v_out = 1.0 / s.homogeneous_density(x_out);
+                    st.cf_ref_dp * pressure_drop::friedel(&s, x_m, g, d, len)
+                        + pressure_drop::acceleration(g, v_in, v_out)
+                } else {
+                    0.0
+                };
+                (q_full, h_out, dp)
+            } else {
+                // Dry-out inside the segment: boiling up to the dew point on the fraction
+                // `f` of the area, superheating the vapour on the rest.
+                let f = to_dew / q_full;
+                let c_ref = mdot * s.cp_v;
+                let q_v = c_ref * (tw - s.t) * (1.0 - (-alpha_v * a * (1.0 - f) / c_ref).exp());
+                let h_out = s.h_v + q_v / mdot;
+                let dp = if high {
+                    let v_in = 1.0 / s.homogeneous_density(x_in);
+                    let v_out = 1.0 / vapour(p, h_out, s.h_v).rho;
+                    st.cf_ref_dp
+                        * (pressure_drop::friedel(&s, 0.5 * (x_in.max(0.0) + 1.0), g, d, f * len)
+                            + pressure_drop::single_phase(s.rho_v, s.mu_v, g, d, (1.0 - f) * len))
+                        + pressure_drop::acceleration(g, v_in, v_out)
+                } else {
+                    0.0
+                };
+                (to_dew + q_v, h_out, dp)
+            }
+        } else {
+            let v = vapour(p, h, s.h_v);
+            let alpha = st.cf_ref_ht * nusselt_gnielinski(g * d / v.mu, v.prandtl()) * v.k / d;
+            let c_ref = mdot * v.cp;
+            let q = c_ref * (tw - v.t) * (1.0 - (-alpha * a / c_ref).exp());
+            let h_out = h + q / mdot;
+            let dp = if high {
+                let v_out = 1.0 / vapour(p, h_out, s.h_v).rho;
+                st.cf_ref_dp * pressure_drop::single_phase(v.rho, v.mu, g, d, len)
+                    + pressure_drop::acceleration(g, 1.0 / v.rho, v_out)
+            } else {
+                0.0
+            };
+            (q, h_out, dp)
+        };
+        let v_mid = if high {
+            0.0
+        } else {
+            specific_volume(p, 0.5 * (h + h_out))
+        };
+        Segment {
+            q_ref,
+            h_out,
+            dp,
+            v_mid,
+        }
+    }
+
+    /// Heat flows into the wall of a segment from air, and out of it to ambient.
+    #[inline]
+    fn air_and_ambient(&self, air: &AirSide, tw: f64) -> (f64, f64) {
+        let q_air = air.effectiveness * air.c_seg * (air.t_in - tw);
+        let q_amb =
+            self.settings.ambient_conductance / self.n as f64 * (tw - self.settings.t_ambient);
+        (q_air, q_amb)
+    }
+
+    /// Steady wall temperature of one segment: `q_air(T_w) = q_ref(T_w) + q_amb(T_w)`, the
+    /// balance being strictly decreasing in `T_w` (Illinois regula falsi on a bracket).
+    fn steady_wall(&self, air: &AirSide, p: f64, h: f64, mdot: f64) -> (f64, Segment) {
+        let s = saturation(p);
+        let t_ref = if h < s.h_v {
+            s.t
+        } else {
+            vapour(p, h, s.h_v).t
+        };
+        let t_amb = self.settings.t_ambient;
+        let mut lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
+        let mut hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
+        let balance = |tw: f64| {
+            let seg = self.segment(p, h, tw, mdot);
+            let (q_air, q_amb) = self.air_and_ambient(air, tw);
+            (q_air - seg.q_ref - q_amb, seg)
+        };
+        let (mut f_lo, _) = balance(lo);
+        let (mut f_hi, _) = balance(hi);
+        let mut side = 0i8;
+        let mut best = (lo, balance(lo).1);
+        for _ in 0..200 {
+            let mut tw = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+            if !(tw > lo && tw < hi) {
+                tw = 0.5 * (lo + hi);
+            }
+            let (f, seg) = balance(tw);
+            best = (tw, seg);
+            if f.abs() < 1e-9 || hi - lo < 1e-11 {
+                break;
+            }
+            if f > 0.0 {
+                lo = tw;
+                f_lo = f;
+                if side == 1 {
+                    f_hi *= 0.5;
+                }
+                side = 1;
+            } else {
+                hi = tw;
+                f_hi = f;
+                if side == -1 {
+                    f_lo *= 0.5;
+                }
+                side = -1;
+            }
+        }
+        best
+    }
+
+    /// March from the inlet at pressure `p_in`, writing the net heat flow into each wall
+    /// (W) into `net`, and return the totals.
+    fn march(
+        &self,
+        inp: &Inputs,
+        air: &AirSide,
+        p_in: f64,
+        mut walls: Walls,
+        net: &mut [f64],
+    ) -> March {
+        let n = self.n;
+        let high = self.settings.fidelity == Fidelity::High;
+        // Low fidelity: linear pressure profile between the inlet and the outlet boundary.
+        let dp_lin = (p_in - inp.p_out) / n as f64;
+        let mut p = p_in;
+        let mut h = inp.h_in;
+        let mut m = March {
+            p_in,
+            ..March::default()
+        };
+        let mut v_sum = 0.0;
+        let (p_min, p_max) = refrigerant::pressure_range();
+        for i in 0..n {
+            if !(p_min..=p_max).contains(&p) {
+                self.out_of_range.set(true);
+                p = p.clamp(p_min, p_max);
+            }
+            let (tw, seg) = match &mut walls {
+                Walls::Given(tw) => (tw[i], self.segment(p, h, tw[i], inp.mdot_ref)),
+                Walls::Steady(tw) => {
+                    let (t, seg) = self.steady_wall(air, p, h, inp.mdot_ref);
+                    tw[i] = t;
+                    (t, seg)
+                }
+            };
+            let (q_air, q_amb) = self.air_and_ambient(air, tw);
+            net[i] = q_air - seg.q_ref - q_amb;
+            m.q_ref += seg.q_ref;
+            m.q_air += q_air;
+            m.q_ambient += q_amb;
+            m.wall_mean += tw / n as f64;
+            v_sum += seg.v_mid;
+            h = seg.h_out;
+            p -= if high { seg.dp } else { dp_lin };
+        }
+        m.p_end = p;
+        m.h_out = h;
+        if !high {
+            let nom = &self.settings.nominal;
+            let rho_mean = n as f64 / v_sum;
+            m.dp_model = pressure_drop::density_profile(
+                self.settings.cf_ref_dp,
+                nom.dp0,
+                inp.mdot_ref,
+                nom.mdot0,
+                self.rho0,
+                rho_mean,
+            );
+        }
+        m
+    }
+
+    /// Residual of the outlet condition: zero when the march ends at the outlet pressure.
+    fn residual(&self, inp: &Inputs, m: &March) -> f64 {
+        match self.settings.fidelity {
+            Fidelity::High => m.p_end - inp.p_out,
+            Fidelity::Low => m.p_in - inp.p_out - m.dp_model,
+        }
+    }
+
+    /// Steady state for the inputs `inp`: the inlet pressure that meets the outlet
+    /// boundary condition, by a secant iteration on `p_in` around the segment-by-segment
+    /// steady wall solve. Writes the wall temperatures into `tw`.
+    fn solve_steady(&self, inp: &Inputs, air: &AirSide, tw: &mut [f64], net: &mut [f64]) -> March {
+        let p_max = refrigerant::pressure_range().1;
+        let mut run = |p_in: f64, net: &mut [f64]| {
+            let m = self.march(inp, air, p_in, Walls::Steady(&mut *tw), net);
+            (self.residual(inp, &m), m)
+        };
+        let mut x0 = (inp.p_out + 3e4).min(p_max);
+        let (mut r0, mut m) = run(x0, net);
+        let scale = |x: f64| PRESSURE_TOL * (x - inp.p_out).abs().max(100.0);
+        if r0.abs() <= scale(x0) {
+            return m;
+        }
+        let mut slope = 1.0;
+        let mut x1 = (x0 - r0 / slope).clamp(inp.p_out, p_max);
+        for _ in 0..PRESSURE_ITER {
+            let (r1, m1) = run(x1, net);
+            m = m1;
+            if r1.abs() <= scale(x1) || x1 == x0 {
+                break;
+            }
+            let s = (r1 - r0) / (x1 - x0);
+            if s.is_finite() && s > 0.05 {
+                slope = s;
+            }
+            let x2 = (x1 - r1 / slope).clamp(inp.p_out, p_max);
+            x0 = x1;
+            r0 = r1;
+            x1 = x2;
+        }
+        m
+    }
+
+    /// Net heat flow into each wall (W), the outlet-condition residual (Pa) and the march
+    /// totals at time-`t` inputs, for wall temperatures `tw` and inlet pressure `p_in`.
+    pub fn evaluate(
+        &self,
+        t: f64,
+        tw: &[f64],
+        p_in: f64,
+        net: &mut [f64],
+    ) -> (Inputs, AirSide, March, f64) {
+        let inp = self.settings.ramps.at(t);
+        let air = self.air_side(&inp);
+        let m = self.march(&inp, &air, p_in, Walls::Given(tw), net);
+        let r = self.residual(&inp, &m);
+        (inp, air, m, r)
+    }
+
+    /// Steady state at the inputs of time `t`: wall temperatures, then the inlet pressure.
+    pub fn steady_state(&self, t: f64) -> Vec<f64> {
+        let inp = self.settings.ramps.at(t);
+        let air = self.air_side(&inp);
+        let mut tw = vec![inp.t_air_in; self.n];
+        let mut net = vec![0.0; self.n];
+        let m = self.solve_steady(&inp, &air, &mut tw, &mut net);
+        tw.push(m.p_in);
+        tw
+    }
+
+    /// Heat capacity of one segment's wall (J/K).
+    pub fn segment_capacity(&self) -> f64 {
+        self.settings.wall_capacity / self.n as f64
+    }
+
+    /// Outlet temperature (K) and superheat (K, 0 while two-phase) at `(p, h)`.
+    pub fn outlet_state(p: f64, h: f64) -> (f64, f64) {
+        let s = saturation(p);
+        if h < s.h_v {
+            (s.t, 0.0)
+        } else {
+            let t = vapour(p, h, s.h_v).t;
+            (t, t - s.t)
+        }
+    }
+}

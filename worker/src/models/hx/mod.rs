@@ -1,0 +1,581 @@
+//! `hx_highfi` / `hx_lowfi`: a microtube (microchannel) evaporator test bench, R134a inside
+//! flat multiport tubes, air across louvered fins.
+//!
+//! # Structure
+//!
+//! The refrigerant path (four passes of the core, unrolled, see [`geometry`]) is cut into
+//! `N` segments of equal length (`hx_highfi`: N = 40, `hx_lowfi`: N = 6). Each segment `i`
+//! has one state, its wall temperature `T_w,i` (tubes and fins lumped, heat capacity
+//! `C_w/N`):
+//!
+//! ```text
+//! (C_w/N) dT_w,i/dt = Q_air,i − Q_ref,i − (G_amb/N)(T_w,i − T_amb)
+//! ```
+//!
+//! **Air side** (ε-NTU, cross flow against a wall at uniform temperature, `C_min/C_max = 0`):
+//! each segment sees the share `ṁ_a/N` of the air, entering at `T_a,in`;
+//! `Q_air,i = ε (ṁ_a c_p/N)(T_a,in − T_w,i)`, `ε = 1 − exp(−NTU)`,
+//! `NTU = η_o h_a A_a/(ṁ_a c_p)`, `η_o = 1 − (A_f/A_a)(1 − η_f)`, with
+//! `h_a = CF_AirHT · j G_c c_p Pr^(−2/3)` and the Colburn factor `j` of Chang & Wang
+//! (1997) for louvered fins ([`correlations`]).
+//!
+//! **Refrigerant side**, marched from the inlet quasi-steadily (the refrigerant's own heat
+//! capacity and mass storage are neglected next to the wall's): in segment `i`, at inlet
+//! pressure `p_i` and enthalpy `h_i`,
+//! - two-phase (`h_i < h_v(p_i)`): `Q = α_tp A_r,i (T_w,i − T_sat(p_i))` with
+//!   `α_tp = CF_RefHT · (F h_l + S h_FZ)` of Chen (1966) at the inlet quality. If the
+//!   segment reaches the dew point, the fraction `f = ṁ (h_v − h_i)/Q` of its area boils
+//!   the rest of the liquid and the remainder superheats the vapour as below;
+//! - superheated vapour: `Q = ṁ c_p (T_w,i − T_i)(1 − exp(−α_v A/(ṁ c_p)))` with
+//!   `α_v = CF_RefHT · Nu k/D_h`, `Nu` Gnielinski (1976) blended with the laminar value;
+//! - `h_{i+1} = h_i + Q/ṁ`; the outlet enthalpy and temperature come out of the march.
+//!
+//! **Pressure**: the outlet pressure is the boundary condition; the inlet pressure
+//! `p_in` is a state. The march starts from `p_in` and yields a residual `r` of the
+//! outlet condition:
+//! - `hx_highfi`: `p_{i+1} = p_i − Δp_i`, `Δp_i = CF_Refdp · Δp_friction + Δp_momentum`;
+//!   two-phase friction by Friedel (1979) at the segment's mean quality, vapour friction
+//!   by Churchill (1977), the momentum term `G² (v_out − v_in)` of homogeneous flow
+//!   ([`pressure_drop`]); `r = p_N − p_out`;
+//! - `hx_lowfi`: the density-profile model
+//!   `Δp = CF_Refdp · Δp0 · (ṁ/ṁ0)² · (ρ0/ρ̄)`, where `ρ0` is the density at the nominal
+//!   point `(p0, h0)` and `ρ̄` the path-mean density of the current state (harmonic mean of
+//!   the segments' homogeneous densities, since homogeneous friction scales with specific
+//!   volume); the pressure falls linearly along the path; `r = p_in − p_out − Δp`.
+//!
+//! and `τ_p dp_in/dt = −r` with `τ_p` = [`PRESSURE_LAG`] = 1 s, a lumped stand-in for the
+//! refrigerant inventory that the quasi-steady march neglects. Without it the inlet
+//! pressure would be the root of `r(p_in) = 0` at frozen wall temperatures, and that root
+//! is not unique: a lower inlet pressure raises every wall superheat, moves the dry-out
+//! point upstream, and shortens the high-quality two-phase region, whose Friedel gradient
+//! exceeds the vapour's, so `r` is V-shaped around the steady state and the explicit
+//! integrator chattered between roots (measured: 24 000 steps and non-flat outputs at
+//! constant inputs). With the lag, the walls settle the superheat before the pressure
+//! moves, and the steady state is unchanged.
+//!
+//! The air-side pressure drop `Δp_air = CF_Airdp · f (A_a/A_c) G_c²/(2ρ)` (with `f = 4 j`)
+//! only feeds the `dp_air` output.
+//!
+//! **Ambient loss** (effect `ambient_loss`, conductance `G_amb` in W/K, 0 = absent): heat
+//! flows from the wall to the room at `T_amb`; for an evaporator colder than the room it is
+//! a heat gain.
+//!
+//! # Time integration
+//!
+//! States: `N` wall temperatures and the inlet pressure, integrated with the crate's
+//! Dormand–Prince 5(4) ([`crate::ode`]) at the caller's tolerance. The fastest wall mode
+//! (wall to boiling refrigerant, whose heat flux grows like the square of the wall
+//! superheat in Chen's nucleate term, over the wall capacity) has a time constant of about
+//! 0.1–0.3 s, so the explicit method takes steps of about 0.3 s. A fixed-step
+//! Rosenbrock–W method (ROS2, Verwer et al. 1999, Jacobian by finite differences) was
+//! tried and measured against DoPri5 at rtol 10⁻⁸: the dry-out front crossing segment
+//! boundaries makes the right-hand side only piecewise smooth, and at steps of 0.25–1 s
+//! ROS2 was off by up to 5 % in heat flow and diverged at 0.5 s in the 40-segment model, so
+//! the error-controlled explicit method stays.
+//!
+//! The initial state is the steady state at the inputs of t = 0, solved directly: for a
+//! given inlet pressure, each segment's wall balance is a scalar equation in `T_w,i`
+//! (strictly decreasing), solved in flow order by regula falsi; a secant iteration on the
+//! inlet pressure meets the outlet condition (to 10⁻¹⁰ of the pressure drop). Outputs are
+//! therefore flat until the first ramp.
+//!
+//! # Boundary conditions
+//!
+//! Ramps of refrigerant mass flow, inlet enthalpy, outlet pressure, air inlet temperature
+//! and air mass flow, in turn between 60 s and 230 s ([`boundary`]); their start and end
+//! values are parameters.
+//!
+//! # Nominal operating point
+//!
+//! At the start values ([`NOMINAL`]: 0.021 kg/s of R134a at 250 kJ/kg, quality 0.25 at the
+//! inlet; 2.7 bar at the outlet; 0.15 kg/s of air at 25 °C) `hx_highfi` gives 3.27 kW,
+//! a refrigerant pressure drop of 38.2 kPa (inlet 3.08 bar) and 9.7 K of outlet superheat.
+//! The refrigerant flow is a little below the 0.025 kg/s of the bench specification: with
+//! dry air (no condensate on the fins), 0.15 kg/s at 25 °C can give at most about
+//! `ṁ_a c_p (25 − T_sat) ≈ 3.9 kW` at infinite NTU, less than the 3.9 kW that 0.025 kg/s
+//! needs to leave superheated from quality 0.25.
+//!
+//! # Sources
+//!
+//! See [`correlations`], [`pressure_drop`] and [`refrigerant`] for the papers behind each
+//! correlation and the property data.
+
+pub mod boundary;
+pub mod correlations;
+pub mod evaporator;
+pub mod geometry;
+pub mod pressure_drop;
+pub mod refrigerant;
+
+#[cfg(test)]
+mod tests;
+
+use crate::model::{
+    check_request, EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
+    SolverOptions, Trajectory,
+};
+use crate::ode::{integrate, HybridSystem};
+use boundary::{Inputs, Ramps};
+use evaporator::{Evaporator, Fidelity, NominalPoint, Settings};
+use geometry::Geometry;
+
+const T0: f64 = 273.15;
+
+/// Segments of each model.
+pub const HIGHFI_SEGMENTS: usize = 40;
+pub const LOWFI_SEGMENTS: usize = 6;
+
+/// The nominal operating point (start values of the ramps).
+pub const NOMINAL: Inputs = Inputs {
+    mdot_ref: 0.021,
+    h_in: 250e3,
+    p_out: 2.7e5,
+    t_air_in: T0 + 25.0,
+    mdot_air: 0.15,
+};
+
+/// Nominal point of the low-fidelity pressure-drop model: the high-fidelity model's
+/// steady state at [`NOMINAL`] (inlet pressure, inlet enthalpy, flow, pressure drop).
+pub const LOWFI_NOMINAL: NominalPoint = NominalPoint {
+    p0: 3.08e5,
+    h0: 250e3,
+    mdot0: 0.021,
+    dp0: 38.2e3,
+};
+
+/// Outputs, in order.
+pub const OUTPUTS: [(&str, &str, &str); 10] = [
+    (
+        "dp_ref",
+        "Pa",
+        "refrigerant pressure drop, inlet minus outlet",
+    ),
+    ("Qdot_refTotal", "W", "heat flow into the refrigerant"),
+    ("Qdot_airTotal", "W", "heat flow out of the air"),
+    (
+        "superheat_out",
+        "K",
+        "refrigerant outlet superheat (0 while the outlet is two-phase)",
+    ),
+    ("T_ref_out", "degC", "refrigerant outlet temperature"),
+    ("T_air_out", "degC", "mixed air outlet temperature"),
+    ("T_wall_mean", "degC", "mean wall temperature"),
+    ("p_ref_in", "bar", "refrigerant inlet pressure"),
+    ("h_ref_out", "kJ/kg", "refrigerant outlet enthalpy"),
+    ("dp_air", "Pa", "air-side pressure drop"),
+];
+
+struct Param {
+    name: &'static str,
+    unit: &'static str,
+    default: f64,
+    min: f64,
+    max: f64,
+    description: &'static str,
+}
+
+const fn param(
+    name: &'static str,
+    unit: &'static str,
+    default: f64,
+    min: f64,
+    max: f64,
+    description: &'static str,
+) -> Param {
+    Param {
+        name,
+        unit,
+        default,
+        min,
+        max,
+        description,
+    }
+}
+
+/// Parameters shared by both models, in order.
+const COMMON: [Param; 16] = [
+    param(
+        "CF_RefHT",
+        "1",
+        1.0,
+        0.1,
+        5.0,
+        "calibration factor on the refrigerant-side heat-transfer coefficients",
+    ),
+    param(
+        "CF_AirHT",
+        "1",
+        1.0,
+        0.1,
+        5.0,
+        "calibration factor on the air-side heat-transfer coefficient",
+    ),
+    param(
+        "CF_Refdp",
+        "1",
+        1.0,
+        0.1,
+        5.0,
+        "calibration factor on the refrigerant frictional pressure drop",
+    ),
+    param(
+        "CF_Airdp",
+        "1",
+        1.0,
+        0.1,
+        5.0,
+        "calibration factor on the air-side pressure drop",
+    ),
+    param(
+        "mdot_ref_start",
+        "kg/s",
+        NOMINAL.mdot_ref,
+        0.005,
+        0.05,
+        "refrigerant mass flow before its ramp (60-90 s)",
+    ),
+    param(
+        "mdot_ref_end",
+        "kg/s",
+        0.0252,
+        0.005,
+        0.05,
+        "refrigerant mass flow after its ramp",
+    ),
+    param(
+        "h_in_start",
+        "kJ/kg",
+        250.0,
+        180.0,
+        450.0,
+        "refrigerant inlet enthalpy before its ramp (95-125 s)",
+    ),
+    param(
+        "h_in_end",
+        "kJ/kg",
+        260.0,
+        180.0,
+        450.0,
+        "refrigerant inlet enthalpy after its ramp",
+    ),
+    param(
+        "p_out_start",
+        "bar",
+        2.7,
+        1.5,
+        6.0,
+        "refrigerant outlet pressure before its ramp (130-160 s)",
+    ),
+    param(
+        "p_out_end",
+        "bar",
+        3.0,
+        1.5,
+        6.0,
+        "refrigerant outlet pressure after its ramp",
+    ),
+    param(
+        "T_air_in_start",
+        "degC",
+        25.0,
+        0.0,
+        50.0,
+        "air inlet temperature before its ramp (165-195 s)",
+    ),
+    param(
+        "T_air_in_end",
+        "degC",
+        35.0,
+        0.0,
+        50.0,
+        "air inlet temperature after its ramp",
+    ),
+    param(
+        "mdot_air_start",
+        "kg/s",
+        NOMINAL.mdot_air,
+        0.05,
+        0.4,
+        "air mass flow before its ramp (200-230 s)",
+    ),
+    param(
+        "mdot_air_end",
+        "kg/s",
+        0.195,
+        0.05,
+        0.4,
+        "air mass flow after its ramp",
+    ),
+    param(
+        "C_wall",
+        "J/K",
+        1430.0,
+        100.0,
+        10000.0,
+        "heat capacity of tubes and fins",
+    ),
+    param(
+        "T_amb",
+        "degC",
+        25.0,
+        -10.0,
+        50.0,
+        "room temperature (for the ambient_loss effect)",
+    ),
+];
+
+/// Parameters of the low-fidelity pressure-drop model.
+const LOWFI_EXTRA: [Param; 4] = [
+    param(
+        "p0",
+        "bar",
+        LOWFI_NOMINAL.p0 / 1e5,
+        1.5,
+        8.0,
+        "nominal inlet pressure of the density-profile pressure drop",
+    ),
+    param(
+        "h0",
+        "kJ/kg",
+        LOWFI_NOMINAL.h0 / 1e3,
+        180.0,
+        450.0,
+        "nominal inlet enthalpy of the density-profile pressure drop",
+    ),
+    param(
+        "mdot0",
+        "kg/s",
+        LOWFI_NOMINAL.mdot0,
+        0.005,
+        0.05,
+        "nominal mass flow of the density-profile pressure drop",
+    ),
+    param(
+        "dp0",
+        "Pa",
+        LOWFI_NOMINAL.dp0,
+        1e3,
+        2e5,
+        "nominal pressure drop of the density-profile model",
+    ),
+];
+
+/// A hosted heat-exchanger model of either fidelity.
+pub struct HxModel {
+    info: ModelInfo,
+    fidelity: Fidelity,
+    segments: usize,
+}
+
+/// `hx_highfi`.
+pub fn highfi() -> HxModel {
+    HxModel::new(Fidelity::High, HIGHFI_SEGMENTS)
+}
+
+/// `hx_lowfi`.
+pub fn lowfi() -> HxModel {
+    HxModel::new(Fidelity::Low, LOWFI_SEGMENTS)
+}
+
+impl HxModel {
+    /// A model of the given fidelity and segmentation (other segment counts are for tests).
+    pub fn new(fidelity: Fidelity, segments: usize) -> Self {
+        let (name, description, extra): (&str, &str, &[Param]) = match fidelity {
+            Fidelity::High => (
+                "hx_highfi",
+                "microtube evaporator test bench (R134a / air): 40 segments with dynamic wall \
+                 temperatures, Chen boiling, Gnielinski vapour, Chang-Wang louvered fins, \
+                 Friedel two-phase pressure drop",
+                &[],
+            ),
+            Fidelity::Low => (
+                "hx_lowfi",
+                "microtube evaporator test bench (R134a / air): 6 segments with dynamic wall \
+                 temperatures, same heat transfer as hx_highfi, density-profile pressure drop \
+                 around a nominal point",
+                &LOWFI_EXTRA,
+            ),
+        };
+        let parameters = COMMON
+            .iter()
+            .chain(extra)
+            .map(|p| ParameterSpec {
+                name: p.name.into(),
+                unit: p.unit.into(),
+                default: p.default,
+                min: p.min,
+                max: p.max,
+                description: p.description.into(),
+            })
+            .collect();
+        let outputs = OUTPUTS
+            .iter()
+            .map(|(n, u, d)| OutputSpec {
+                name: (*n).into(),
+                unit: (*u).into(),
+                description: (*d).into(),
+            })
+            .collect();
+        let effects = vec![EffectSpec {
+            name: "ambient_loss".into(),
+            unit: "W/K".into(),
+            min: 0.0,
+            max: 100.0,
+            description: "heat flow from the wall to the room, G (T_wall - T_amb)".into(),
+        }];
+        Self {
+            info: ModelInfo {
+                name: name.into(),
+                version: 1,
+                description: description.into(),
+                parameters,
+                outputs,
+                effects,
+            },
+            fidelity,
+            segments,
+        }
+    }
+
+    /// Simulation settings from a full parameter vector (already checked for length).
+    pub fn settings(&self, p: &[f64]) -> Result<Settings, SimulationError> {
+        for (i, v) in p.iter().enumerate() {
+            let (lo, hi) = self.info.bounds_at(i);
+            if *v < lo || *v > hi {
+                return Err(SimulationError::InvalidInput(format!(
+                    "parameter `{}` = {v} is outside [{lo}, {hi}]",
+                    self.info.name_at(i)
+                )));
+            }
+        }
+        let inputs = |k: usize| Inputs {
+            mdot_ref: p[4 + k],
+            h_in: p[6 + k] * 1e3,
+            p_out: p[8 + k] * 1e5,
+            t_air_in: p[10 + k] + T0,
+            mdot_air: p[12 + k],
+        };
+        let nominal = match self.fidelity {
+            Fidelity::High => LOWFI_NOMINAL,
+            Fidelity::Low => NominalPoint {
+                p0: p[16] * 1e5,
+                h0: p[17] * 1e3,
+                mdot0: p[18],
+                dp0: p[19],
+            },
+        };
+        Ok(Settings {
+            fidelity: self.fidelity,
+            segments: self.segments,
+            geometry: Geometry::BENCH,
+            cf_ref_ht: p[0],
+            cf_air_ht: p[1],
+            cf_ref_dp: p[2],
+            cf_air_dp: p[3],
+            ramps: Ramps {
+                start: inputs(0),
+                end: inputs(1),
+            },
+            wall_capacity: p[14],
+            t_ambient: p[15] + T0,
+            ambient_conductance: p[self.info.parameters.len()],
+            nominal,
+        })
+    }
+}
+
+/// Time constant (s) of the inlet-pressure lag; see the module documentation.
+pub const PRESSURE_LAG: f64 = 1.0;
+
+/// The ODE: wall temperatures of the segments, then the inlet pressure.
+struct Dynamics<'a> {
+    evap: &'a Evaporator,
+    inv_capacity: f64,
+}
+
+impl HybridSystem for Dynamics<'_> {
+    fn dim(&self) -> usize {
+        self.evap.segments() + 1
+    }
+
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        let n = self.evap.segments();
+        let (_, _, _, r) = self.evap.evaluate(t, &y[..n], y[n], &mut dy[..n]);
+        for v in dy[..n].iter_mut() {
+            *v *= self.inv_capacity;
+        }
+        dy[n] = -r / PRESSURE_LAG;
+    }
+}
+
+/// All outputs at one instant, in the order of [`OUTPUTS`].
+fn outputs_at(evap: &Evaporator, t: f64, y: &[f64], scratch: &mut [f64]) -> [f64; 10] {
+    let n = evap.segments();
+    let (inp, air, m, _) = evap.evaluate(t, &y[..n], y[n], scratch);
+    let (t_out, superheat) = Evaporator::outlet_state(inp.p_out, m.h_out);
+    let c_air = air.c_seg * n as f64;
+    [
+        m.p_in - inp.p_out,
+        m.q_ref,
+        m.q_air,
+        superheat,
+        t_out - T0,
+        inp.t_air_in - m.q_air / c_air - T0,
+        m.wall_mean - T0,
+        m.p_in / 1e5,
+        m.h_out / 1e3,
+        air.dp,
+    ]
+}
+
+impl Model for HxModel {
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+
+    fn simulate(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError> {
+        check_request(&self.info, params, grid, outputs)?;
+        let settings = self.settings(params)?;
+        let evap = Evaporator::new(settings);
+        let y0 = evap.steady_state(0.0);
+        if evap.out_of_range() || y0.iter().any(|v| !v.is_finite()) {
+            return Err(SimulationError::InvalidInput(
+                "no steady state at the initial inputs inside the property tables".into(),
+            ));
+        }
+        let mut system = Dynamics {
+            evap: &evap,
+            inv_capacity: 1.0 / evap.segment_capacity(),
+        };
+        let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
+        let mut scratch = vec![0.0; evap.segments()];
+        let mut record = |i: usize, y: &[f64]| {
+            let all = outputs_at(&evap, grid[i], y, &mut scratch);
+            for (v, &o) in values.iter_mut().zip(outputs) {
+                v.push(all[o]);
+            }
+        };
+        let stats = integrate(&mut system, &y0, grid, options, &mut record)?;
+        if evap.out_of_range() {
+            return Err(SimulationError::Diverged {
+                time: grid.last().copied().unwrap_or(0.0),
+            });
+        }
+        if values.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(SimulationError::Diverged {
+                time: grid.last().copied().unwrap_or(0.0),
+            });
+        }
+        Ok(Trajectory {
+            time: grid.to_vec(),
+            values,
+            stats,
+        })
+    }
+}
