@@ -17,7 +17,6 @@ use crate::campaign::Method;
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
 use argmin::core::{Executor, IterState, PopulationState, Solver, State, TerminationStatus};
-use rayon::prelude::*;
 use serde::Serialize;
 
 /// Hard cap on iterations, far above what any budget allows; argmin needs one.
@@ -91,12 +90,36 @@ pub struct RunContext<'a> {
     pub progress: &'a dyn Progress,
 }
 
+/// Most runs in flight at once. Runs spend their time waiting for evaluations (on this
+/// machine's cores or on remote workers), so they each get a thread, not a core: enough
+/// concurrent batches to keep every worker busy.
+pub const MAX_CONCURRENT_RUNS: usize = 64;
+
 /// Run all `runs` concurrently; outcomes in the order of `runs`.
 pub fn run_all(
     context: &RunContext,
     runs: &[RunSpec],
 ) -> Result<Vec<RunOutcome>, argmin::core::Error> {
-    runs.par_iter().map(|spec| run_one(context, spec)).collect()
+    let mut outcomes = Vec::with_capacity(runs.len());
+    for chunk in runs.chunks(MAX_CONCURRENT_RUNS) {
+        let results: Vec<_> = std::thread::scope(|scope| {
+            let handles: Vec<_> = chunk
+                .iter()
+                .map(|spec| scope.spawn(move || run_one(context, spec)))
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| {
+                    h.join()
+                        .unwrap_or_else(|panic| std::panic::resume_unwind(panic))
+                })
+                .collect()
+        });
+        for result in results {
+            outcomes.push(result?);
+        }
+    }
+    Ok(outcomes)
 }
 
 /// Run one method from one start.
