@@ -3,6 +3,7 @@
 //! The worker is stateless: it simulates a model for a parameter vector and returns
 //! trajectories (or, later, objective values against a cached measurement).
 
+pub mod effects;
 pub mod model;
 pub mod models;
 pub mod ode;

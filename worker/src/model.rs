@@ -4,7 +4,9 @@
 //! effects, and simulates onto a time grid. Effects are extra physics with a parameter
 //! whose value 0 means "absent": they are listed separately so that diagnosis can find
 //! them, but they are passed to [`Model::simulate`] like any other parameter, after the
-//! base parameters, in the order of [`ModelInfo::effects`].
+//! base parameters, in the order of [`ModelInfo::effects`]. An effect may also *be* a base
+//! parameter (the furuta's Coulomb frictions are base parameters and, when a campaign holds
+//! them at 0, candidate effects): it then names that parameter and has no slot of its own.
 //!
 //! The optimisers, the objective and the dispatcher only ever see this trait, so new
 //! models slot in without touching them.
@@ -41,6 +43,9 @@ pub struct EffectSpec {
     pub min: f64,
     pub max: f64,
     pub description: String,
+    /// The base parameter this effect is, if it has no slot of its own.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parameter: Option<String>,
 }
 
 /// Everything a client needs to know to drive a model.
@@ -56,17 +61,32 @@ pub struct ModelInfo {
 }
 
 impl ModelInfo {
+    /// Effects with a slot of their own in the full parameter vector, in slot order.
+    pub fn slot_effects(&self) -> impl Iterator<Item = &EffectSpec> {
+        self.effects.iter().filter(|e| e.parameter.is_none())
+    }
+
     /// Index of a base parameter or effect in the full parameter vector.
     pub fn parameter_index(&self, name: &str) -> Option<usize> {
-        self.parameters
+        if let Some(i) = self.parameters.iter().position(|p| p.name == name) {
+            return Some(i);
+        }
+        if let Some(alias) = self
+            .effects
             .iter()
-            .position(|p| p.name == name)
-            .or_else(|| {
-                self.effects
-                    .iter()
-                    .position(|e| e.name == name)
-                    .map(|i| self.parameters.len() + i)
-            })
+            .find(|e| e.name == name)
+            .and_then(|e| e.parameter.as_deref())
+        {
+            return self.parameters.iter().position(|p| p.name == alias);
+        }
+        self.slot_effects()
+            .position(|e| e.name == name)
+            .map(|i| self.parameters.len() + i)
+    }
+
+    /// The effect called `name`, if the model has one.
+    pub fn effect(&self, name: &str) -> Option<&EffectSpec> {
+        self.effects.iter().find(|e| e.name == name)
     }
 
     pub fn output_index(&self, name: &str) -> Option<usize> {
@@ -75,7 +95,7 @@ impl ModelInfo {
 
     /// Length of the full parameter vector: base parameters, then effects.
     pub fn full_len(&self) -> usize {
-        self.parameters.len() + self.effects.len()
+        self.parameters.len() + self.slot_effects().count()
     }
 
     /// Defaults for every base parameter, 0 (absent) for every effect.
@@ -83,7 +103,7 @@ impl ModelInfo {
         self.parameters
             .iter()
             .map(|p| p.default)
-            .chain(self.effects.iter().map(|_| 0.0))
+            .chain(self.slot_effects().map(|_| 0.0))
             .collect()
     }
 
@@ -92,7 +112,7 @@ impl ModelInfo {
         if index < self.parameters.len() {
             &self.parameters[index].name
         } else {
-            &self.effects[index - self.parameters.len()].name
+            &self.slot_effect(index).name
         }
     }
 
@@ -102,9 +122,15 @@ impl ModelInfo {
             let p = &self.parameters[index];
             (p.min, p.max)
         } else {
-            let e = &self.effects[index - self.parameters.len()];
+            let e = self.slot_effect(index);
             (e.min, e.max)
         }
+    }
+
+    fn slot_effect(&self, index: usize) -> &EffectSpec {
+        self.slot_effects()
+            .nth(index - self.parameters.len())
+            .expect("index within the full parameter vector")
     }
 }
 
@@ -161,6 +187,10 @@ pub enum SimulationError {
 }
 
 /// A hosted model.
+///
+/// Models implement the physics ([`Model::simulate`]); the registry wraps every model in
+/// [`crate::effects::WithOutputEffects`], which adds the per-output effects (offset, gain,
+/// delay, lag) to its description and applies them to its outputs.
 pub trait Model: Send + Sync {
     fn info(&self) -> &ModelInfo;
 

@@ -182,7 +182,21 @@ impl Furuta {
                 "initial pendulum speed",
             ),
         ];
-        let mut effects = Vec::new();
+        let mut effects: Vec<EffectSpec> = JOINTS
+            .iter()
+            .zip(["armFriction", "pendulumFriction"])
+            .map(|(joint, parameter)| EffectSpec {
+                name: format!("coulomb_friction.{joint}"),
+                unit: "N.m".into(),
+                min: 0.0,
+                max: 0.9,
+                description: format!(
+                    "Coulomb (stick-slip) friction on the {joint} joint: the base parameter \
+                     `{parameter}`, a candidate when a campaign holds it at 0"
+                ),
+                parameter: Some(parameter.into()),
+            })
+            .collect();
         let kinds: [(&str, &str, f64, f64, &str); 4] = [
             (
                 "viscous_friction",
@@ -221,6 +235,7 @@ impl Furuta {
                     min,
                     max,
                     description: format!("{description} on the {joint} joint"),
+                    parameter: None,
                 });
             }
         }

@@ -3,17 +3,19 @@
 pub mod furuta;
 pub mod hx;
 
+use crate::effects::WithOutputEffects;
 use crate::Model;
 use std::sync::OnceLock;
 
-/// Every hosted model, in the order `calib models` lists them.
+/// Every hosted model, in the order `calib models` lists them, each with the per-output
+/// measurement effects of [`WithOutputEffects`].
 pub fn all() -> &'static [Box<dyn Model>] {
     static MODELS: OnceLock<Vec<Box<dyn Model>>> = OnceLock::new();
     MODELS.get_or_init(|| {
         vec![
-            Box::new(furuta::Furuta::new()),
-            Box::new(hx::highfi()),
-            Box::new(hx::lowfi()),
+            Box::new(WithOutputEffects::new(furuta::Furuta::new())),
+            Box::new(WithOutputEffects::new(hx::highfi())),
+            Box::new(WithOutputEffects::new(hx::lowfi())),
         ]
     })
 }

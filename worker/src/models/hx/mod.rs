@@ -422,6 +422,7 @@ impl HxModel {
             min: 0.0,
             max: 100.0,
             description: "heat flow from the wall to the room, G (T_wall - T_amb)".into(),
+            parameter: None,
         }];
         Self {
             info: ModelInfo {
