@@ -33,6 +33,9 @@ enum Command {
     Simulate(commands::simulate::Args),
     /// Run a calibration campaign in this process (all cores, no network).
     Calibrate(commands::calibrate::Args),
+    /// Calibrate, then trace what is left to the physical effect the model lacks: rank the
+    /// candidate effects, refit the best, and report the error before and after.
+    Diagnose(commands::diagnose::Args),
     /// Measure simulation and calibration speed and print the figures.
     Bench(commands::bench::Args),
 }
@@ -55,6 +58,7 @@ fn main() -> ExitCode {
         Command::Models(args) => commands::models::run(args),
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Calibrate(args) => commands::calibrate::run(args),
+        Command::Diagnose(args) => commands::diagnose::run(args),
         Command::Bench(args) => commands::bench::run(args),
     };
     match outcome {

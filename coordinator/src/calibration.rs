@@ -76,11 +76,15 @@ pub fn calibrate<E: Evaluator>(
     );
 
     let space = UnitBox::new(&campaign.free);
-    let starts = multistart::start_points(
+    let mut starts = multistart::start_points(
         &space.to_unit(&nominal_point),
         campaign.search.starts,
         campaign.search.seed,
     );
+    // Informed starts (from a diagnosis, say) go right after the nominal point.
+    for (i, extra) in campaign.search.extra_starts.iter().enumerate() {
+        starts.insert(1 + i, space.to_unit(extra));
+    }
     let plan = multistart::plan(&campaign.search.methods, &starts, campaign.search.seed);
     // Tolerances are relative to the nominal objective; a perfect nominal fit keeps 1.
     let scale = if nominal.objective > 0.0 && nominal.failure.is_none() {

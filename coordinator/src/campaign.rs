@@ -70,6 +70,10 @@ struct CampaignFile {
     outputs: Vec<Spanned<OutputEntry>>,
     #[serde(default)]
     parameters: Vec<Spanned<ParameterEntry>>,
+    #[serde(default)]
+    effects: Vec<Spanned<ParameterEntry>>,
+    #[serde(default)]
+    diagnosis: Option<Spanned<DiagnosisSection>>,
     window: Option<Spanned<WindowSection>>,
     #[serde(default)]
     search: Option<Spanned<SearchSection>>,
@@ -122,6 +126,15 @@ struct ParameterEntry {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
+struct DiagnosisSection {
+    holdout_start: Option<f64>,
+    holdout_stop: Option<f64>,
+    refit: Option<usize>,
+    candidates: Option<Vec<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
 struct WindowSection {
     start: f64,
     stop: f64,
@@ -169,6 +182,8 @@ pub struct FreeParameter {
     pub nominal: f64,
     pub min: f64,
     pub max: f64,
+    /// Whether this is one of the model's effects (absent at 0) rather than a base parameter.
+    pub effect: bool,
 }
 
 /// A model output compared with a measured column.
@@ -188,6 +203,9 @@ pub struct Search {
     /// Evaluation budget of each run (one method from one start).
     pub max_evaluations: usize,
     pub seed: u64,
+    /// Further start points (physical values of the free parameters), tried after the
+    /// nominal point; set by diagnosis, not by campaign files.
+    pub extra_starts: Vec<Vec<f64>>,
 }
 
 /// A campaign checked against the model it names.
@@ -209,6 +227,19 @@ pub struct Campaign {
     pub window: (f64, f64),
     pub search: Search,
     pub solver: SolverOptions,
+    pub diagnosis: DiagnosisSettings,
+}
+
+/// How `calib diagnose` treats a campaign.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize)]
+pub struct DiagnosisSettings {
+    /// Held-out window [s]; default: the data after the fitted window, or else the last
+    /// fifth of the window (which is then not fitted).
+    pub holdout: Option<(f64, f64)>,
+    /// How many of the best-ranked candidates are refitted (alone, and in pairs).
+    pub refit: usize,
+    /// Restrict the candidates to these effects (default: every effect the model has).
+    pub candidates: Option<Vec<String>>,
 }
 
 impl fmt::Debug for Campaign {
@@ -320,7 +351,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
 
     // Fixed overrides.
     let mut base = info.default_vector();
-    let mut fixed_names = Vec::new();
+    let mut fixed = Vec::new();
     for (name, value) in &model_section.parameters {
         let field = format!("model.parameters.{}", name.get_ref());
         let Some(index) = info.parameter_index(name.get_ref()) else {
@@ -345,16 +376,35 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             );
         }
         base[index] = v;
-        fixed_names.push(name.get_ref().clone());
+        fixed.push(index);
     }
 
-    // Free parameters.
+    // Free parameters, then free effects.
     let mut free: Vec<FreeParameter> = Vec::new();
-    for (i, entry) in file.parameters.iter().enumerate() {
+    let sections = [("parameters", &file.parameters), ("effects", &file.effects)];
+    for (section, entry, i) in sections.iter().flat_map(|(section, entries)| {
+        entries
+            .iter()
+            .enumerate()
+            .map(move |(i, e)| (*section, e, i))
+    }) {
+        let is_effect = section == "effects";
         let span = entry.span();
         let p = entry.get_ref();
         let name = p.name.get_ref();
-        let field = format!("parameters[{i}] ({name})");
+        let field = format!("{section}[{i}] ({name})");
+        if is_effect && info.effect(name).is_none() {
+            let effects: Vec<&str> = info.effects.iter().map(|e| e.name.as_str()).collect();
+            return at.error(
+                p.name.span(),
+                &field,
+                format!(
+                    "model `{}` has no effect `{name}` (it has: {})",
+                    info.name,
+                    effects.join(", ")
+                ),
+            );
+        }
         let Some(index) = info.parameter_index(name) else {
             return at.error(
                 p.name.span(),
@@ -369,7 +419,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
         if free.iter().any(|f| f.index == index) {
             return at.error(span, &field, "is listed twice".into());
         }
-        if fixed_names.contains(name) {
+        if fixed.contains(&index) {
             return at.error(
                 span,
                 &field,
@@ -397,7 +447,9 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
                 ),
             );
         }
-        let nominal = p.nominal.unwrap_or(base[index]);
+        let nominal = p
+            .nominal
+            .unwrap_or(if is_effect { 0.0 } else { base[index] });
         if !nominal.is_finite() || nominal < p.min || nominal > p.max {
             return at.error(
                 span,
@@ -415,6 +467,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             nominal,
             min: p.min,
             max: p.max,
+            effect: is_effect,
         });
     }
     if free.is_empty() {
@@ -422,7 +475,8 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             file: at.path.to_path_buf(),
             line: None,
             field: "parameters".into(),
-            message: "no parameter to calibrate: add at least one [[parameters]] entry".into(),
+            message: "nothing to calibrate: add at least one [[parameters]] or [[effects]] entry"
+                .into(),
         });
     }
 
@@ -513,6 +567,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             starts: default_starts(),
             max_evaluations: default_max_evaluations(),
             seed: 0,
+            extra_starts: Vec::new(),
         },
         Some(s) => {
             let span = s.span();
@@ -546,6 +601,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
                 starts: s.starts,
                 max_evaluations: s.max_evaluations,
                 seed: s.seed,
+                extra_starts: Vec::new(),
             }
         }
     };
@@ -584,6 +640,52 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
             .join(measurement_path)
     };
 
+    let mut diagnosis = DiagnosisSettings {
+        holdout: None,
+        refit: 3,
+        candidates: None,
+    };
+    if let Some(d) = file.diagnosis {
+        let span = d.span();
+        let d = d.into_inner();
+        match (d.holdout_start, d.holdout_stop) {
+            (None, None) => {}
+            (Some(a), Some(b)) if a.is_finite() && b.is_finite() && 0.0 <= a && a < b => {
+                diagnosis.holdout = Some((a, b));
+            }
+            (Some(a), Some(b)) => {
+                return at.error(
+                    span,
+                    "diagnosis.holdout_start",
+                    format!("the held-out window [{a}, {b}] must have 0 ≤ start < stop"),
+                );
+            }
+            _ => {
+                return at.error(
+                    span,
+                    "diagnosis.holdout_start",
+                    "give both holdout_start and holdout_stop, or neither".into(),
+                );
+            }
+        }
+        if let Some(refit) = d.refit {
+            if refit == 0 {
+                return at.error(span, "diagnosis.refit", "must be at least 1".into());
+            }
+            diagnosis.refit = refit;
+        }
+        if let Some(candidates) = d.candidates {
+            if let Some(unknown) = candidates.iter().find(|c| info.effect(c).is_none()) {
+                return at.error(
+                    span,
+                    "diagnosis.candidates",
+                    format!("model `{}` has no effect `{unknown}`", info.name),
+                );
+            }
+            diagnosis.candidates = Some(candidates);
+        }
+    }
+
     let name = file.name.unwrap_or_else(|| {
         at.path
             .file_stem()
@@ -604,6 +706,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
         window: (start, stop),
         search,
         solver,
+        diagnosis,
     })
 }
 

@@ -17,6 +17,27 @@ pub trait Evaluator: Send + Sync {
     fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation>;
 }
 
+impl<E: Evaluator + ?Sized> Evaluator for &E {
+    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+        (**self).evaluate(objective, points)
+    }
+}
+
+/// Simulated outputs of one point (one series per mapped output), or why there are none.
+pub type Outputs = Result<Vec<Vec<f64>>, String>;
+
+/// Simulates batches of points and returns the mapped outputs themselves, for sensitivities,
+/// residuals and plots.
+pub trait Simulator: Send + Sync {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs>;
+}
+
+impl<S: Simulator + ?Sized> Simulator for &S {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
+        (**self).simulate(objective, points)
+    }
+}
+
 /// Simulates in this process, spreading a batch over the machine's cores.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct LocalEvaluator;
@@ -24,6 +45,15 @@ pub struct LocalEvaluator;
 impl Evaluator for LocalEvaluator {
     fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
         points.par_iter().map(|p| objective.evaluate(p)).collect()
+    }
+}
+
+impl Simulator for LocalEvaluator {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
+        points
+            .par_iter()
+            .map(|p| objective.simulate(p).map_err(|e| e.to_string()))
+            .collect()
     }
 }
 

@@ -3,6 +3,7 @@
 
 pub mod calibration;
 pub mod campaign;
+pub mod diagnosis;
 pub mod error;
 pub mod evaluator;
 pub mod measurement;

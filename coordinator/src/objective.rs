@@ -7,7 +7,7 @@
 
 use crate::campaign::{Campaign, CampaignError};
 use crate::measurement::Measurement;
-use calib_worker::{Model, SolverOptions};
+use calib_worker::{Model, SimulationError, SolverOptions};
 
 /// Objective value given to parameter sets whose simulation failed: finite, so optimisers
 /// that compare or average costs keep working, and far above any real fit.
@@ -35,6 +35,7 @@ impl Evaluation {
 
 /// Everything needed to score a parameter vector: the model, the fixed parameters, the
 /// measured series on the window's grid and the weights.
+#[derive(Clone)]
 pub struct Objective {
     pub model: &'static dyn Model,
     /// Full parameter vector with the free entries at their nominal values.
@@ -49,6 +50,7 @@ pub struct Objective {
     /// Measured series on `grid`, one per output.
     pub measured: Vec<Vec<f64>>,
     pub solver: SolverOptions,
+    measurement_hash: [u8; 32],
     fingerprint: [u8; 32],
 }
 
@@ -106,10 +108,21 @@ impl Objective {
             weights: campaign.outputs.iter().map(|o| o.weight).collect(),
             measured,
             solver: campaign.solver,
+            measurement_hash: measurement.content_hash(),
             fingerprint: [0; 32],
         };
-        objective.fingerprint = objective.compute_fingerprint(&measurement.content_hash());
+        objective.fingerprint = objective.compute_fingerprint();
         Ok(objective)
+    }
+
+    /// The same objective with every parameter fixed at `full` (the full parameter vector):
+    /// nothing left free.
+    pub fn fixed_at(&self, full: Vec<f64>) -> Objective {
+        let mut o = self.clone();
+        o.base = full;
+        o.free.clear();
+        o.fingerprint = o.compute_fingerprint();
+        o
     }
 
     /// A hash of everything that changes the value of the objective at a given point: model
@@ -119,7 +132,7 @@ impl Objective {
         self.fingerprint
     }
 
-    fn compute_fingerprint(&self, measurement_hash: &[u8; 32]) -> [u8; 32] {
+    fn compute_fingerprint(&self) -> [u8; 32] {
         let info = self.model.info();
         let mut h = blake3::Hasher::new();
         h.update(b"calib-objective-v1");
@@ -144,7 +157,7 @@ impl Objective {
         f64s(&mut h, &fixed);
         usizes(&mut h, &self.free);
         f64s(&mut h, &self.grid);
-        h.update(measurement_hash);
+        h.update(&self.measurement_hash);
         usizes(&mut h, &self.outputs);
         f64s(&mut h, &self.weights);
         f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
@@ -163,14 +176,18 @@ impl Objective {
 
     /// Simulate at `free_values` and score against the measurement.
     pub fn evaluate(&self, free_values: &[f64]) -> Evaluation {
-        let params = self.full_parameters(free_values);
-        match self
-            .model
-            .simulate(&params, &self.grid, &self.outputs, &self.solver)
-        {
+        match self.simulate(free_values) {
             Err(e) => Evaluation::failed(self.outputs.len(), e.to_string()),
-            Ok(trajectory) => self.score(&trajectory.values),
+            Ok(values) => self.score(&values),
         }
+    }
+
+    /// The mapped outputs on the grid at `free_values` (one series per output).
+    pub fn simulate(&self, free_values: &[f64]) -> Result<Vec<Vec<f64>>, SimulationError> {
+        let params = self.full_parameters(free_values);
+        self.model
+            .simulate(&params, &self.grid, &self.outputs, &self.solver)
+            .map(|t| t.values)
     }
 
     /// Score simulated series (one per output, on the grid).

@@ -95,6 +95,7 @@ mod tests {
             nominal: min,
             min,
             max,
+            effect: false,
         }
     }
 

@@ -26,6 +26,19 @@ pub fn time_plot(
     series: &[Series],
     shade: Option<(f64, f64)>,
 ) -> Result<()> {
+    line_plot(path, title, "time [s]", y_label, series, shade)
+}
+
+/// A plot of several series against a common abscissa (their `time`), the range `shade`
+/// (start, stop) shaded.
+pub fn line_plot(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    shade: Option<(f64, f64)>,
+) -> Result<()> {
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -65,7 +78,7 @@ pub fn time_plot(
             .build_cartesian_2d(x0..x1, y0..y1)?;
         chart
             .configure_mesh()
-            .x_desc("time [s]")
+            .x_desc(x_label)
             .y_desc(y_label)
             .light_line_style(WHITE.mix(0.0))
             .draw()?;

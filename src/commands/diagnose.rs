@@ -1,0 +1,105 @@
+use super::{Failure, Outcome};
+use calib_coordinator::campaign::Campaign;
+use calib_coordinator::diagnosis::{self, report};
+use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::problem::Progress;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Campaign file (TOML), as for `calib calibrate`, optionally with a [diagnosis] section
+    /// (holdout_start, holdout_stop, refit, candidates).
+    campaign: PathBuf,
+    /// Folder for diagnosis.json, diagnosis.md and the plots [default:
+    /// results/<campaign name>/diagnosis/ beside the campaign file].
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Print diagnosis.json to standard output instead of the summary.
+    #[arg(long)]
+    json: bool,
+}
+
+/// A spinner counting evaluations, drawn only on a terminal.
+struct Spinner(ProgressBar);
+
+impl Progress for Spinner {
+    fn evaluated(&self, count: usize, _best_objective: f64) {
+        self.0.inc(count as u64);
+    }
+}
+
+pub fn run(args: Args) -> Outcome {
+    let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed_precise} {pos} evaluations {msg}")
+            .expect("valid template"),
+    );
+    bar.set_message("calibrating, ranking candidate effects, refitting");
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let spinner = Spinner(bar);
+    let result = diagnosis::diagnose(&campaign, &LocalEvaluator, &spinner);
+    spinner.0.finish_and_clear();
+    let d = result?;
+    let out = args.out.unwrap_or_else(|| {
+        args.campaign
+            .parent()
+            .unwrap_or(std::path::Path::new("."))
+            .join("results")
+            .join(&campaign.name)
+            .join("diagnosis")
+    });
+    let written = report::write(&d, &out)?;
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&report::diagnosis_json(&d)).expect("plain data")
+        );
+        return Ok(());
+    }
+    println!(
+        "baseline: objective {:.4e} (held out {:.4e}), noise floor {:.4e}",
+        d.baseline.objective, d.baseline.held_out_objective, d.noise_floor
+    );
+    for (o, r) in d.campaign.outputs.iter().zip(&d.baseline.residual) {
+        println!(
+            "  {:<22} rms {:.4e}  Ljung-Box {:.1} (white below {:.1}): {}",
+            o.model,
+            r.rms,
+            r.ljung_box,
+            r.ljung_box_critical,
+            if r.white { "white" } else { "structured" }
+        );
+    }
+    println!("\ncandidates (score = share of the residual each could remove):");
+    for c in d.candidates.iter().take(10) {
+        let refit = c
+            .objective
+            .map_or(String::new(), |o| format!("  refitted: {o:.4e}"));
+        println!("  {:<32} {:>7.4}{refit}", c.effect, c.score);
+    }
+    if !d.selected.is_empty() {
+        println!("\nadded: {}", d.selected.join(" + "));
+    }
+    println!("\nparameters:");
+    for p in &d.final_fit.parameters {
+        println!(
+            "  {:<28} {:>13.6e}  95% [{:.6e}, {:.6e}]",
+            p.name, p.value, p.ci_low, p.ci_high
+        );
+    }
+    println!(
+        "\nobjective {:.4e} -> {:.4e}, held out {:.4e} -> {:.4e}",
+        d.baseline.objective,
+        d.final_fit.objective,
+        d.baseline.held_out_objective,
+        d.final_fit.held_out_objective
+    );
+    println!("\n{}", report::verdict_text(&d));
+    println!("{:.2} s", d.elapsed.as_secs_f64());
+    for path in written {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
