@@ -35,6 +35,8 @@ enum Command {
     Calibrate(commands::calibrate::Args),
     /// Measure simulation and calibration speed and print the figures.
     Bench(commands::bench::Args),
+    /// Inspect, export or import an evaluation store (`calib calibrate --db`).
+    Store(commands::store::Args),
 }
 
 fn main() -> ExitCode {
@@ -56,6 +58,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Store(args) => commands::store::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

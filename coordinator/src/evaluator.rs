@@ -17,6 +17,12 @@ pub trait Evaluator: Send + Sync {
     fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation>;
 }
 
+impl<E: Evaluator + ?Sized> Evaluator for &E {
+    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+        (**self).evaluate(objective, points)
+    }
+}
+
 /// Simulates in this process, spreading a batch over the machine's cores.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct LocalEvaluator;

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod calibrate;
 pub mod models;
 pub mod simulate;
+pub mod store;
 
 /// A command's failure: the message for the user and the process exit code.
 #[derive(Debug)]
