@@ -38,6 +38,8 @@ enum Command {
     Diagnose(commands::diagnose::Args),
     /// Measure simulation and calibration speed and print the figures.
     Bench(commands::bench::Args),
+    /// Inspect, export or import an evaluation store (`calib calibrate --db`).
+    Store(commands::store::Args),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +62,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Diagnose(args) => commands::diagnose::run(args),
         Command::Bench(args) => commands::bench::run(args),
+        Command::Store(args) => commands::store::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

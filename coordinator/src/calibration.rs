@@ -3,12 +3,17 @@
 
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
-use crate::evaluator::{CacheStats, CachedEvaluator, Evaluator};
+use crate::evaluator::{CacheStats, Evaluator};
 use crate::measurement::Measurement;
 use crate::objective::{Evaluation, Objective};
 use crate::optim::multistart::{self, Cluster, RunContext, RunOutcome};
 use crate::optim::problem::Progress;
 use crate::optim::space::UnitBox;
+use crate::report;
+use crate::store::{
+    encoding, hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, MemoryStore, RunBest,
+    Store, StoredEvaluator,
+};
 use std::time::{Duration, Instant};
 
 /// Radius (unit box, max-norm) within which two runs' optima count as one minimum.
@@ -54,19 +59,176 @@ pub fn load_measurement(campaign: &Campaign) -> Result<Measurement> {
     )?)
 }
 
-/// Calibrate `campaign`, simulating through `evaluator` (behind an evaluation cache).
+/// Calibrate `campaign`, simulating through `evaluator` behind an evaluation cache that
+/// lasts as long as the call.
 pub fn calibrate<E: Evaluator>(
     campaign: &Campaign,
     evaluator: E,
     progress: &dyn Progress,
 ) -> Result<Calibration> {
-    let started = Instant::now();
+    calibrate_with_store(campaign, evaluator, &MemoryStore::new(), progress)
+}
+
+/// Calibrate `campaign`, answering every point the store already holds from it and storing
+/// every simulated one durably before the optimiser hears of it. The campaign is recorded
+/// as running until it finishes; a re-run of an interrupted campaign replays its
+/// deterministic runs from the store, so no stored evaluation is simulated again.
+pub fn calibrate_with_store<E: Evaluator>(
+    campaign: &Campaign,
+    evaluator: E,
+    store: &dyn Store,
+    progress: &dyn Progress,
+) -> Result<Calibration> {
     let measurement = load_measurement(campaign)?;
+    calibrate_measured(campaign, measurement, evaluator, store, progress)
+}
+
+/// Re-run every campaign of `store` marked running (the coordinator calls this when it
+/// starts). A campaign that cannot be resumed (its file no longer resolves, its data is
+/// gone, the optimiser fails) is marked failed, logged, and skipped; only a failure of the
+/// store itself is returned.
+pub fn resume_unfinished<E: Evaluator>(
+    store: &dyn Store,
+    evaluator: &E,
+    progress: &dyn Progress,
+) -> Result<Vec<Calibration>> {
+    let mut resumed = Vec::new();
+    for (id, record) in store.campaigns()? {
+        if record.status != CampaignStatus::Running {
+            continue;
+        }
+        tracing::info!(campaign = %record.name, id = %hex(&id), "resuming campaign");
+        match resume(store, &id, &record, evaluator, progress) {
+            Ok(calibration) => resumed.push(calibration),
+            Err(Error::Store(e)) => return Err(Error::Store(e)),
+            Err(e) => {
+                tracing::warn!(campaign = %record.name, error = %e, "cannot resume campaign");
+                mark_failed(store, &id, record, e.to_string())?;
+            }
+        }
+    }
+    Ok(resumed)
+}
+
+fn resume<E: Evaluator>(
+    store: &dyn Store,
+    id: &CampaignId,
+    record: &CampaignRecord,
+    evaluator: &E,
+    progress: &dyn Progress,
+) -> Result<Calibration> {
+    let campaign = Campaign::parse(&record.spec, &record.source)?;
+    let hash = unhex32(&record.dataset).ok_or_else(|| {
+        Error::InvalidRequest(format!("dataset hash `{}` is malformed", record.dataset))
+    })?;
+    let measurement = match store.dataset(&hash)? {
+        Some(bytes) => encoding::decode_measurement(&bytes, campaign.measurement_file.clone())?,
+        None => load_measurement(&campaign)?,
+    };
+    let now = campaign.identity(&measurement.content_hash());
+    if &now != id {
+        // The campaign resolves differently today (a model changed version): it runs as a
+        // new campaign, and the old record is closed.
+        mark_failed(
+            store,
+            id,
+            record.clone(),
+            format!("superseded by campaign {}", hex(&now)),
+        )?;
+    }
+    calibrate_measured(&campaign, measurement, evaluator, store, progress)
+}
+
+fn mark_failed(
+    store: &dyn Store,
+    id: &CampaignId,
+    mut record: CampaignRecord,
+    why: String,
+) -> Result<()> {
+    record.status = CampaignStatus::Failed;
+    record.failure = Some(why);
+    Ok(store.put_campaign(id, &record)?)
+}
+
+fn calibrate_measured<E: Evaluator>(
+    campaign: &Campaign,
+    measurement: Measurement,
+    evaluator: E,
+    store: &dyn Store,
+    progress: &dyn Progress,
+) -> Result<Calibration> {
+    let started = Instant::now();
     let objective = Objective::new(campaign, &measurement)?;
-    let evaluator = CachedEvaluator::new(evaluator);
+    let dataset = measurement.content_hash();
+    if store.dataset(&dataset)?.is_none() {
+        store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
+    }
+    let id = campaign.identity(&dataset);
+    let mut record = CampaignRecord {
+        name: campaign.name.clone(),
+        spec: campaign.spec.clone(),
+        source: campaign.source.clone().unwrap_or_default(),
+        dataset: hex(&dataset),
+        status: CampaignStatus::Running,
+        runs: Vec::new(),
+        result: None,
+        failure: None,
+    };
+    store.put_campaign(&id, &record)?;
+    tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
+    let evaluator = StoredEvaluator::new(evaluator, store);
+    let outcome = search(campaign, &objective, &evaluator, progress);
+    if let Some(e) = evaluator.error() {
+        return Err(e.into());
+    }
+    let (nominal, runs, clusters, best, best_evaluation) = match outcome {
+        Ok(found) => found,
+        Err(e) => {
+            mark_failed(store, &id, record, e.to_string())?;
+            return Err(e);
+        }
+    };
+    let calibration = Calibration {
+        campaign: campaign.clone(),
+        measurement,
+        objective,
+        nominal,
+        runs,
+        clusters,
+        best,
+        best_evaluation,
+        stats: evaluator.stats(),
+        elapsed: started.elapsed(),
+    };
+    record.status = CampaignStatus::Finished;
+    record.runs = calibration
+        .runs
+        .iter()
+        .map(|r| RunBest {
+            method: r.method.name().into(),
+            start: r.start,
+            point: r.point.clone(),
+            objective: r.objective,
+            evaluations: r.evaluations,
+        })
+        .collect();
+    record.result = Some(report::result_json(&calibration));
+    store.put_campaign(&id, &record)?;
+    Ok(calibration)
+}
+
+type Found = (Evaluation, Vec<RunOutcome>, Vec<Cluster>, usize, Evaluation);
+
+/// Score the nominal point, run every method from every start, cluster, score the best.
+fn search(
+    campaign: &Campaign,
+    objective: &Objective,
+    evaluator: &dyn Evaluator,
+    progress: &dyn Progress,
+) -> Result<Found> {
     let nominal_point = campaign.nominal();
     let nominal = evaluator
-        .evaluate(&objective, std::slice::from_ref(&nominal_point))
+        .evaluate(objective, std::slice::from_ref(&nominal_point))
         .remove(0);
     progress.evaluated(1, nominal.objective);
     tracing::info!(
@@ -93,8 +255,8 @@ pub fn calibrate<E: Evaluator>(
         1.0
     };
     let context = RunContext {
-        objective: &objective,
-        evaluator: &evaluator,
+        objective,
+        evaluator,
         space: &space,
         scale,
         max_evaluations: campaign.search.max_evaluations,
@@ -118,18 +280,7 @@ pub fn calibrate<E: Evaluator>(
         );
     }
     let best_evaluation = evaluator
-        .evaluate(&objective, std::slice::from_ref(&runs[best].point))
+        .evaluate(objective, std::slice::from_ref(&runs[best].point))
         .remove(0);
-    Ok(Calibration {
-        campaign: campaign.clone(),
-        measurement,
-        objective,
-        nominal,
-        runs,
-        clusters,
-        best,
-        best_evaluation,
-        stats: evaluator.stats(),
-        elapsed: started.elapsed(),
-    })
+    Ok((nominal, runs, clusters, best, best_evaluation))
 }

@@ -214,6 +214,8 @@ pub struct Campaign {
     pub name: String,
     /// The campaign file, when the campaign came from one.
     pub source: Option<PathBuf>,
+    /// The campaign's text as written (the store keeps it to resume the campaign).
+    pub spec: String,
     pub model: &'static dyn Model,
     /// End of the simulated horizon (plots run to it; the fit uses the window).
     pub stop_time: f64,
@@ -291,6 +293,61 @@ impl Campaign {
             full[p.index] = *v;
         }
         full
+    }
+
+    /// A hash of the resolved campaign run on the measurement with content hash
+    /// `measurement_hash`: name, model and version, parameters (fixed and free, with bounds
+    /// and nominal values), outputs and weights, window, horizon, search and solver
+    /// settings. Two campaigns with the same identity compute the same result; the file's
+    /// formatting, comments and location do not count.
+    pub fn identity(&self, measurement_hash: &[u8; 32]) -> [u8; 32] {
+        let info = self.model.info();
+        let mut h = blake3::Hasher::new();
+        h.update(b"calib.campaign.v1\0");
+        let text = |h: &mut blake3::Hasher, s: &str| {
+            h.update(&(s.len() as u64).to_le_bytes());
+            h.update(s.as_bytes());
+        };
+        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
+            h.update(&(v.len() as u64).to_le_bytes());
+            for x in v {
+                h.update(&x.to_bits().to_le_bytes());
+            }
+        };
+        let count = |h: &mut blake3::Hasher, n: usize| {
+            h.update(&(n as u64).to_le_bytes());
+        };
+        text(&mut h, &self.name);
+        text(&mut h, &info.name);
+        h.update(&info.version.to_le_bytes());
+        f64s(&mut h, &self.base);
+        f64s(&mut h, &[self.stop_time, self.window.0, self.window.1]);
+        count(&mut h, self.free.len());
+        for p in &self.free {
+            count(&mut h, p.index);
+            f64s(&mut h, &[p.nominal, p.min, p.max]);
+        }
+        h.update(measurement_hash);
+        count(&mut h, self.outputs.len());
+        for o in &self.outputs {
+            count(&mut h, o.model_index);
+            text(&mut h, &o.measured);
+            f64s(&mut h, &[o.weight]);
+        }
+        count(&mut h, self.search.methods.len());
+        for m in &self.search.methods {
+            text(&mut h, m.name());
+        }
+        count(&mut h, self.search.starts);
+        count(&mut h, self.search.max_evaluations);
+        h.update(&self.search.seed.to_le_bytes());
+        count(&mut h, self.search.extra_starts.len());
+        for start in &self.search.extra_starts {
+            f64s(&mut h, start);
+        }
+        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
+        count(&mut h, self.solver.max_steps);
+        *h.finalize().as_bytes()
     }
 }
 
@@ -696,6 +753,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
     Ok(Campaign {
         name,
         source: Some(at.path.to_path_buf()),
+        spec: at.text.to_string(),
         model,
         stop_time,
         base,

@@ -2,6 +2,7 @@
 
 use crate::campaign::CampaignError;
 use crate::measurement::MeasurementError;
+use crate::store::StoreError;
 use std::path::PathBuf;
 
 #[derive(Debug, thiserror::Error)]
@@ -22,6 +23,9 @@ pub enum Error {
     },
     #[error("optimiser failed: {0}")]
     Optimiser(String),
+    /// The evaluation store failed (disk, corruption, in use by another process).
+    #[error(transparent)]
+    Store(#[from] StoreError),
 }
 
 impl Error {

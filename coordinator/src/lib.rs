@@ -10,5 +10,6 @@ pub mod measurement;
 pub mod objective;
 pub mod optim;
 pub mod report;
+pub mod store;
 
 pub use error::{Error, Result};

@@ -25,6 +25,15 @@ pub struct Args {
     /// Campaign of the calibration benchmarks.
     #[arg(long, default_value = "examples/furuta_real.toml")]
     campaign: PathBuf,
+    #[command(subcommand)]
+    suite: Option<Suite>,
+}
+
+/// Benchmarks run on request only.
+#[derive(clap::Subcommand)]
+enum Suite {
+    /// The evaluation store: persisted evaluations per second, time to resume a campaign.
+    Store(super::bench_store::Args),
 }
 
 fn median(mut samples: Vec<Duration>) -> Duration {
@@ -48,6 +57,9 @@ fn ms(d: Duration) -> f64 {
 }
 
 pub fn run(args: Args) -> Outcome {
+    if let Some(Suite::Store(store)) = args.suite {
+        return super::bench_store::run(store);
+    }
     let model = models::find("furuta").expect("furuta is hosted");
     let params = model.info().default_vector();
     let grid: Vec<f64> = (0..=4000).map(|i| i as f64 * 0.01).collect();

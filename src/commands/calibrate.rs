@@ -4,9 +4,11 @@ use calib_coordinator::campaign::Campaign;
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
 use calib_coordinator::report;
+use calib_coordinator::store::SledStore;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Mutex;
+use std::time::{Duration, Instant};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -19,6 +21,24 @@ pub struct Args {
     /// Print result.json to standard output instead of the summary table.
     #[arg(long)]
     json: bool,
+    /// Evaluation store (a folder, created when absent): every simulated point is kept
+    /// there, so an interrupted campaign resumes where it stopped and a repeated one
+    /// simulates nothing [default: results/.calib-db beside the campaign file].
+    #[arg(long, value_name = "DIR")]
+    db: Option<PathBuf>,
+}
+
+/// Set to `lines` to report progress as plain lines on standard error (for scripts and
+/// tests) instead of a progress bar.
+pub const PROGRESS_ENV: &str = "CALIB_PROGRESS";
+
+/// The store a campaign uses when `--db` is not given.
+pub fn default_db(campaign: &Path) -> PathBuf {
+    campaign
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join("results")
+        .join(".calib-db")
 }
 
 /// A progress bar on standard error, drawn only when it is a terminal.
@@ -38,8 +58,42 @@ impl Progress for Bar {
     }
 }
 
+/// Progress as lines on standard error, at most ten a second (the first at once): every
+/// evaluation counted in a line is already stored.
+struct Lines {
+    state: Mutex<(u64, f64, Option<Instant>)>,
+}
+
+impl Progress for Lines {
+    fn evaluated(&self, count: usize, best_objective: f64) {
+        let mut state = self.state.lock().expect("progress lock");
+        state.0 += count as u64;
+        state.1 = state.1.min(best_objective);
+        let due = state
+            .2
+            .is_none_or(|last| last.elapsed() >= Duration::from_millis(100));
+        if due {
+            state.2 = Some(Instant::now());
+            eprintln!("progress: {} evaluations, best {:.6e}", state.0, state.1);
+        }
+    }
+}
+
 pub fn run(args: Args) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let db = args
+        .db
+        .clone()
+        .unwrap_or_else(|| default_db(&args.campaign));
+    let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
+    if std::env::var(PROGRESS_ENV).is_ok_and(|v| v == "lines") {
+        let progress = Lines {
+            state: Mutex::new((0, f64::INFINITY, None)),
+        };
+        let calibration =
+            calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, &progress)?;
+        return report_result(&args, &campaign, &calibration);
+    }
     let runs = campaign.search.methods.len() * campaign.search.starts;
     let budget = (runs * campaign.search.max_evaluations + 1) as u64;
     let bar = ProgressBar::with_draw_target(Some(budget), ProgressDrawTarget::stderr());
@@ -54,25 +108,31 @@ pub fn run(args: Args) -> Outcome {
         bar,
         best: Mutex::new(f64::INFINITY),
     };
-    let result = calibration::calibrate(&campaign, LocalEvaluator, &progress);
+    let result = calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, &progress);
     progress.bar.finish_and_clear();
-    let calibration = result?;
+    report_result(&args, &campaign, &result?)
+}
 
-    let out = args.out.unwrap_or_else(|| {
+fn report_result(
+    args: &Args,
+    campaign: &Campaign,
+    calibration: &calibration::Calibration,
+) -> Outcome {
+    let out = args.out.clone().unwrap_or_else(|| {
         args.campaign
             .parent()
             .unwrap_or(std::path::Path::new("."))
             .join("results")
             .join(&campaign.name)
     });
-    let written = report::write(&calibration, &out)?;
+    let written = report::write(calibration, &out)?;
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report::result_json(&calibration)).expect("plain data")
+            serde_json::to_string_pretty(&report::result_json(calibration)).expect("plain data")
         );
     } else {
-        print!("{}", report::table::summary(&calibration));
+        print!("{}", report::table::summary(calibration));
         for path in written {
             println!("wrote {}", path.display());
         }

@@ -1,10 +1,12 @@
 //! One module per subcommand: parse nothing, call the library, print.
 
 pub mod bench;
+pub mod bench_store;
 pub mod calibrate;
 pub mod diagnose;
 pub mod models;
 pub mod simulate;
+pub mod store;
 
 /// A command's failure: the message for the user and the process exit code.
 #[derive(Debug)]

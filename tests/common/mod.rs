@@ -97,3 +97,48 @@ pub fn calib(args: &[&str]) -> Output {
         .output()
         .expect("run calib")
 }
+
+/// Run the `calib` binary with `stdin` as its standard input.
+pub fn calib_with_input(args: &[&str], stdin: &[u8]) -> Output {
+    use std::io::Write;
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args(args)
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start calib");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(stdin)
+        .expect("feed calib");
+    child.wait_with_output().expect("run calib")
+}
+
+/// Standard output of a successful run, as JSON; panics with its standard error otherwise.
+pub fn json_of(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "calib failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("JSON on standard output")
+}
+
+/// Poll `condition` until it holds; panics naming `what` after `timeout`.
+pub fn await_condition(
+    what: &str,
+    timeout: std::time::Duration,
+    mut condition: impl FnMut() -> bool,
+) {
+    let deadline = std::time::Instant::now() + timeout;
+    while !condition() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "timed out after {timeout:?} waiting for {what}"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+}

@@ -101,7 +101,7 @@ pub fn result_json(c: &Calibration) -> Value {
         },
         "evaluations": evaluations,
         "simulated": c.stats.simulated,
-        "cached": evaluations.saturating_sub(c.stats.simulated),
+        "cached": c.stats.cached,
         "runs": runs,
         "clusters": clusters,
         "spread": { "runs_within_1_percent": agreeing.len(), "parameters": spread },

@@ -1,0 +1,284 @@
+//! The store on disk, in a sled database (sled 0.34: beta, its on-disk format will change
+//! before 1.0, hence `calib store export`/`import`).
+//!
+//! One tree per collection plus `meta` (layout version, lookup counters); the layouts are
+//! in [`super::encoding`]. sled allows one open database per path per process: open it
+//! once and share the [`SledStore`].
+//!
+//! Durability: `flush` fsyncs and blocks, so it runs on the calling (run) thread, never on
+//! an async runtime, and writes are grouped: a writer that finds a flush in progress waits
+//! for the next one, which then covers every write made meanwhile (group commit). Many
+//! runs writing at once therefore share a few flushes instead of queueing one each.
+//! `flush_async` is not used (it can deadlock in 0.34).
+
+use super::encoding::{self, LAYOUT_VERSION};
+use super::{
+    CampaignId, CampaignRecord, Collection, DatasetHash, EvaluationKey, RawEntry, Store,
+    StoreError, StoreStats,
+};
+use crate::objective::Evaluation;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Condvar, Mutex};
+
+const LAYOUT_KEY: &[u8] = b"layout";
+const HITS_KEY: &[u8] = b"hits";
+const MISSES_KEY: &[u8] = b"misses";
+
+/// A [`Store`] in a sled database.
+pub struct SledStore {
+    path: PathBuf,
+    db: sled::Db,
+    evaluations: sled::Tree,
+    campaigns: sled::Tree,
+    datasets: sled::Tree,
+    meta: sled::Tree,
+    commits: GroupCommit,
+    /// Lookup counts not yet added to `meta`.
+    pending_hits: AtomicU64,
+    pending_misses: AtomicU64,
+    flushes: AtomicU64,
+}
+
+#[derive(Default)]
+struct GroupCommit {
+    state: Mutex<CommitState>,
+    flushed: Condvar,
+}
+
+#[derive(Default)]
+struct CommitState {
+    /// Writes that asked to be made durable, numbered from 1.
+    requested: u64,
+    /// Every write numbered up to this one is durable.
+    durable: u64,
+    flushing: bool,
+}
+
+impl SledStore {
+    /// Open (or create) the store in `path`. Fails when another process has it open.
+    pub fn open(path: &Path) -> Result<Self, StoreError> {
+        let open_error = |message: String| StoreError::Open {
+            path: path.to_path_buf(),
+            message,
+        };
+        let db = sled::Config::new().path(path).open().map_err(|e| match e {
+            sled::Error::Io(io)
+                if io.kind() == std::io::ErrorKind::WouldBlock
+                    || io.to_string().contains("acquire lock") =>
+            {
+                open_error(
+                    "it is in use by another process (one calib process per store at a time)"
+                        .into(),
+                )
+            }
+            e => open_error(e.to_string()),
+        })?;
+        let tree = |name: &str| db.open_tree(name).map_err(|e| open_error(e.to_string()));
+        let store = Self {
+            evaluations: tree(Collection::Evaluations.name())?,
+            campaigns: tree(Collection::Campaigns.name())?,
+            datasets: tree(Collection::Datasets.name())?,
+            meta: tree("meta")?,
+            path: path.to_path_buf(),
+            db,
+            commits: GroupCommit::default(),
+            pending_hits: AtomicU64::new(0),
+            pending_misses: AtomicU64::new(0),
+            flushes: AtomicU64::new(0),
+        };
+        match store.meta.get(LAYOUT_KEY)? {
+            None => {
+                store
+                    .meta
+                    .insert(LAYOUT_KEY, &LAYOUT_VERSION.to_le_bytes())?;
+                store.db.flush()?;
+            }
+            Some(v) if v.as_ref() == LAYOUT_VERSION.to_le_bytes() => {}
+            Some(v) => {
+                return Err(open_error(format!(
+                    "its layout version is {:?}, this calib reads {LAYOUT_VERSION}: \
+                     export it with the calib that wrote it and import it here",
+                    v.as_ref()
+                )))
+            }
+        }
+        Ok(store)
+    }
+
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Flushes (fsyncs) made so far by this process.
+    pub fn flushes(&self) -> u64 {
+        self.flushes.load(Ordering::Relaxed)
+    }
+
+    fn tree(&self, collection: Collection) -> &sled::Tree {
+        match collection {
+            Collection::Evaluations => &self.evaluations,
+            Collection::Campaigns => &self.campaigns,
+            Collection::Datasets => &self.datasets,
+        }
+    }
+
+    /// Return once everything written before the call is on disk, sharing the flush with
+    /// every other writer waiting at the same time.
+    fn make_durable(&self) -> Result<(), StoreError> {
+        let mut state = self.commits.state.lock().expect("commit lock");
+        state.requested += 1;
+        let ticket = state.requested;
+        loop {
+            if state.durable >= ticket {
+                return Ok(());
+            }
+            if state.flushing {
+                state = self.commits.flushed.wait(state).expect("commit lock");
+                continue;
+            }
+            // Flush for every write requested so far (ours included).
+            state.flushing = true;
+            let covered = state.requested;
+            drop(state);
+            let flushed = self.flush_now();
+            state = self.commits.state.lock().expect("commit lock");
+            state.flushing = false;
+            if flushed.is_ok() {
+                state.durable = state.durable.max(covered);
+            }
+            self.commits.flushed.notify_all();
+            flushed?;
+        }
+    }
+
+    /// Add the pending lookup counts to `meta` and fsync.
+    fn flush_now(&self) -> Result<(), StoreError> {
+        self.persist_counter(HITS_KEY, self.pending_hits.swap(0, Ordering::Relaxed))?;
+        self.persist_counter(MISSES_KEY, self.pending_misses.swap(0, Ordering::Relaxed))?;
+        self.db.flush()?;
+        self.flushes.fetch_add(1, Ordering::Relaxed);
+        Ok(())
+    }
+
+    fn persist_counter(&self, key: &[u8], add: u64) -> Result<(), StoreError> {
+        if add > 0 {
+            self.meta.fetch_and_update(key, |old| {
+                let n = old.map_or(0, encoding::decode_counter) + add;
+                Some(encoding::encode_counter(n).to_vec())
+            })?;
+        }
+        Ok(())
+    }
+
+    fn counter(&self, key: &[u8]) -> Result<u64, StoreError> {
+        Ok(self
+            .meta
+            .get(key)?
+            .map_or(0, |v| encoding::decode_counter(&v)))
+    }
+}
+
+impl Drop for SledStore {
+    fn drop(&mut self) {
+        if let Err(e) = self.flush_now() {
+            tracing::warn!(store = %self.path.display(), error = %e, "final flush failed");
+        }
+    }
+}
+
+impl Store for SledStore {
+    fn get_evaluations(
+        &self,
+        keys: &[EvaluationKey],
+    ) -> Result<Vec<Option<Evaluation>>, StoreError> {
+        keys.iter()
+            .map(|k| {
+                self.evaluations
+                    .get(k)?
+                    .map(|v| encoding::decode_evaluation(&v))
+                    .transpose()
+            })
+            .collect()
+    }
+
+    fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
+        let mut batch = sled::Batch::default();
+        for (k, e) in entries {
+            batch.insert(&k[..], encoding::encode_evaluation(e));
+        }
+        self.evaluations.apply_batch(batch)?;
+        self.make_durable()
+    }
+
+    fn count_lookups(&self, hits: u64, misses: u64) {
+        self.pending_hits.fetch_add(hits, Ordering::Relaxed);
+        self.pending_misses.fetch_add(misses, Ordering::Relaxed);
+    }
+
+    fn put_campaign(&self, id: &CampaignId, record: &CampaignRecord) -> Result<(), StoreError> {
+        self.campaigns
+            .insert(&id[..], encoding::encode_campaign(record))?;
+        self.make_durable()
+    }
+
+    fn campaign(&self, id: &CampaignId) -> Result<Option<CampaignRecord>, StoreError> {
+        self.campaigns
+            .get(id)?
+            .map(|v| encoding::decode_campaign(&v))
+            .transpose()
+    }
+
+    fn campaigns(&self) -> Result<Vec<(CampaignId, CampaignRecord)>, StoreError> {
+        self.campaigns
+            .iter()
+            .map(|entry| {
+                let (k, v) = entry?;
+                let id = k
+                    .as_ref()
+                    .try_into()
+                    .map_err(|_| StoreError::Corrupt("campaign id is not 32 bytes".into()))?;
+                Ok((id, encoding::decode_campaign(&v)?))
+            })
+            .collect()
+    }
+
+    fn put_dataset(&self, hash: &DatasetHash, bytes: &[u8]) -> Result<(), StoreError> {
+        self.datasets.insert(&hash[..], bytes)?;
+        self.make_durable()
+    }
+
+    fn dataset(&self, hash: &DatasetHash) -> Result<Option<Vec<u8>>, StoreError> {
+        Ok(self.datasets.get(hash)?.map(|v| v.to_vec()))
+    }
+
+    fn raw_entries(&self, collection: Collection) -> Result<Vec<RawEntry>, StoreError> {
+        self.tree(collection)
+            .iter()
+            .map(|entry| {
+                let (k, v) = entry?;
+                Ok((k.to_vec(), v.to_vec()))
+            })
+            .collect()
+    }
+
+    fn put_raw(&self, collection: Collection, entries: &[RawEntry]) -> Result<(), StoreError> {
+        let mut batch = sled::Batch::default();
+        for (k, v) in entries {
+            batch.insert(&k[..], &v[..]);
+        }
+        self.tree(collection).apply_batch(batch)?;
+        self.make_durable()
+    }
+
+    fn stats(&self) -> Result<StoreStats, StoreError> {
+        Ok(StoreStats {
+            evaluations: self.evaluations.len() as u64,
+            campaigns: self.campaigns.len() as u64,
+            datasets: self.datasets.len() as u64,
+            bytes: self.db.size_on_disk()?,
+            hits: self.counter(HITS_KEY)? + self.pending_hits.load(Ordering::Relaxed),
+            misses: self.counter(MISSES_KEY)? + self.pending_misses.load(Ordering::Relaxed),
+        })
+    }
+}

@@ -1,0 +1,354 @@
+//! The store contract, checked on both implementations, and the stored evaluator.
+
+use super::*;
+use crate::campaign::Campaign;
+use crate::evaluator::Evaluator;
+use crate::measurement::Measurement;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+fn key(i: u64) -> EvaluationKey {
+    evaluation_key_from(&[1; 32], &[i as f64])
+}
+
+fn evaluation(i: u64) -> Evaluation {
+    if i % 7 == 3 {
+        Evaluation::failed(2, format!("diverged at point {i}"))
+    } else {
+        Evaluation {
+            objective: i as f64 * 0.1,
+            sse: vec![i as f64, 1.0 / (i as f64 + 1.0)],
+            failure: None,
+        }
+    }
+}
+
+fn same(a: &Evaluation, b: &Evaluation) -> bool {
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    a.objective.to_bits() == b.objective.to_bits()
+        && bits(&a.sse) == bits(&b.sse)
+        && a.failure == b.failure
+}
+
+fn record(name: &str, status: CampaignStatus) -> CampaignRecord {
+    CampaignRecord {
+        name: name.into(),
+        spec: format!("name = \"{name}\"\n"),
+        source: PathBuf::from(format!("/campaigns/{name}.toml")),
+        dataset: hex(&[9; 32]),
+        status,
+        runs: vec![],
+        result: None,
+        failure: None,
+    }
+}
+
+/// What every store must do.
+fn contract(store: &dyn Store) {
+    let entries: Vec<_> = (0..40).map(|i| (key(i), evaluation(i))).collect();
+    store.put_evaluations(&entries[..30]).unwrap();
+    store.put_evaluations(&entries[20..]).unwrap();
+    let keys: Vec<_> = (0..45).map(key).collect();
+    let got = store.get_evaluations(&keys).unwrap();
+    for (i, g) in got.iter().enumerate() {
+        match g {
+            Some(e) => assert!(same(e, &evaluation(i as u64)), "entry {i}"),
+            None => assert!(i >= 40, "entry {i} missing"),
+        }
+    }
+
+    store
+        .put_campaign(&[2; 32], &record("b", CampaignStatus::Running))
+        .unwrap();
+    store
+        .put_campaign(&[1; 32], &record("a", CampaignStatus::Running))
+        .unwrap();
+    store
+        .put_campaign(&[1; 32], &record("a", CampaignStatus::Finished))
+        .unwrap();
+    let campaigns = store.campaigns().unwrap();
+    assert_eq!(campaigns.len(), 2);
+    assert_eq!(campaigns[0].0, [1; 32]);
+    assert_eq!(campaigns[0].1.status, CampaignStatus::Finished);
+    assert_eq!(
+        store.campaign(&[2; 32]).unwrap().unwrap(),
+        record("b", CampaignStatus::Running)
+    );
+    assert!(store.campaign(&[3; 32]).unwrap().is_none());
+
+    let measurement = Measurement {
+        source: PathBuf::from("x.csv"),
+        time: vec![0.0, 1.0],
+        columns: vec![("y".into(), vec![f64::MIN_POSITIVE, -0.0])],
+    };
+    let hash = measurement.content_hash();
+    let bytes = encoding::encode_measurement(&measurement);
+    store.put_dataset(&hash, &bytes).unwrap();
+    assert_eq!(store.dataset(&hash).unwrap().unwrap(), bytes);
+    assert!(store.dataset(&[6; 32]).unwrap().is_none());
+
+    store.count_lookups(3, 2);
+    let stats = store.stats().unwrap();
+    assert_eq!(stats.evaluations, 40);
+    assert_eq!(stats.campaigns, 2);
+    assert_eq!(stats.datasets, 1);
+    assert_eq!((stats.hits, stats.misses), (3, 2));
+    assert!(stats.bytes > 0);
+}
+
+/// Many threads putting at once: nothing lost.
+fn concurrent_puts(store: &dyn Store) {
+    std::thread::scope(|scope| {
+        for t in 0..8u64 {
+            scope.spawn(move || {
+                for b in 0..25u64 {
+                    let batch: Vec<_> = (0..10)
+                        .map(|j| {
+                            let i = 1000 + t * 1000 + b * 10 + j;
+                            (key(i), evaluation(i))
+                        })
+                        .collect();
+                    store.put_evaluations(&batch).unwrap();
+                    // Whatever was put is readable at once.
+                    let back = store.get_evaluations(&[batch[9].0]).unwrap();
+                    assert!(back[0].is_some());
+                }
+            });
+        }
+    });
+    let keys: Vec<_> = (0..8u64)
+        .flat_map(|t| (0..250).map(move |j| key(1000 + t * 1000 + j)))
+        .collect();
+    let got = store.get_evaluations(&keys).unwrap();
+    assert!(got.iter().all(Option::is_some));
+}
+
+#[test]
+fn memory_store_keeps_the_contract() {
+    contract(&MemoryStore::new());
+    concurrent_puts(&MemoryStore::new());
+}
+
+#[test]
+fn sled_store_keeps_the_contract() {
+    let dir = tempfile::tempdir().unwrap();
+    contract(&SledStore::open(dir.path()).unwrap());
+    let dir = tempfile::tempdir().unwrap();
+    let store = SledStore::open(dir.path()).unwrap();
+    concurrent_puts(&store);
+    // 200 puts from 8 threads: the group commit shares flushes (at most one per put).
+    assert!(store.flushes() <= 200, "{} flushes", store.flushes());
+}
+
+#[test]
+fn sled_store_survives_reopening() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let store = SledStore::open(dir.path()).unwrap();
+        store.put_evaluations(&[(key(1), evaluation(1))]).unwrap();
+        store
+            .put_campaign(&[1; 32], &record("a", CampaignStatus::Running))
+            .unwrap();
+        store.count_lookups(5, 1);
+    }
+    let store = SledStore::open(dir.path()).unwrap();
+    let got = store.get_evaluations(&[key(1), key(2)]).unwrap();
+    assert!(same(got[0].as_ref().unwrap(), &evaluation(1)));
+    assert!(got[1].is_none());
+    assert_eq!(store.campaigns().unwrap().len(), 1);
+    let stats = store.stats().unwrap();
+    assert_eq!((stats.hits, stats.misses), (5, 1));
+}
+
+#[test]
+fn a_sled_store_opens_once_at_a_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let _first = SledStore::open(dir.path()).unwrap();
+    let second = SledStore::open(dir.path())
+        .err()
+        .expect("second open fails");
+    assert!(second.to_string().contains("in use"), "{second}");
+}
+
+#[test]
+fn export_and_import_carry_every_entry() {
+    let source = MemoryStore::new();
+    contract(&source);
+    let mut text = Vec::new();
+    let exported = export::export(&source, &mut text).unwrap();
+    assert_eq!(exported.evaluations, 40);
+    let first = text.split(|b| *b == b'\n').next().unwrap();
+    assert_eq!(first, br#"{"format":"calib-store","version":1}"#);
+
+    let dir = tempfile::tempdir().unwrap();
+    let target = SledStore::open(dir.path()).unwrap();
+    let imported = export::import(&target, &mut &text[..]).unwrap();
+    assert_eq!(imported, exported);
+    for collection in Collection::ALL {
+        assert_eq!(
+            target.raw_entries(collection).unwrap(),
+            source.raw_entries(collection).unwrap(),
+            "{collection}"
+        );
+    }
+
+    // A truncated export is refused (what came before the cut is kept: it is correct).
+    let cut = text.len() - 30;
+    let error = export::import(&MemoryStore::new(), &mut &text[..cut]).unwrap_err();
+    assert!(error.to_string().contains("line") || error.to_string().contains("truncated"));
+    let error = export::import(&MemoryStore::new(), &mut &b"{\"a\":1}\n"[..]).unwrap_err();
+    assert!(
+        error.to_string().contains("not a calib store export"),
+        "{error}"
+    );
+}
+
+// ---- the stored evaluator ----
+
+/// Scores a point by the sum of its values, slowly, counting what it simulates.
+#[derive(Default)]
+struct Counting {
+    simulated: AtomicUsize,
+}
+
+impl Evaluator for Counting {
+    fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+        std::thread::sleep(Duration::from_millis(20));
+        self.simulated.fetch_add(points.len(), Ordering::SeqCst);
+        points
+            .iter()
+            .map(|p| Evaluation {
+                objective: p.iter().sum(),
+                sse: vec![p.iter().sum()],
+                failure: None,
+            })
+            .collect()
+    }
+}
+
+fn objective(version_bump: bool) -> Objective {
+    let text = r#"
+[model]
+name = "furuta"
+[measurement]
+file = "m.csv"
+[[outputs]]
+model = "armJoint.phi"
+measured = "phi"
+[[parameters]]
+name = "armFriction"
+min = 0.0
+max = 0.9
+[window]
+start = 0.0
+stop = 1.0
+"#;
+    let campaign = Campaign::parse(text, Path::new("/campaigns/c.toml")).unwrap();
+    let measurement = Measurement {
+        source: PathBuf::from("m.csv"),
+        time: vec![0.0, 0.5, 1.0],
+        columns: vec![(
+            "phi".into(),
+            if version_bump {
+                vec![0.0, 0.1, 0.3]
+            } else {
+                vec![0.0, 0.1, 0.2]
+            },
+        )],
+    };
+    Objective::new(&campaign, &measurement).unwrap()
+}
+
+#[test]
+fn concurrent_requests_for_one_point_simulate_it_once() {
+    let store = MemoryStore::new();
+    let inner = Counting::default();
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 * 0.1]).collect();
+    std::thread::scope(|scope| {
+        for t in 0..4 {
+            let (evaluator, objective, points) = (&evaluator, &objective, &points);
+            scope.spawn(move || {
+                // Each thread asks for an overlapping window, one point twice.
+                let mut batch = points[t..t + 3].to_vec();
+                batch.push(points[t].clone());
+                let answers = evaluator.evaluate(objective, &batch);
+                for (p, a) in batch.iter().zip(answers) {
+                    assert_eq!(a.objective, p[0]);
+                }
+            });
+        }
+    });
+    assert_eq!(inner.simulated.load(Ordering::SeqCst), 6);
+    let stats = evaluator.stats();
+    assert_eq!(
+        (stats.requested, stats.simulated, stats.cached),
+        (16, 6, 10)
+    );
+    let store_stats = store.stats().unwrap();
+    assert_eq!((store_stats.hits, store_stats.misses), (10, 6));
+    assert_eq!(store_stats.evaluations, 6);
+}
+
+#[test]
+fn a_second_evaluator_on_the_same_store_simulates_nothing() {
+    let store = MemoryStore::new();
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..5).map(|i| vec![i as f64 * 0.2]).collect();
+    let first = Counting::default();
+    StoredEvaluator::new(&first, &store).evaluate(&objective, &points);
+    let second = Counting::default();
+    let again = StoredEvaluator::new(&second, &store);
+    let answers = again.evaluate(&objective, &points);
+    assert_eq!(second.simulated.load(Ordering::SeqCst), 0);
+    assert_eq!(again.stats().cached, 5);
+    assert_eq!(answers[4].objective, 0.8);
+
+    // Other data, other objective: nothing is reused.
+    let other = objective_with_other_data();
+    again.evaluate(&other, &points);
+    assert_eq!(second.simulated.load(Ordering::SeqCst), 5);
+}
+
+fn objective_with_other_data() -> Objective {
+    objective(true)
+}
+
+/// Panics on its first batch, then behaves.
+struct PanicsOnce {
+    armed: std::sync::atomic::AtomicBool,
+    inner: Counting,
+}
+
+impl Evaluator for PanicsOnce {
+    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+        if self.armed.swap(false, Ordering::SeqCst) {
+            std::thread::sleep(Duration::from_millis(50));
+            panic!("simulator crashed");
+        }
+        self.inner.evaluate(objective, points)
+    }
+}
+
+#[test]
+fn a_crashed_simulation_does_not_leave_waiters_hanging() {
+    let store = MemoryStore::new();
+    let inner = PanicsOnce {
+        armed: true.into(),
+        inner: Counting::default(),
+    };
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let point = vec![vec![0.5]];
+    let crashed = std::thread::scope(|scope| {
+        let first = scope.spawn(|| evaluator.evaluate(&objective, &point));
+        std::thread::sleep(Duration::from_millis(10));
+        let second = scope.spawn(|| evaluator.evaluate(&objective, &point));
+        let answer = second.join().unwrap();
+        assert_eq!(answer[0].objective, 0.5);
+        first.join().is_err()
+    });
+    assert!(crashed);
+}
