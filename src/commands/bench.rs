@@ -34,6 +34,8 @@ pub struct Args {
 enum Suite {
     /// The evaluation store: persisted evaluations per second, time to resume a campaign.
     Store(super::bench_store::Args),
+    /// A whole diagnosis (calibrate, rank, refit, select), single node.
+    Diagnose(super::bench_diagnose::Args),
 }
 
 fn median(mut samples: Vec<Duration>) -> Duration {
@@ -57,8 +59,10 @@ fn ms(d: Duration) -> f64 {
 }
 
 pub fn run(args: Args) -> Outcome {
-    if let Some(Suite::Store(store)) = args.suite {
-        return super::bench_store::run(store);
+    match args.suite {
+        Some(Suite::Store(store)) => return super::bench_store::run(store),
+        Some(Suite::Diagnose(diagnose)) => return super::bench_diagnose::run(diagnose),
+        None => {}
     }
     let model = models::find("furuta").expect("furuta is hosted");
     let params = model.info().default_vector();

@@ -1,6 +1,7 @@
 //! One module per subcommand: parse nothing, call the library, print.
 
 pub mod bench;
+pub mod bench_diagnose;
 pub mod bench_store;
 pub mod calibrate;
 pub mod diagnose;

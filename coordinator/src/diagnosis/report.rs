@@ -415,6 +415,24 @@ fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
             width: 1 + i as u32,
         });
     }
+    // The band within which the autocorrelation of white noise stays 95% of the time.
+    let n = d.baseline.residual.first().map_or(1, |r| r.samples).max(1) as f64;
+    let band = vec![1.96 / n.sqrt(); lags.len()];
+    let minus_band: Vec<f64> = band.iter().map(|b| -b).collect();
+    series.push(Series {
+        label: "white-noise band (95%)",
+        time: &lags,
+        values: &band,
+        color: MEASURED,
+        width: 1,
+    });
+    series.push(Series {
+        label: "",
+        time: &lags,
+        values: &minus_band,
+        color: MEASURED,
+        width: 1,
+    });
     let path = dir.join("autocorrelation.svg");
     line_plot(
         &path,

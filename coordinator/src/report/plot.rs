@@ -91,19 +91,20 @@ pub fn line_plot(
         for s in series {
             let color = s.color;
             let width = s.width;
-            chart
-                .draw_series(LineSeries::new(
-                    s.time
-                        .iter()
-                        .zip(s.values)
-                        .filter(|(t, v)| t.is_finite() && v.is_finite())
-                        .map(|(&t, &v)| (t, v)),
-                    color.stroke_width(width),
-                ))?
-                .label(s.label)
-                .legend(move |(x, y)| {
+            let drawn = chart.draw_series(LineSeries::new(
+                s.time
+                    .iter()
+                    .zip(s.values)
+                    .filter(|(t, v)| t.is_finite() && v.is_finite())
+                    .map(|(&t, &v)| (t, v)),
+                color.stroke_width(width),
+            ))?;
+            // Series without a label (a second band edge, say) stay out of the legend.
+            if !s.label.is_empty() {
+                drawn.label(s.label).legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                 });
+            }
         }
         chart
             .configure_series_labels()
