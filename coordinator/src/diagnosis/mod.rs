@@ -232,31 +232,79 @@ where
     )?;
     candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
 
-    if baseline.objective <= NOISE_FACTOR * noise_floor {
-        let final_fit = baseline.clone();
-        return Ok(Diagnosis {
-            campaign: fit_campaign,
-            measurement,
-            fit_window,
-            holdout_window,
-            noise,
-            noise_floor,
-            baseline,
-            candidates,
+    let Judgement {
+        refits,
+        selected,
+        final_fit,
+        verdict,
+        explained_fraction,
+    } = if baseline.objective <= NOISE_FACTOR * noise_floor {
+        Judgement {
             refits: Vec::new(),
             selected: Vec::new(),
-            final_fit,
+            final_fit: baseline.clone(),
             verdict: Verdict::Noise,
             explained_fraction: 1.0,
-            elapsed: started.elapsed(),
-        });
-    }
+        }
+    } else {
+        refit_and_select(
+            &fit_campaign,
+            &measurement,
+            engine,
+            progress,
+            &baseline,
+            &mut candidates,
+            &candidate_specs,
+            &holdout_objective,
+            noise_floor,
+        )?
+    };
+    Ok(Diagnosis {
+        campaign: fit_campaign,
+        measurement,
+        fit_window,
+        holdout_window,
+        noise,
+        noise_floor,
+        baseline,
+        candidates,
+        refits,
+        selected,
+        final_fit,
+        verdict,
+        explained_fraction,
+        elapsed: started.elapsed(),
+    })
+}
 
+/// What steps 4 to 7 conclude.
+struct Judgement {
+    refits: Vec<Fit>,
+    selected: Vec<String>,
+    final_fit: Fit,
+    verdict: Verdict,
+    explained_fraction: f64,
+}
+
+/// Steps 4 to 7: refit the best candidates alone and in pairs, select, and judge. The refits,
+/// the selected effects, the final fit, the verdict and the share of the excess explained.
+#[allow(clippy::too_many_arguments)]
+fn refit_and_select<E: Evaluator + Simulator>(
+    fit_campaign: &Campaign,
+    measurement: &Measurement,
+    engine: &E,
+    progress: &dyn Progress,
+    baseline: &Fit,
+    candidates: &mut [Candidate],
+    candidate_specs: &[FreeParameter],
+    holdout_objective: &Objective,
+    noise_floor: f64,
+) -> Result<Judgement> {
     // 4. Refit the best candidates alone and in pairs.
     let top: Vec<&Candidate> = candidates
         .iter()
         .filter(|c| c.score > 0.0)
-        .take(campaign.diagnosis.refit)
+        .take(fit_campaign.diagnosis.refit)
         .collect();
     let mut sets: Vec<Vec<&Candidate>> = top.iter().map(|c| vec![*c]).collect();
     for i in 0..top.len() {
@@ -266,7 +314,7 @@ where
     }
     let refit_campaigns: Vec<Campaign> = sets
         .iter()
-        .map(|set| refit_campaign(&fit_campaign, &baseline, set, &candidate_specs))
+        .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
         .collect();
     let refits: Vec<Fit> = std::thread::scope(|scope| {
         let handles: Vec<_> = refit_campaigns
@@ -290,10 +338,10 @@ where
     polish_singles_from_pairs(
         &mut refits,
         &refit_campaigns,
-        &measurement,
+        measurement,
         engine,
         progress,
-        &holdout_objective,
+        holdout_objective,
     )?;
     for c in candidates.iter_mut() {
         c.objective = refits
@@ -305,7 +353,7 @@ where
     // 5. Select.
     let mut chosen: Option<&Fit> = None;
     for fit in refits.iter().filter(|f| f.effects.len() == 1) {
-        if improves(fit, &baseline) && chosen.is_none_or(|c| fit.objective < c.objective) {
+        if improves(fit, baseline) && chosen.is_none_or(|c| fit.objective < c.objective) {
             chosen = Some(fit);
         }
     }
@@ -319,7 +367,7 @@ where
     } else {
         // A pair may succeed where each effect alone falls short.
         for pair in refits.iter().filter(|f| f.effects.len() == 2) {
-            if improves(pair, &baseline) && chosen.is_none_or(|c| pair.objective < c.objective) {
+            if improves(pair, baseline) && chosen.is_none_or(|c| pair.objective < c.objective) {
                 chosen = Some(pair);
             }
         }
@@ -341,21 +389,12 @@ where
     };
     let excess = (baseline.objective - noise_floor).max(f64::MIN_POSITIVE);
     let explained_fraction = ((baseline.objective - final_fit.objective) / excess).clamp(0.0, 1.0);
-    Ok(Diagnosis {
-        campaign: fit_campaign,
-        measurement,
-        fit_window,
-        holdout_window,
-        noise,
-        noise_floor,
-        baseline,
-        candidates,
+    Ok(Judgement {
         refits,
         selected,
         final_fit,
         verdict,
         explained_fraction,
-        elapsed: started.elapsed(),
     })
 }
 

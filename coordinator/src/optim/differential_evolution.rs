@@ -58,6 +58,7 @@
 //!   Practical Approach to Global Optimization. Springer (bounce-back boundary
 //!   handling, dither).
 
+use super::sanitize;
 use argmin::core::{
     ArgminError, CostFunction, Error, PopulationState, Problem, Solver, SyncAlias,
     TerminationReason, TerminationStatus, KV,
@@ -426,96 +427,11 @@ fn invalid(text: &str) -> Error {
     ArgminError::InvalidParameter { text: text.into() }.into()
 }
 
-/// NaN and `+∞` rank behind every finite cost.
-fn sanitize(cost: f64) -> f64 {
-    if cost.is_nan() || cost == f64::INFINITY {
-        f64::MAX
-    } else {
-        cost
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::optim::test_problems::{Recorder, Rosenbrock, Sphere};
     use argmin::core::{Executor, State};
-    use std::sync::Mutex;
-
-    /// `sum (x_i - c_i)^2`.
-    struct Sphere {
-        centre: Vec<f64>,
-    }
-
-    impl CostFunction for Sphere {
-        type Param = Vec<f64>;
-        type Output = f64;
-        fn cost(&self, x: &Vec<f64>) -> Result<f64, Error> {
-            Ok(x.iter()
-                .zip(&self.centre)
-                .map(|(a, c)| (a - c) * (a - c))
-                .sum())
-        }
-    }
-
-    /// Rosenbrock's function with the unit box mapped onto `[-2, 2]^2`; the minimum
-    /// `(1, 1)` sits at `(0.75, 0.75)`.
-    struct Rosenbrock;
-
-    impl CostFunction for Rosenbrock {
-        type Param = Vec<f64>;
-        type Output = f64;
-        fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
-            let (x, y) = (4.0 * u[0] - 2.0, 4.0 * u[1] - 2.0);
-            Ok((1.0 - x).powi(2) + 100.0 * (y - x * x).powi(2))
-        }
-    }
-
-    /// Records every evaluated point and how it was requested.
-    struct Recorder<O> {
-        inner: O,
-        points: Mutex<Vec<Vec<f64>>>,
-        batch_sizes: Mutex<Vec<usize>>,
-        single_calls: Mutex<usize>,
-    }
-
-    impl<O> Recorder<O> {
-        fn new(inner: O) -> Self {
-            Recorder {
-                inner,
-                points: Mutex::new(Vec::new()),
-                batch_sizes: Mutex::new(Vec::new()),
-                single_calls: Mutex::new(0),
-            }
-        }
-    }
-
-    impl<O: CostFunction<Param = Vec<f64>, Output = f64>> CostFunction for Recorder<O> {
-        type Param = Vec<f64>;
-        type Output = f64;
-
-        fn cost(&self, x: &Vec<f64>) -> Result<f64, Error> {
-            *self.single_calls.lock().unwrap() += 1;
-            self.points.lock().unwrap().push(x.clone());
-            self.inner.cost(x)
-        }
-
-        fn bulk_cost<P>(&self, params: &[P]) -> Result<Vec<f64>, Error>
-        where
-            P: std::borrow::Borrow<Vec<f64>> + SyncAlias,
-            Self::Output: argmin::core::SendAlias,
-            Self: SyncAlias,
-        {
-            self.batch_sizes.lock().unwrap().push(params.len());
-            let mut points = self.points.lock().unwrap();
-            params
-                .iter()
-                .map(|p| {
-                    points.push(p.borrow().clone());
-                    self.inner.cost(p.borrow())
-                })
-                .collect()
-        }
-    }
 
     struct Outcome {
         best: Vec<f64>,

@@ -23,6 +23,18 @@ pub mod nelder_mead;
 pub mod powell;
 pub mod problem;
 pub mod space;
+#[cfg(test)]
+mod test_problems;
 
 pub use differential_evolution::{DifferentialEvolution, Strategy};
+
+/// A cost the solvers can order: NaN and +∞ become the largest finite value, so a failed
+/// evaluation ranks last without poisoning comparisons or averages.
+pub(crate) fn sanitize(cost: f64) -> f64 {
+    if cost.is_nan() || cost == f64::INFINITY {
+        f64::MAX
+    } else {
+        cost
+    }
+}
 pub use powell::Powell;

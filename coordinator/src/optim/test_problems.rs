@@ -1,0 +1,80 @@
+//! Test problems shared by the solvers' tests.
+
+use argmin::core::{CostFunction, Error, SyncAlias};
+use std::sync::Mutex;
+
+/// `sum (x_i - c_i)^2`.
+pub struct Sphere {
+    pub centre: Vec<f64>,
+}
+
+impl CostFunction for Sphere {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, x: &Vec<f64>) -> Result<f64, Error> {
+        Ok(x.iter()
+            .zip(&self.centre)
+            .map(|(a, c)| (a - c) * (a - c))
+            .sum())
+    }
+}
+
+/// Rosenbrock's function with the unit box mapped onto `[-2, 2]^2`; the minimum
+/// `(1, 1)` sits at `(0.75, 0.75)`.
+pub struct Rosenbrock;
+
+impl CostFunction for Rosenbrock {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
+        let (x, y) = (4.0 * u[0] - 2.0, 4.0 * u[1] - 2.0);
+        Ok((1.0 - x).powi(2) + 100.0 * (y - x * x).powi(2))
+    }
+}
+
+/// Records every evaluated point and how it was requested.
+pub struct Recorder<O> {
+    inner: O,
+    pub points: Mutex<Vec<Vec<f64>>>,
+    pub batch_sizes: Mutex<Vec<usize>>,
+    pub single_calls: Mutex<usize>,
+}
+
+impl<O> Recorder<O> {
+    pub fn new(inner: O) -> Self {
+        Recorder {
+            inner,
+            points: Mutex::new(Vec::new()),
+            batch_sizes: Mutex::new(Vec::new()),
+            single_calls: Mutex::new(0),
+        }
+    }
+}
+
+impl<O: CostFunction<Param = Vec<f64>, Output = f64>> CostFunction for Recorder<O> {
+    type Param = Vec<f64>;
+    type Output = f64;
+
+    fn cost(&self, x: &Vec<f64>) -> Result<f64, Error> {
+        *self.single_calls.lock().unwrap() += 1;
+        self.points.lock().unwrap().push(x.clone());
+        self.inner.cost(x)
+    }
+
+    fn bulk_cost<P>(&self, params: &[P]) -> Result<Vec<f64>, Error>
+    where
+        P: std::borrow::Borrow<Vec<f64>> + SyncAlias,
+        Self::Output: argmin::core::SendAlias,
+        Self: SyncAlias,
+    {
+        self.batch_sizes.lock().unwrap().push(params.len());
+        let mut points = self.points.lock().unwrap();
+        params
+            .iter()
+            .map(|p| {
+                points.push(p.borrow().clone());
+                self.inner.cost(p.borrow())
+            })
+            .collect()
+    }
+}
