@@ -426,7 +426,7 @@ impl HxModel {
         Self {
             info: ModelInfo {
                 name: name.into(),
-                version: 1,
+                version: 2,
                 description: description.into(),
                 parameters,
                 outputs,
