@@ -109,6 +109,9 @@ pub struct Evaporator {
     rho0: f64,
     /// Set when a march leaves the property tables.
     out_of_range: Cell<bool>,
+    /// The last air side computed, with its air inlet temperature and mass flow: the air
+    /// inputs only move during their own ramps.
+    air_cache: Cell<Option<(f64, f64, AirSide)>>,
 }
 
 /// Quality of dry-out inception: above it the boiling coefficient falls linearly to the
@@ -157,6 +160,7 @@ impl Evaporator {
             ),
             rho0: 1.0 / specific_volume(nom.p0, nom.h0),
             out_of_range: Cell::new(false),
+            air_cache: Cell::new(None),
         }
     }
 
@@ -170,6 +174,17 @@ impl Evaporator {
 
     /// ε-NTU of the finned air side against a wall at uniform temperature, per segment.
     pub fn air_side(&self, inp: &Inputs) -> AirSide {
+        if let Some((t, m, air)) = self.air_cache.get() {
+            if t == inp.t_air_in && m == inp.mdot_air {
+                return air;
+            }
+        }
+        let air = self.compute_air_side(inp);
+        self.air_cache.set(Some((inp.t_air_in, inp.mdot_air, air)));
+        air
+    }
+
+    fn compute_air_side(&self, inp: &Inputs) -> AirSide {
         let g = &self.settings.geometry;
         let air = Air::at(inp.t_air_in);
         let a_min = g.air_min_flow_area();

@@ -137,6 +137,9 @@ struct Tables {
     /// Saturation rows (quantities, then their groups) with one ghost row at each end
     /// (linear extrapolation).
     sat: Vec<[f64; ROW_COLS]>,
+    /// Pressure range of the saturation table.
+    sat_p_min: f64,
+    sat_p_max: f64,
     /// ln p grid of the vapour table.
     vs0: f64,
     vds: f64,
@@ -227,6 +230,8 @@ fn tables() -> &'static Tables {
             s0,
             ds,
             sat,
+            sat_p_min: p[0],
+            sat_p_max: p[n - 1],
             vs0,
             vds: (vp_max.ln() - vs0) / (np - 1) as f64,
             du: u_max / (nu - 1) as f64,
@@ -297,7 +302,7 @@ pub fn saturation(p: f64) -> Saturation {
         }
         dt += dw[k] * row[0];
     }
-    let p_eff = (tb.s0 + (i as f64 + t) * tb.ds).exp();
+    let p_eff = p.clamp(tb.sat_p_min, tb.sat_p_max);
     Saturation {
         p: p_eff,
         t: v[0],
