@@ -6,7 +6,6 @@
 pub mod model;
 pub mod models;
 pub mod ode;
-pub mod stiff;
 
 pub use model::{
     EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
