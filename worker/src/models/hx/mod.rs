@@ -79,13 +79,14 @@
 //! inlet pressure meets the outlet condition (to 10⁻¹⁰ of the pressure drop). Outputs are
 //! therefore flat until the first ramp, and the integration starts there.
 //!
-//! **Cost** (300 s at rtol 10⁻⁸, release build, CPU time): measured at first 150 ms for
-//! `hx_highfi` and 16 ms for `hx_lowfi`, two thirds of it in `powf` inside the
-//! correlations. The pressure-only property groups now come interpolated from the
+//! **Cost** (300 s at rtol 10⁻⁸, release build, `examples/hx_timing.rs`): measured at
+//! first 150 ms for `hx_highfi` and 16 ms for `hx_lowfi`, two thirds of it in `powf` inside
+//! the correlations. The pressure-only property groups now come interpolated from the
 //! saturation table ([`refrigerant::Groups`]), the remaining powers are exponentials of
 //! shared logarithms, the air side is recomputed only when the air inputs move, and the
-//! flat first minute is not integrated: 16 → 5.5 ms and 150 → 72 ms, with ~4 900 and
-//! ~6 200 evaluations of the right-hand side. What is left is the step count, and it is set
+//! flat first minute is not integrated: 150 → 72 ms and 16 → 5.4 ms (old and new binaries
+//! run in turn on the same machine), with 6 338 and 4 898 evaluations of the right-hand
+//! side (998 and 802 steps). What is left is the step count, and it is set
 //! by accuracy, not stability: with the same solver the ramps take 857 steps at rtol 10⁻⁸
 //! against 432 at 10⁻⁶ (the flat stretches take stability-limited steps of ~0.45 s). A
 //! Rosenbrock method with error control (RODAS4, Hairer & Wanner 1996) was measured: on
