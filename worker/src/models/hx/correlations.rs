@@ -107,7 +107,13 @@ pub fn nusselt_dittus_boelter(re: f64, pr: f64) -> f64 {
 
 /// [`nusselt_dittus_boelter`] given `ln Re` (of a positive Reynolds number) and `Pr^0.4`.
 fn dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
-    blend(0.023 * (0.8 * ln_re).exp() * pr_04)
+    ln_dittus_boelter_with(ln_re, pr_04).exp()
+}
+
+/// The logarithm of [`dittus_boelter_with`].
+fn ln_dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
+    let nu_turbulent = 0.023 * (0.8 * ln_re).exp() * pr_04;
+    0.1 * (NU_LAMINAR.powi(10) + nu_turbulent.powi(10)).ln()
 }
 
 /// Gnielinski with the Filonenko friction factor, blended with the laminar floor; the
@@ -153,12 +159,12 @@ pub fn chen(s: &Saturation, x: f64, g: f64, d: f64, dt_sat: f64) -> ChenCoeffici
     let x = x.clamp(1e-4, 0.9999);
     let re_l = g * (1.0 - x) * d / s.mu_l;
     let ln_re = re_l.ln();
-    let h_l = dittus_boelter_with(ln_re, s.groups.pr_l_04) * s.k_l / d;
+    let ln_nu_l = ln_dittus_boelter_with(ln_re, s.groups.pr_l_04);
     let inv_xtt = (0.9 * (x / (1.0 - x)).ln()).exp() * s.groups.martinelli;
     // F = max(1, 2.35 (1/X_tt + 0.213)^0.736), through its logarithm.
     let ln_f = (2.35f64.ln() + 0.736 * (inv_xtt + 0.213).ln()).max(0.0);
-    let f = ln_f.exp();
-    let convective = f * h_l;
+    // F h_l, h_l = Nu_l k_l / D.
+    let convective = (ln_f + ln_nu_l).exp() * s.k_l / d;
     let nucleate = if dt_sat > 0.0 {
         // (Re_l F^1.25)^1.17.
         let re_tp_117 = (1.17 * (ln_re + 1.25 * ln_f)).exp();

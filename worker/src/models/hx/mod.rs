@@ -84,9 +84,9 @@
 //! the correlations. The pressure-only property groups now come interpolated from the
 //! saturation table ([`refrigerant::Groups`]), the remaining powers are exponentials of
 //! shared logarithms, the air side is recomputed only when the air inputs move, and the
-//! flat first minute is not integrated: 150 → 72 ms and 16 → 5.4 ms (old and new binaries
-//! run in turn on the same machine), with 6 338 and 4 898 evaluations of the right-hand
-//! side (998 and 802 steps). What is left is the step count, and it is set
+//! flat first minute is not integrated: 141 → 66 ms and 15 → 4.8 ms (best medians, old
+//! and new binaries run in turn on the same machine), with 6 374 and 4 898 evaluations of
+//! the right-hand side (1 001 and 802 steps). What is left is the step count, and it is set
 //! by accuracy, not stability: with the same solver the ramps take 857 steps at rtol 10⁻⁸
 //! against 432 at 10⁻⁶ (the flat stretches take stability-limited steps of ~0.45 s). A
 //! Rosenbrock method with error control (RODAS4, Hairer & Wanner 1996) was measured: on
@@ -444,7 +444,7 @@ impl HxModel {
         Self {
             info: ModelInfo {
                 name: name.into(),
-                version: 2,
+                version: 3,
                 description: description.into(),
                 parameters,
                 outputs,

@@ -81,7 +81,8 @@ pub fn friedel(s: &Saturation, x: f64, g: f64, d: f64, len: f64) -> f64 {
 /// Churchill (1977) Fanning friction factor of a smooth channel, all regimes.
 pub fn fanning_churchill(re: f64) -> f64 {
     let re = re.max(1e-6);
-    let a = (2.457 * (1.0 / ((7.0 / re).powf(0.9))).ln()).powi(16);
+    // ln(1/(7/Re)^0.9) = 0.9 ln(Re/7).
+    let a = (2.457 * 0.9 * (re / 7.0).ln()).powi(16);
     let b = (37_530.0 / re).powi(16);
     2.0 * ((8.0 / re).powi(12) + (a + b).powf(-1.5)).powf(1.0 / 12.0)
 }

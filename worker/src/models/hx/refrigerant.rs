@@ -270,7 +270,8 @@ fn weights(t: f64) -> ([f64; 4], [f64; 4]) {
 #[inline]
 fn locate(x: f64, x0: f64, dx: f64, nodes: usize) -> (usize, f64) {
     let f = ((x - x0) / dx).clamp(0.0, (nodes - 1) as f64);
-    let i = (f.floor() as usize).min(nodes - 2);
+    // `f ≥ 0`, so truncation is the floor.
+    let i = (f as usize).min(nodes - 2);
     (i, f - i as f64)
 }
 
