@@ -17,6 +17,13 @@ use std::time::{Duration, Instant};
 const SEED_EVALUATION: Duration = Duration::from_millis(300);
 const SEED_CALIBRATION: Duration = Duration::from_secs(25);
 
+/// Targets for one 300 s heat-exchanger simulation: what each evaluation of a campaign
+/// calibrating `hx_lowfi` (and each record of `hx_highfi`) may cost.
+const HX_TARGETS: [(&str, Duration); 2] = [
+    ("hx_lowfi", Duration::from_millis(5)),
+    ("hx_highfi", Duration::from_millis(50)),
+];
+
 #[derive(clap::Args)]
 pub struct Args {
     /// Repetitions of each measurement (the median is reported).
@@ -89,6 +96,8 @@ pub fn run(args: Args) -> Outcome {
         SEED_EVALUATION.as_secs_f64() / sim.as_secs_f64()
     );
 
+    hx(args.repeat)?;
+
     let mut campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
     let single = rayon::ThreadPoolBuilder::new()
         .num_threads(1)
@@ -137,5 +146,40 @@ pub fn run(args: Args) -> Outcome {
         c.stats.simulated,
         c.best_run().objective
     );
+    Ok(())
+}
+
+/// One 300 s simulation of each heat-exchanger model, both calibrated outputs on a 1 s grid.
+fn hx(repeat: usize) -> Outcome {
+    let options = SolverOptions::default();
+    let grid: Vec<f64> = (0..=300).map(f64::from).collect();
+    println!(
+        "heat exchanger, one 300 s simulation (rtol {:e}, dp_ref and Qdot_refTotal, 301 output points):",
+        options.rtol
+    );
+    for (name, target) in HX_TARGETS {
+        let model = models::find(name).expect("the hx models are hosted");
+        let info = model.info();
+        let params = info.default_vector();
+        let outputs: Vec<usize> = ["dp_ref", "Qdot_refTotal"]
+            .iter()
+            .map(|o| info.output_index(o).expect("hx output"))
+            .collect();
+        let (sim, trajectory) = time(repeat, || {
+            model
+                .simulate(&params, &grid, &outputs, &options)
+                .map_err(|e| Failure::internal(format!("{name} failed: {e}")))
+        });
+        let stats = trajectory?.stats;
+        println!(
+            "  {name:9} median {:.2} ms  ({} steps, {} rejected, {} rhs)  target: {:.0} ms  -> {}",
+            ms(sim),
+            stats.accepted_steps,
+            stats.rejected_steps,
+            stats.rhs_evaluations,
+            ms(target),
+            if sim <= target { "met" } else { "missed" }
+        );
+    }
     Ok(())
 }

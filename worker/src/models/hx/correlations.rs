@@ -94,23 +94,41 @@ pub fn fin_efficiency(h: f64, conductivity: f64, thickness: f64, half_height: f6
 
 /// Churchill–Usagi blend of the laminar floor and a turbulent Nusselt number.
 fn blend(nu_turbulent: f64) -> f64 {
-    (NU_LAMINAR.powi(10) + nu_turbulent.max(0.0).powi(10)).powf(0.1)
+    (0.1 * (NU_LAMINAR.powi(10) + nu_turbulent.max(0.0).powi(10)).ln()).exp()
 }
 
 /// Dittus–Boelter (heating) with the laminar floor.
 pub fn nusselt_dittus_boelter(re: f64, pr: f64) -> f64 {
-    blend(0.023 * re.max(0.0).powf(0.8) * pr.powf(0.4))
+    if re <= 0.0 {
+        return NU_LAMINAR;
+    }
+    dittus_boelter_with(re.ln(), pr.powf(0.4))
+}
+
+/// [`nusselt_dittus_boelter`] given `ln Re` (of a positive Reynolds number) and `Pr^0.4`.
+fn dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
+    ln_dittus_boelter_with(ln_re, pr_04).exp()
+}
+
+/// The logarithm of [`dittus_boelter_with`].
+fn ln_dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
+    let nu_turbulent = 0.023 * (0.8 * ln_re).exp() * pr_04;
+    0.1 * (NU_LAMINAR.powi(10) + nu_turbulent.powi(10)).ln()
 }
 
 /// Gnielinski with the Filonenko friction factor, blended with the laminar floor; the
 /// turbulent expression vanishes at Re = 1000, so the blend is smooth in Re.
 pub fn nusselt_gnielinski(re: f64, pr: f64) -> f64 {
+    nusselt_gnielinski_with(re, pr, pr.powf(2.0 / 3.0))
+}
+
+/// [`nusselt_gnielinski`] given `Pr^(2/3)` as well.
+pub fn nusselt_gnielinski_with(re: f64, pr: f64, pr_23: f64) -> f64 {
     if re <= 1000.0 {
         return NU_LAMINAR;
     }
     let f = (0.79 * re.ln() - 1.64).powi(-2);
-    let nu = (f / 8.0) * (re - 1000.0) * pr
-        / (1.0 + 12.7 * (f / 8.0).sqrt() * (pr.powf(2.0 / 3.0) - 1.0));
+    let nu = (f / 8.0) * (re - 1000.0) * pr / (1.0 + 12.7 * (f / 8.0).sqrt() * (pr_23 - 1.0));
     blend(nu)
 }
 
@@ -132,22 +150,28 @@ pub struct ChenCoefficient {
 /// - `h_FZ = 0.00122 k_l^0.79 c_pl^0.45 ρ_l^0.49 / (σ^0.5 μ_l^0.29 h_lv^0.24 ρ_v^0.24)
 ///   ΔT_sat^0.24 Δp_sat^0.75` (Forster–Zuber), with `Δp_sat = ΔT_sat / (dT_sat/dp)`
 ///   (Clausius–Clapeyron, linearised about the local saturation state).
+///
+/// The property groups come precomputed with the saturation state
+/// ([`Saturation::groups`](super::refrigerant::Groups)).
 pub fn chen(s: &Saturation, x: f64, g: f64, d: f64, dt_sat: f64) -> ChenCoefficient {
+    // Powers are taken as exponentials of logarithms: each `powf` costs about as much as
+    // a logarithm and an exponential together, and the logarithms are shared.
     let x = x.clamp(1e-4, 0.9999);
     let re_l = g * (1.0 - x) * d / s.mu_l;
-    let pr_l = s.cp_l * s.mu_l / s.k_l;
-    let h_l = nusselt_dittus_boelter(re_l, pr_l) * s.k_l / d;
-    let inv_xtt =
-        (x / (1.0 - x)).powf(0.9) * (s.rho_l / s.rho_v).sqrt() * (s.mu_v / s.mu_l).powf(0.1);
-    let f = (2.35 * (inv_xtt + 0.213).powf(0.736)).max(1.0);
-    let convective = f * h_l;
+    let ln_re = re_l.ln();
+    let ln_nu_l = ln_dittus_boelter_with(ln_re, s.groups.pr_l_04);
+    let inv_xtt = (0.9 * (x / (1.0 - x)).ln()).exp() * s.groups.martinelli;
+    // F = max(1, 2.35 (1/X_tt + 0.213)^0.736), through its logarithm.
+    let ln_f = (2.35f64.ln() + 0.736 * (inv_xtt + 0.213).ln()).max(0.0);
+    // F h_l, h_l = Nu_l k_l / D.
+    let convective = (ln_f + ln_nu_l).exp() * s.k_l / d;
     let nucleate = if dt_sat > 0.0 {
-        let re_tp = re_l * f.powf(1.25);
-        let supp = 1.0 / (1.0 + 2.53e-6 * re_tp.powf(1.17));
-        let group = 0.00122 * s.k_l.powf(0.79) * s.cp_l.powf(0.45) * s.rho_l.powf(0.49)
-            / (s.sigma.sqrt() * s.mu_l.powf(0.29) * s.h_lv().powf(0.24) * s.rho_v.powf(0.24));
-        let dp_sat = dt_sat / s.dt_dp;
-        supp * group * dt_sat.powf(0.24) * dp_sat.powf(0.75)
+        // (Re_l F^1.25)^1.17.
+        let re_tp_117 = (1.17 * (ln_re + 1.25 * ln_f)).exp();
+        let supp = 1.0 / (1.0 + 2.53e-6 * re_tp_117);
+        // ΔT_sat^0.24 Δp_sat^0.75 with Δp_sat = ΔT_sat / (dT_sat/dp).
+        let driving = (0.99 * dt_sat.ln() - 0.75 * s.dt_dp.ln()).exp();
+        supp * s.groups.forster_zuber * driving
     } else {
         0.0
     };

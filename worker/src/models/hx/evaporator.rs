@@ -8,7 +8,9 @@
 use std::cell::Cell;
 
 use super::boundary::{Inputs, Ramps};
-use super::correlations::{chen, colburn_j, fin_efficiency, louver_group, nusselt_gnielinski, Air};
+use super::correlations::{
+    chen, colburn_j, fin_efficiency, louver_group, nusselt_gnielinski, nusselt_gnielinski_with, Air,
+};
 use super::geometry::Geometry;
 use super::pressure_drop;
 use super::refrigerant::{self, saturation, vapour};
@@ -107,6 +109,9 @@ pub struct Evaporator {
     rho0: f64,
     /// Set when a march leaves the property tables.
     out_of_range: Cell<bool>,
+    /// The last air side computed, with its air inlet temperature and mass flow: the air
+    /// inputs only move during their own ramps.
+    air_cache: Cell<Option<(f64, f64, AirSide)>>,
 }
 
 /// Quality of dry-out inception: above it the boiling coefficient falls linearly to the
@@ -118,7 +123,11 @@ const PRESSURE_TOL: f64 = 1e-10;
 const PRESSURE_ITER: usize = 60;
 
 fn specific_volume(p: f64, h: f64) -> f64 {
-    let s = saturation(p);
+    specific_volume_at(&saturation(p), p, h)
+}
+
+/// [`specific_volume`] given the saturation state at `p`.
+fn specific_volume_at(s: &refrigerant::Saturation, p: f64, h: f64) -> f64 {
     if h < s.h_v {
         let x = s.quality(h).clamp(0.0, 1.0);
         x / s.rho_v + (1.0 - x) / s.rho_l
@@ -151,6 +160,7 @@ impl Evaporator {
             ),
             rho0: 1.0 / specific_volume(nom.p0, nom.h0),
             out_of_range: Cell::new(false),
+            air_cache: Cell::new(None),
         }
     }
 
@@ -164,6 +174,17 @@ impl Evaporator {
 
     /// ε-NTU of the finned air side against a wall at uniform temperature, per segment.
     pub fn air_side(&self, inp: &Inputs) -> AirSide {
+        if let Some((t, m, air)) = self.air_cache.get() {
+            if t == inp.t_air_in && m == inp.mdot_air {
+                return air;
+            }
+        }
+        let air = self.compute_air_side(inp);
+        self.air_cache.set(Some((inp.t_air_in, inp.mdot_air, air)));
+        air
+    }
+
+    fn compute_air_side(&self, inp: &Inputs) -> AirSide {
         let g = &self.settings.geometry;
         let air = Air::at(inp.t_air_in);
         let a_min = g.air_min_flow_area();
@@ -197,13 +218,17 @@ impl Evaporator {
             let x_in = s.quality(h);
             let dt = tw - s.t;
             let c = chen(&s, x_in, g, d, dt);
-            let pr_v = s.cp_v * s.mu_v / s.k_v;
-            let alpha_v = st.cf_ref_ht * nusselt_gnielinski(g * d / s.mu_v, pr_v) * s.k_v / d;
+            // Saturated-vapour coefficient, needed in the dry-out region only.
+            let alpha_v = || {
+                let pr_v = s.cp_v * s.mu_v / s.k_v;
+                let nu = nusselt_gnielinski_with(g * d / s.mu_v, pr_v, s.groups.pr_v_23);
+                st.cf_ref_ht * nu * s.k_v / d
+            };
             let mut alpha = st.cf_ref_ht * (c.convective + c.nucleate);
             if x_in > X_DRYOUT {
                 // Dry-out region: linear in quality down to the vapour value at x = 1.
                 let w = (1.0 - x_in) / (1.0 - X_DRYOUT);
-                alpha = w * alpha + (1.0 - w) * alpha_v;
+                alpha = w * alpha + (1.0 - w) * alpha_v();
             }
             let q_full = alpha * a * dt;
             let to_dew = mdot * (s.h_v - h);
@@ -225,7 +250,7 @@ impl Evaporator {
                 // `f` of the area, superheating the vapour on the rest.
                 let f = to_dew / q_full;
                 let c_ref = mdot * s.cp_v;
-                let q_v = c_ref * (tw - s.t) * (1.0 - (-alpha_v * a * (1.0 - f) / c_ref).exp());
+                let q_v = c_ref * (tw - s.t) * (1.0 - (-alpha_v() * a * (1.0 - f) / c_ref).exp());
                 let h_out = s.h_v + q_v / mdot;
                 let dp = if high {
                     let v_in = 1.0 / s.homogeneous_density(x_in);
@@ -257,7 +282,7 @@ impl Evaporator {
         let v_mid = if high {
             0.0
         } else {
-            specific_volume(p, 0.5 * (h + h_out))
+            specific_volume_at(&s, p, 0.5 * (h + h_out))
         };
         Segment {
             q_ref,

@@ -77,7 +77,25 @@
 //! given inlet pressure, each segment's wall balance is a scalar equation in `T_w,i`
 //! (strictly decreasing), solved in flow order by regula falsi; a secant iteration on the
 //! inlet pressure meets the outlet condition (to 10⁻¹⁰ of the pressure drop). Outputs are
-//! therefore flat until the first ramp.
+//! therefore flat until the first ramp, and the integration starts there.
+//!
+//! **Cost** (300 s at rtol 10⁻⁸, release build, `examples/hx_timing.rs`): measured at
+//! first 150 ms for `hx_highfi` and 16 ms for `hx_lowfi`, two thirds of it in `powf` inside
+//! the correlations. The pressure-only property groups now come interpolated from the
+//! saturation table ([`refrigerant::Groups`]), the remaining powers are exponentials of
+//! shared logarithms, the air side is recomputed only when the air inputs move, and the
+//! flat first minute is not integrated: 141 → 66 ms and 15 → 4.8 ms (best medians, old
+//! and new binaries run in turn on the same machine), with 6 374 and 4 898 evaluations of
+//! the right-hand side (1 001 and 802 steps). What is left is the step count, and it is set
+//! by accuracy, not stability: with the same solver the ramps take 857 steps at rtol 10⁻⁸
+//! against 432 at 10⁻⁶ (the flat stretches take stability-limited steps of ~0.45 s). A
+//! Rosenbrock method with error control (RODAS4, Hairer & Wanner 1996) was measured: on
+//! `hx_lowfi` it needs 445 steps instead of 802 but 14 evaluations per step (the
+//! Jacobian by differences), so it is no faster at equal tolerance, and on `hx_highfi` it
+//! fails (tens of thousands of rejected steps): around the dry-out segment the
+//! right-hand side bends within a few millikelvin of wall temperature (a 1 mK step
+//! changes its slope by 14 %), so the linearly implicit stages are wrong at any useful
+//! step, where the explicit method only sees a kink in time.
 //!
 //! # Boundary conditions
 //!
@@ -427,7 +445,7 @@ impl HxModel {
         Self {
             info: ModelInfo {
                 name: name.into(),
-                version: 1,
+                version: 3,
                 description: description.into(),
                 parameters,
                 outputs,
@@ -488,10 +506,12 @@ impl HxModel {
 /// Time constant (s) of the inlet-pressure lag; see the module documentation.
 pub const PRESSURE_LAG: f64 = 1.0;
 
-/// The ODE: wall temperatures of the segments, then the inlet pressure.
+/// The ODE: wall temperatures of the segments, then the inlet pressure. Its clock starts
+/// at `t0` of the simulation's.
 struct Dynamics<'a> {
     evap: &'a Evaporator,
     inv_capacity: f64,
+    t0: f64,
 }
 
 impl HybridSystem for Dynamics<'_> {
@@ -501,7 +521,7 @@ impl HybridSystem for Dynamics<'_> {
 
     fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
         let n = self.evap.segments();
-        let (_, _, _, r) = self.evap.evaluate(t, &y[..n], y[n], &mut dy[..n]);
+        let (_, _, _, r) = self.evap.evaluate(self.t0 + t, &y[..n], y[n], &mut dy[..n]);
         for v in dy[..n].iter_mut() {
             *v *= self.inv_capacity;
         }
@@ -550,19 +570,31 @@ impl Model for HxModel {
                 "no steady state at the initial inputs inside the property tables".into(),
             ));
         }
+        // The inputs hold their start values until the first ramp and `y0` is the steady
+        // state there, so the exact solution is `y0` up to then: the integration starts at
+        // the first ramp.
+        let t0 = boundary::FIRST_RAMP;
         let mut system = Dynamics {
             evap: &evap,
             inv_capacity: 1.0 / evap.segment_capacity(),
+            t0,
         };
         let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
         let mut scratch = vec![0.0; evap.segments()];
-        let mut record = |i: usize, y: &[f64]| {
-            let all = outputs_at(&evap, grid[i], y, &mut scratch);
+        let mut record = |t: f64, y: &[f64]| {
+            let all = outputs_at(&evap, t, y, &mut scratch);
             for (v, &o) in values.iter_mut().zip(outputs) {
                 v.push(all[o]);
             }
         };
-        let stats = integrate(&mut system, &y0, grid, options, &mut record)?;
+        let flat = grid.partition_point(|&t| t <= t0);
+        for &t in &grid[..flat] {
+            record(t, &y0);
+        }
+        let rest: Vec<f64> = grid[flat..].iter().map(|t| t - t0).collect();
+        let stats = integrate(&mut system, &y0, &rest, options, |i, y| {
+            record(grid[flat + i], y)
+        })?;
         if evap.out_of_range() {
             return Err(SimulationError::Diverged {
                 time: grid.last().copied().unwrap_or(0.0),

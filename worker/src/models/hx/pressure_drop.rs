@@ -20,11 +20,22 @@ const G_ACC: f64 = 9.81;
 
 /// Fanning friction factor used inside Friedel's correlation:
 /// `16/Re` below Re = 1055, `0.079 Re^−0.25` above (Friedel's own choice).
+#[cfg(test)]
 fn fanning_friedel(re: f64) -> f64 {
     if re < 1055.0 {
         16.0 / re.max(1e-9)
     } else {
         0.079 * re.powf(-0.25)
+    }
+}
+
+/// [`fanning_friedel`] at `Re = gd/μ`, given `(gd)^0.25` and `μ^0.25`.
+fn fanning_friedel_with(gd: f64, gd_025: f64, mu: f64, mu_025: f64) -> f64 {
+    let re = gd / mu;
+    if re < 1055.0 {
+        16.0 / re.max(1e-9)
+    } else {
+        0.079 * mu_025 / gd_025
     }
 }
 
@@ -34,32 +45,44 @@ fn fanning_friedel(re: f64) -> f64 {
 /// `E = (1−x)² + x² ρ_l f_vo / (ρ_v f_lo)`, `F = x^0.78 (1−x)^0.224`,
 /// `H = (ρ_l/ρ_v)^0.91 (μ_v/μ_l)^0.19 (1 − μ_v/μ_l)^0.7`,
 /// `Fr = G²/(g D ρ_h²)`, `We = G² D/(σ ρ_h)`, `ρ_h` the homogeneous density.
+/// `H` and the viscosity powers come precomputed with the saturation state.
 pub fn friedel_multiplier(s: &Saturation, x: f64, g: f64, d: f64) -> f64 {
+    let gd = g * d;
+    let gd_025 = gd.sqrt().sqrt();
+    let f_lo = fanning_friedel_with(gd, gd_025, s.mu_l, s.groups.mu_l_025);
+    multiplier(s, x, g, d, f_lo, gd_025)
+}
+
+fn multiplier(s: &Saturation, x: f64, g: f64, d: f64, f_lo: f64, gd_025: f64) -> f64 {
     let x = x.clamp(0.0, 1.0);
-    let f_lo = fanning_friedel(g * d / s.mu_l);
-    let f_vo = fanning_friedel(g * d / s.mu_v);
+    let f_vo = fanning_friedel_with(g * d, gd_025, s.mu_v, s.groups.mu_v_025);
     let e = (1.0 - x).powi(2) + x * x * s.rho_l * f_vo / (s.rho_v * f_lo);
-    let f = x.powf(0.78) * (1.0 - x).powf(0.224);
-    let h = (s.rho_l / s.rho_v).powf(0.91)
-        * (s.mu_v / s.mu_l).powf(0.19)
-        * (1.0 - s.mu_v / s.mu_l).powf(0.7);
+    if x <= 0.0 || x >= 1.0 {
+        // F = x^0.78 (1−x)^0.224 vanishes.
+        return e;
+    }
     let rho_h = s.homogeneous_density(x);
     let fr = g * g / (G_ACC * d * rho_h * rho_h);
     let we = g * g * d / (s.sigma * rho_h);
-    e + 3.24 * f * h / (fr.powf(0.045) * we.powf(0.035))
+    // F / (Fr^0.045 We^0.035), as one exponential of logarithms.
+    let ratio = (0.78 * x.ln() + 0.224 * (1.0 - x).ln() - 0.045 * fr.ln() - 0.035 * we.ln()).exp();
+    e + 3.24 * s.groups.friedel_h * ratio
 }
 
 /// Two-phase frictional pressure drop (Pa) over length `len` at mean quality `x`:
 /// `Δp = Φ_lo² · 2 f_lo G² L / (D ρ_l)`.
 pub fn friedel(s: &Saturation, x: f64, g: f64, d: f64, len: f64) -> f64 {
-    let f_lo = fanning_friedel(g * d / s.mu_l);
-    friedel_multiplier(s, x, g, d) * 2.0 * f_lo * g * g * len / (d * s.rho_l)
+    let gd = g * d;
+    let gd_025 = gd.sqrt().sqrt();
+    let f_lo = fanning_friedel_with(gd, gd_025, s.mu_l, s.groups.mu_l_025);
+    multiplier(s, x, g, d, f_lo, gd_025) * 2.0 * f_lo * g * g * len / (d * s.rho_l)
 }
 
 /// Churchill (1977) Fanning friction factor of a smooth channel, all regimes.
 pub fn fanning_churchill(re: f64) -> f64 {
     let re = re.max(1e-6);
-    let a = (2.457 * (1.0 / ((7.0 / re).powf(0.9))).ln()).powi(16);
+    // ln(1/(7/Re)^0.9) = 0.9 ln(Re/7).
+    let a = (2.457 * 0.9 * (re / 7.0).ln()).powi(16);
     let b = (37_530.0 / re).powi(16);
     2.0 * ((8.0 / re).powi(12) + (a + b).powf(-1.5)).powf(1.0 / 12.0)
 }

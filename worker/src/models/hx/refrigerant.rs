@@ -25,6 +25,10 @@ const VAPOUR_CSV: &str = include_str!("../../../data/r134a_vapour.csv");
 
 /// Number of tabulated saturation quantities (all columns but `p`).
 const SAT_COLS: usize = 12;
+/// Number of property groups derived from each saturation row (see [`Groups`]).
+const GROUP_COLS: usize = 7;
+/// Columns of the interpolated saturation rows: the quantities, then the groups.
+const ROW_COLS: usize = SAT_COLS + GROUP_COLS;
 /// Number of tabulated vapour quantities.
 const VAP_COLS: usize = 5;
 
@@ -47,6 +51,48 @@ pub struct Saturation {
     pub cp_l: f64,
     pub cp_v: f64,
     pub sigma: f64,
+    /// Property groups of the correlations, see [`Groups`].
+    pub groups: Groups,
+}
+
+/// Products of powers of saturation properties that the correlations need at every
+/// segment. They depend on the pressure alone, so they are evaluated once per table row
+/// when the table is loaded and interpolated like the properties themselves (the
+/// interpolation error of these smooth groups is of the order of 10⁻⁹), which spares the
+/// march about twenty `powf` calls per two-phase segment.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Groups {
+    /// Forster–Zuber property group
+    /// `0.00122 k_l^0.79 c_pl^0.45 ρ_l^0.49 / (σ^0.5 μ_l^0.29 h_lv^0.24 ρ_v^0.24)`.
+    pub forster_zuber: f64,
+    /// Property part of Chen's `1/X_tt`: `(ρ_l/ρ_v)^0.5 (μ_v/μ_l)^0.1`.
+    pub martinelli: f64,
+    /// `Pr_l^0.4`.
+    pub pr_l_04: f64,
+    /// `Pr_v^(2/3)` of the saturated vapour.
+    pub pr_v_23: f64,
+    /// Friedel's `H = (ρ_l/ρ_v)^0.91 (μ_v/μ_l)^0.19 (1 − μ_v/μ_l)^0.7`.
+    pub friedel_h: f64,
+    /// `μ_l^0.25` and `μ_v^0.25` (Friedel's turbulent Fanning factors).
+    pub mu_l_025: f64,
+    pub mu_v_025: f64,
+}
+
+impl Groups {
+    /// The groups of one row of saturation quantities (table column order).
+    fn of(r: &[f64; SAT_COLS]) -> [f64; GROUP_COLS] {
+        let [_, rho_l, rho_v, h_l, h_v, mu_l, mu_v, k_l, k_v, cp_l, cp_v, sigma] = *r;
+        [
+            0.00122 * k_l.powf(0.79) * cp_l.powf(0.45) * rho_l.powf(0.49)
+                / (sigma.sqrt() * mu_l.powf(0.29) * (h_v - h_l).powf(0.24) * rho_v.powf(0.24)),
+            (rho_l / rho_v).sqrt() * (mu_v / mu_l).powf(0.1),
+            (cp_l * mu_l / k_l).powf(0.4),
+            (cp_v * mu_v / k_v).powf(2.0 / 3.0),
+            (rho_l / rho_v).powf(0.91) * (mu_v / mu_l).powf(0.19) * (1.0 - mu_v / mu_l).powf(0.7),
+            mu_l.powf(0.25),
+            mu_v.powf(0.25),
+        ]
+    }
 }
 
 impl Saturation {
@@ -88,8 +134,12 @@ struct Tables {
     /// ln p of the first node and node spacing, saturation grid.
     s0: f64,
     ds: f64,
-    /// Saturation rows with one ghost row at each end (linear extrapolation).
-    sat: Vec<[f64; SAT_COLS]>,
+    /// Saturation rows (quantities, then their groups) with one ghost row at each end
+    /// (linear extrapolation).
+    sat: Vec<[f64; ROW_COLS]>,
+    /// Pressure range of the saturation table.
+    sat_p_min: f64,
+    sat_p_max: f64,
     /// ln p grid of the vapour table.
     vs0: f64,
     vds: f64,
@@ -132,7 +182,15 @@ fn tables() -> &'static Tables {
         {
             let r: [f64; SAT_COLS + 1] = parse_row(line, 0);
             p.push(r[0]);
-            rows.push(std::array::from_fn::<f64, SAT_COLS, _>(|i| r[i + 1]));
+            let q: [f64; SAT_COLS] = std::array::from_fn(|i| r[i + 1]);
+            let g = Groups::of(&q);
+            rows.push(std::array::from_fn::<f64, ROW_COLS, _>(|i| {
+                if i < SAT_COLS {
+                    q[i]
+                } else {
+                    g[i - SAT_COLS]
+                }
+            }));
         }
         let n = rows.len();
         let s0 = p[0].ln();
@@ -172,6 +230,8 @@ fn tables() -> &'static Tables {
             s0,
             ds,
             sat,
+            sat_p_min: p[0],
+            sat_p_max: p[n - 1],
             vs0,
             vds: (vp_max.ln() - vs0) / (np - 1) as f64,
             du: u_max / (nu - 1) as f64,
@@ -210,7 +270,8 @@ fn weights(t: f64) -> ([f64; 4], [f64; 4]) {
 #[inline]
 fn locate(x: f64, x0: f64, dx: f64, nodes: usize) -> (usize, f64) {
     let f = ((x - x0) / dx).clamp(0.0, (nodes - 1) as f64);
-    let i = (f.floor() as usize).min(nodes - 2);
+    // `f ≥ 0`, so truncation is the floor.
+    let i = (f as usize).min(nodes - 2);
     (i, f - i as f64)
 }
 
@@ -233,16 +294,16 @@ pub fn saturation(p: f64) -> Saturation {
     let s = p.max(1.0).ln();
     let (i, t) = locate(s, tb.s0, tb.ds, n);
     let (w, dw) = weights(t);
-    let mut v = [0.0; SAT_COLS];
+    let mut v = [0.0; ROW_COLS];
     let mut dt = 0.0;
     for k in 0..4 {
         let row = &tb.sat[i + k];
-        for c in 0..SAT_COLS {
+        for c in 0..ROW_COLS {
             v[c] += w[k] * row[c];
         }
         dt += dw[k] * row[0];
     }
-    let p_eff = (tb.s0 + (i as f64 + t) * tb.ds).exp();
+    let p_eff = p.clamp(tb.sat_p_min, tb.sat_p_max);
     Saturation {
         p: p_eff,
         t: v[0],
@@ -259,6 +320,15 @@ pub fn saturation(p: f64) -> Saturation {
         cp_l: v[9],
         cp_v: v[10],
         sigma: v[11],
+        groups: Groups {
+            forster_zuber: v[12],
+            martinelli: v[13],
+            pr_l_04: v[14],
+            pr_v_23: v[15],
+            friedel_h: v[16],
+            mu_l_025: v[17],
+            mu_v_025: v[18],
+        },
     }
 }
 
