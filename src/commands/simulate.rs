@@ -1,5 +1,7 @@
 use super::{Failure, Outcome};
 use calib_worker::{models, SolverOptions};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -22,6 +24,13 @@ pub struct Args {
     /// Relative tolerance of the ODE solver.
     #[arg(long, default_value_t = SolverOptions::default().rtol)]
     rtol: f64,
+    /// Add white Gaussian noise to an output: NAME=SIGMA in the output's unit (repeatable),
+    /// to make a synthetic record.
+    #[arg(long = "noise", value_name = "NAME=SIGMA")]
+    noise: Vec<String>,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
     /// CSV file to write (default: standard output).
     #[arg(long)]
     out: Option<PathBuf>,
@@ -108,9 +117,40 @@ pub fn run(args: Args) -> Outcome {
         atol: args.rtol * 1e-2,
         ..SolverOptions::default()
     };
-    let trajectory = model
+    let mut noise = vec![0.0; outputs.len()];
+    for assignment in &args.noise {
+        let Some((name, sigma)) = assignment.split_once('=') else {
+            return Err(Failure::input(format!("--noise {assignment}: expected NAME=SIGMA")));
+        };
+        let Some(k) = outputs.iter().position(|&o| info.outputs[o].name == name.trim()) else {
+            return Err(Failure::input(format!(
+                "--noise {assignment}: `{name}` is not among the written outputs"
+            )));
+        };
+        match sigma.trim().parse::<f64>() {
+            Ok(s) if s >= 0.0 && s.is_finite() => noise[k] = s,
+            _ => {
+                return Err(Failure::input(format!(
+                    "--noise {assignment}: `{sigma}` is not a standard deviation"
+                )))
+            }
+        }
+    }
+    let mut trajectory = model
         .simulate(&params, &grid, &outputs, &options)
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
+
+    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
+    for (series, sigma) in trajectory.values.iter_mut().zip(&noise) {
+        if *sigma > 0.0 {
+            for v in series.iter_mut() {
+                // Box–Muller.
+                let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+                let u2: f64 = rng.random();
+                *v += sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+            }
+        }
+    }
 
     let sink: Box<dyn Write> = match &args.out {
         Some(path) => Box::new(
