@@ -22,6 +22,9 @@ pub enum Error {
     },
     #[error("optimiser failed: {0}")]
     Optimiser(String),
+    /// The cluster machinery (runtime, server, workers) failed.
+    #[error("dispatch: {0}")]
+    Dispatch(String),
 }
 
 impl Error {

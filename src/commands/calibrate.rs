@@ -1,6 +1,7 @@
 use super::{Failure, Outcome};
 use calib_coordinator::calibration;
 use calib_coordinator::campaign::Campaign;
+use calib_coordinator::dispatch::{self, DispatchConfig, RemoteWorkers};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
 use calib_coordinator::report;
@@ -19,6 +20,8 @@ pub struct Args {
     /// Print result.json to standard output instead of the summary table.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    workers: super::WorkersArgs,
 }
 
 /// A progress bar on standard error, drawn only when it is a terminal.
@@ -54,7 +57,16 @@ pub fn run(args: Args) -> Outcome {
         bar,
         best: Mutex::new(f64::INFINITY),
     };
-    let result = calibration::calibrate(&campaign, LocalEvaluator, &progress);
+    let result = match &args.workers.workers {
+        None => calibration::calibrate(&campaign, LocalEvaluator, &progress),
+        Some(list) => {
+            let addresses =
+                dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
+            let workers =
+                RemoteWorkers::connect(args.workers.apply(DispatchConfig::new(addresses)))?;
+            calibration::calibrate(&campaign, workers.evaluator(), &progress)
+        }
+    };
     progress.bar.finish_and_clear();
     let calibration = result?;
 
