@@ -177,3 +177,33 @@ fn a_dns_name_resolves_to_workers() {
         .collect();
     assert_eq!(up[0].url, format!("http://127.0.0.1:{port}"));
 }
+
+#[test]
+fn an_invalid_request_fails_its_points_and_is_not_retried() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let mut objective =
+        calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let g = objective.model.info().parameter_index("g").unwrap();
+    objective.base[g] = f64::NAN;
+    let cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let evaluations = remote
+        .evaluator()
+        .evaluate(&objective, &[vec![0.01, 0.002], vec![0.011, 0.002]]);
+    for e in &evaluations {
+        let why = e.failure.as_deref().unwrap();
+        assert!(why.contains("rejected by worker"), "{why}");
+        assert!(why.contains("parameters["), "{why}");
+        assert_eq!(e.objective, calib_coordinator::objective::FAILURE_PENALTY);
+    }
+    // Nobody simulated, and no worker was taken out for the client's mistake.
+    assert!(cluster.workers.iter().all(|w| w.simulations() == 0));
+    assert!(remote
+        .pool()
+        .workers()
+        .iter()
+        .all(|w| w.health == Health::Up));
+}

@@ -25,6 +25,10 @@ pub struct Args {
     /// Campaign of the calibration benchmarks.
     #[arg(long, default_value = "examples/furuta_real.toml")]
     campaign: PathBuf,
+    /// Measure dispatch over gRPC instead: overhead per evaluation, scaling with workers,
+    /// and the dispatcher's capacity (workers serve in this process, on loopback).
+    #[arg(long)]
+    cluster: bool,
 }
 
 fn median(mut samples: Vec<Duration>) -> Duration {
@@ -48,6 +52,9 @@ fn ms(d: Duration) -> f64 {
 }
 
 pub fn run(args: Args) -> Outcome {
+    if args.cluster {
+        return super::bench_cluster::run(args.repeat, &args.campaign);
+    }
     let model = models::find("furuta").expect("furuta is hosted");
     let params = model.info().default_vector();
     let grid: Vec<f64> = (0..=4000).map(|i| i as f64 * 0.01).collect();

@@ -62,8 +62,23 @@ pub fn run(args: Args) -> Outcome {
         Some(list) => {
             let addresses =
                 dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
-            let workers =
-                RemoteWorkers::connect(args.workers.apply(DispatchConfig::new(addresses)))?;
+            let config = args.workers.apply(DispatchConfig::new(addresses));
+            let wait = config.wait_for_workers;
+            let workers = RemoteWorkers::connect(config)?;
+            if !workers.wait_until_up(1, wait) {
+                progress.bar.finish_and_clear();
+                let states: Vec<String> = workers
+                    .pool()
+                    .workers()
+                    .iter()
+                    .map(|w| format!("{} ({:?})", w.url, w.health))
+                    .collect();
+                return Err(Failure::internal(format!(
+                    "no worker up after {:.0} s: {}",
+                    wait.as_secs_f64(),
+                    states.join(", ")
+                )));
+            }
             calibration::calibrate(&campaign, workers.evaluator(), &progress)
         }
     };

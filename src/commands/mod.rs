@@ -1,6 +1,7 @@
 //! One module per subcommand: parse nothing, call the library, print.
 
 pub mod bench;
+pub mod bench_cluster;
 pub mod calibrate;
 pub mod coordinator;
 pub mod models;
