@@ -207,3 +207,45 @@ fn an_invalid_request_fails_its_points_and_is_not_retried() {
         .iter()
         .all(|w| w.health == Health::Up));
 }
+
+#[test]
+fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let good = TestWorker::start(1, 64);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (hanging_url, hanging) = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let url = format!("http://{}", listener.local_addr().unwrap());
+        let napper =
+            calib_worker::service::napping::serve_napping(listener, Duration::from_secs(3600), 1)
+                .await;
+        (url, napper)
+    });
+    let mut config = DispatchConfig::new(vec![
+        WorkerAddress::Url(good.url()),
+        WorkerAddress::Url(hanging_url),
+    ]);
+    config.probe_interval = Duration::from_millis(100);
+    config.deadline = Duration::from_millis(300);
+    let remote = RemoteWorkers::connect(config).unwrap();
+    assert!(remote.wait_until_up(2, Duration::from_secs(10)));
+    let points: Vec<Vec<f64>> = (0..8)
+        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
+        .collect();
+    let expected: Vec<_> = points.iter().map(|p| objective.evaluate(p)).collect();
+    let answered = remote.evaluator().evaluate(&objective, &points);
+    assert_eq!(answered, expected);
+    assert!(
+        hanging.requests() >= 1,
+        "the hanging worker was never tried"
+    );
+    assert_eq!(good.simulations(), 8);
+}

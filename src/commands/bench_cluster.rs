@@ -6,7 +6,7 @@
 //! - scaling: evaluations per second of a ≥ 5 ms model (`hx_lowfi`) with one and two
 //!   single-slot workers;
 //! - dispatcher capacity: many workers that only sleep, so that what limits the rate is
-//!   the coordinator's dispatch, not the simulations.
+//!   the coordinator's dispatch, not the simulations ([`napping`]).
 
 use super::{Failure, Outcome};
 use calib_coordinator::calibration;
@@ -14,8 +14,7 @@ use calib_coordinator::campaign::Campaign;
 use calib_coordinator::dispatch::{DispatchConfig, RemoteWorkers, WorkerAddress};
 use calib_coordinator::evaluator::{Evaluator, LocalEvaluator};
 use calib_coordinator::objective::Objective;
-use calib_proto::v1 as proto;
-use calib_worker::service::{serve_worker, RunningWorker, WorkerConfig};
+use calib_worker::service::{napping, serve_worker, RunningWorker, WorkerConfig};
 use calib_worker::{models, SolverOptions};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -231,33 +230,40 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
         own[1] / (2.0 * own[0])
     );
 
-    // Dispatcher capacity: workers that only sleep.
+    // Dispatcher capacity: workers that only sleep. The rate of one such worker (its nap
+    // plus the timer's granularity plus one round trip) is the unit of the efficiency.
     let nap = Duration::from_millis(5);
-    for count in [10usize, 100] {
-        let workers = SleepingWorkers::start(count, nap)?;
+    let mut single = 0.0;
+    for count in [1usize, 10, 100] {
+        let workers = NappingWorkers::start(count, nap)?;
         let remote = connect(&workers.urls)?;
         let batch = points(&furuta, 40 * count);
         let took = time_batch(&remote.evaluator(), &furuta, &batch, 3);
         let rate = batch.len() as f64 / took.as_secs_f64();
-        let ideal = count as f64 / nap.as_secs_f64();
-        println!(
-            "dispatch to {count} single-slot workers that sleep {} ms per evaluation: {rate:.0}/s of an ideal {ideal:.0}/s  -> efficiency {:.2}",
-            nap.as_millis(),
-            rate / ideal
-        );
+        if count == 1 {
+            single = rate;
+            println!(
+                "dispatch to single-slot workers that sleep {} ms per evaluation: 1 worker {rate:.0}/s",
+                nap.as_millis()
+            );
+        } else {
+            println!(
+                "  {count} workers {rate:.0}/s  -> efficiency {:.2} of {count} x 1 worker",
+                rate / (count as f64 * single)
+            );
+        }
     }
     Ok(())
 }
 
 /// Workers that answer every evaluation after a nap, simulating nothing.
-struct SleepingWorkers {
+struct NappingWorkers {
     _runtime: tokio::runtime::Runtime,
     urls: Vec<String>,
 }
 
-impl SleepingWorkers {
+impl NappingWorkers {
     fn start(count: usize, nap: Duration) -> Result<Self, Failure> {
-        use proto::simulator_server::SimulatorServer;
         let runtime = super::runtime()?;
         let urls = runtime.block_on(async {
             let mut urls = Vec::new();
@@ -266,16 +272,7 @@ impl SleepingWorkers {
                     .await
                     .map_err(|e| Failure::internal(format!("cannot bind 127.0.0.1:0: {e}")))?;
                 urls.push(format!("http://{}", listener.local_addr().expect("bound")));
-                let (reporter, health) = tonic_health::server::health_reporter();
-                reporter.set_serving::<SimulatorServer<Sleeper>>().await;
-                let incoming =
-                    tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
-                tokio::spawn(
-                    tonic::transport::Server::builder()
-                        .add_service(health)
-                        .add_service(SimulatorServer::new(Sleeper { nap }))
-                        .serve_with_incoming(incoming),
-                );
+                napping::serve_napping(listener, nap, 1).await;
             }
             Ok::<_, Failure>(urls)
         })?;
@@ -283,64 +280,5 @@ impl SleepingWorkers {
             _runtime: runtime,
             urls,
         })
-    }
-}
-
-struct Sleeper {
-    nap: Duration,
-}
-
-#[tonic::async_trait]
-impl proto::simulator_server::Simulator for Sleeper {
-    async fn list_models(
-        &self,
-        _: tonic::Request<proto::ListModelsRequest>,
-    ) -> Result<tonic::Response<proto::ListModelsResponse>, tonic::Status> {
-        Err(tonic::Status::unimplemented("a sleeping worker"))
-    }
-
-    async fn describe(
-        &self,
-        _: tonic::Request<proto::DescribeRequest>,
-    ) -> Result<tonic::Response<proto::DescribeResponse>, tonic::Status> {
-        Err(tonic::Status::unimplemented("a sleeping worker"))
-    }
-
-    async fn simulate(
-        &self,
-        _: tonic::Request<proto::SimulateRequest>,
-    ) -> Result<tonic::Response<proto::SimulateResponse>, tonic::Status> {
-        Err(tonic::Status::unimplemented("a sleeping worker"))
-    }
-
-    async fn evaluate(
-        &self,
-        request: tonic::Request<proto::EvaluateRequest>,
-    ) -> Result<tonic::Response<proto::EvaluateResponse>, tonic::Status> {
-        let request = request.into_inner();
-        tokio::time::sleep(self.nap * request.points.len() as u32).await;
-        let outputs = request.outputs.len();
-        Ok(tonic::Response::new(proto::EvaluateResponse {
-            results: request
-                .points
-                .iter()
-                .map(|_| proto::PointResult {
-                    objective: 1.0,
-                    sse: vec![1.0; outputs],
-                    failure: None,
-                })
-                .collect(),
-        }))
-    }
-
-    async fn status(
-        &self,
-        _: tonic::Request<proto::StatusRequest>,
-    ) -> Result<tonic::Response<proto::StatusResponse>, tonic::Status> {
-        Ok(tonic::Response::new(proto::StatusResponse {
-            protocol_version: calib_proto::PROTOCOL_VERSION,
-            slots: 1,
-            ..Default::default()
-        }))
     }
 }

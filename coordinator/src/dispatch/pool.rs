@@ -45,7 +45,25 @@ struct Worker {
     busy: usize,
     evaluated: u64,
     probing: bool,
+    /// Failures since the worker last answered: each doubles the wait before the next probe,
+    /// so that a worker that passes health checks but fails its work is rarely sent work.
+    failures: u32,
+    next_probe: Instant,
 }
+
+impl Worker {
+    fn failed(&mut self, reason: String, probe_interval: std::time::Duration) {
+        self.failures = self.failures.saturating_add(1);
+        let backoff = probe_interval
+            .saturating_mul(1 << (self.failures - 1).min(8))
+            .min(MAX_BACKOFF);
+        self.next_probe = Instant::now() + backoff;
+        self.health = Health::Down { reason };
+    }
+}
+
+/// Longest wait between two probes of a failing worker.
+const MAX_BACKOFF: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// A worker as reported by [`WorkerPool::workers`].
 #[derive(Debug, Clone, PartialEq)]
@@ -119,6 +137,8 @@ impl WorkerPool {
             busy: 0,
             evaluated: 0,
             probing: false,
+            failures: 0,
+            next_probe: Instant::now(),
         });
         drop(state);
         self.probe_soon(id);
@@ -214,6 +234,9 @@ impl WorkerPool {
         if let Some(w) = state.workers.iter_mut().find(|w| w.id == lease.worker) {
             w.busy -= lease.points;
             w.evaluated += answered as u64;
+            if answered > 0 {
+                w.failures = 0;
+            }
         }
         drop(state);
         self.changed.notify_waiters();
@@ -227,7 +250,7 @@ impl WorkerPool {
                 tracing::warn!(worker = %w.client.url(), %reason, "worker taken out");
             }
             if !matches!(w.health, Health::Incompatible { .. }) {
-                w.health = Health::Down { reason };
+                w.failed(reason, self.config.probe_interval);
             }
         }
     }
@@ -305,9 +328,7 @@ impl WorkerPool {
                 if w.health == Health::Up {
                     tracing::warn!(worker = %w.client.url(), error = %e, "worker failed its probe");
                 }
-                w.health = Health::Down {
-                    reason: e.to_string(),
-                };
+                w.failed(e.to_string(), self.config.probe_interval);
             }
         }
         drop(state);
@@ -329,7 +350,11 @@ impl WorkerPool {
             state
                 .workers
                 .iter()
-                .filter(|w| matches!(w.health, Health::Joining | Health::Down { .. }))
+                .filter(|w| match w.health {
+                    Health::Joining => true,
+                    Health::Down { .. } => w.next_probe <= now,
+                    _ => false,
+                })
                 .map(|w| w.id)
                 .collect()
         };

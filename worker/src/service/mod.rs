@@ -9,6 +9,7 @@
 
 pub mod cache;
 pub mod error;
+pub mod napping;
 pub mod pool;
 pub mod registration;
 pub mod request;
