@@ -194,7 +194,7 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
 
     // Scaling: single-slot workers, a model of ≥ 5 ms per simulation.
     let hx = hx_objective()?;
-    let batch = points(&hx, 24);
+    let batch = points(&hx, 64);
     let hx_repeat = repeat.div_ceil(7);
     let mut own = Vec::new();
     for threads in 1..=2usize {

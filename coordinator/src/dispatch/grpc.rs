@@ -1,7 +1,8 @@
 //! [`GrpcEvaluator`]: evaluations spread over the pool's workers.
 //!
-//! A batch is cut into chunks sized to each worker's free slots and sent at once; more
-//! points than free slots wait for the first chunk to come back. A chunk whose worker fails
+//! A batch is cut into chunks of at most one point per slot of a worker, up to two chunks
+//! per worker at once (one running, one waiting in the worker's queue, so that no slot idles
+//! while an answer travels back); more points than that wait for the first chunk to return. A chunk whose worker fails
 //! (unreachable, crashed, timed out, busy) goes back into the batch to be retried on another
 //! worker, and the worker is probed back in later; a chunk the worker rejects as invalid is
 //! never retried: its points fail with the worker's reason.

@@ -26,6 +26,9 @@ pub struct DispatchConfig {
     pub workers: Vec<WorkerAddress>,
     /// Deadline of one request to a worker (one chunk of a batch).
     pub deadline: Duration,
+    /// Chunks in flight per worker, each of at most one point per slot: 2 keeps a worker
+    /// busy while an answer travels back.
+    pub depth: usize,
     /// How often workers that are down or joining are probed.
     pub probe_interval: Duration,
     /// Deadline of one probe.
@@ -45,6 +48,7 @@ impl DispatchConfig {
         Self {
             workers,
             deadline: Duration::from_secs(120),
+            depth: 2,
             probe_interval: Duration::from_secs(1),
             probe_timeout: Duration::from_secs(3),
             resolve_interval: Duration::from_secs(10),

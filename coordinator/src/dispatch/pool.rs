@@ -184,13 +184,15 @@ impl WorkerPool {
             .collect()
     }
 
-    /// Lease up to `wanted` free slots, one point at a time round the workers that are up.
+    /// Lease up to `wanted` points of capacity, one point at a time round the workers that are
+    /// up; a worker takes up to `depth` chunks of `slots` points at once.
     pub fn acquire(&self, wanted: usize) -> Vec<Lease> {
         let mut state = self.state.lock().expect("pool lock");
         let n = state.workers.len();
         if n == 0 || wanted == 0 {
             return Vec::new();
         }
+        let depth = self.config.depth.max(1);
         let start = state.cursor % n;
         state.cursor = state.cursor.wrapping_add(1);
         let mut granted = vec![0usize; n];
@@ -200,7 +202,7 @@ impl WorkerPool {
             for k in 0..n {
                 let i = (start + k) % n;
                 let w = &state.workers[i];
-                if w.health == Health::Up && w.busy + granted[i] < w.slots {
+                if w.health == Health::Up && w.busy + granted[i] < w.slots * depth {
                     granted[i] += 1;
                     remaining -= 1;
                     gave = true;
@@ -213,15 +215,20 @@ impl WorkerPool {
                 break;
             }
         }
+        // Chunks of at most one point per slot: the worker runs one while the next waits in
+        // its queue, so no slot idles while an answer travels back.
         let mut leases = Vec::new();
         for (i, &points) in granted.iter().enumerate() {
-            if points > 0 {
-                let w = &mut state.workers[i];
-                w.busy += points;
+            let w = &mut state.workers[i];
+            w.busy += points;
+            let mut left = points;
+            while left > 0 {
+                let chunk = left.min(w.slots);
+                left -= chunk;
                 leases.push(Lease {
                     worker: w.id,
                     client: w.client.clone(),
-                    points,
+                    points: chunk,
                 });
             }
         }
