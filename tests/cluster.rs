@@ -249,3 +249,22 @@ fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
     );
     assert_eq!(good.simulations(), 8);
 }
+
+#[test]
+fn the_test_cluster_binds_distinct_ports_and_kill_closes_one() {
+    let mut cluster = TestCluster::start(3, 1);
+    let mut ports: Vec<u16> = cluster.workers.iter().map(|w| w.address().port()).collect();
+    ports.sort_unstable();
+    ports.dedup();
+    assert_eq!(ports.len(), 3);
+    let address = cluster.workers[1].address();
+    assert!(std::net::TcpStream::connect(address).is_ok());
+    cluster.workers[1].kill();
+    assert!(!cluster.workers[1].is_alive());
+    await_condition(
+        "the killed worker's port to close",
+        Duration::from_secs(5),
+        || std::net::TcpStream::connect(address).is_err(),
+    );
+    assert!(std::net::TcpStream::connect(cluster.workers[0].address()).is_ok());
+}
