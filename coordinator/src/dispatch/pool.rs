@@ -23,6 +23,17 @@ pub enum Origin {
     Registered { expires: Instant },
 }
 
+impl Origin {
+    /// A word for logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Origin::Static => "static",
+            Origin::Dns(_) => "dns",
+            Origin::Registered { .. } => "registered",
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Health {
     Joining,
@@ -127,7 +138,7 @@ impl WorkerPool {
         let client = WorkerClient::new(url)?;
         let id = state.next_id;
         state.next_id += 1;
-        tracing::info!(worker = %url, ?origin, "worker added");
+        tracing::info!(worker = %url, origin = origin.kind(), "worker added");
         state.workers.push(Worker {
             id,
             client,
