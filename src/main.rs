@@ -31,11 +31,15 @@ enum Command {
     Models(commands::models::Args),
     /// Simulate a model and write its outputs over time as CSV.
     Simulate(commands::simulate::Args),
-    /// Run a calibration campaign in this process (all cores, no network).
+    /// Run a calibration campaign: in this process on all cores, or spread over workers.
     Calibrate(commands::calibrate::Args),
     /// Calibrate, then trace what is left to the physical effect the model lacks: rank the
     /// candidate effects, refit the best, and report the error before and after.
     Diagnose(commands::diagnose::Args),
+    /// Serve the hosted models to coordinators (gRPC Simulator, health, reflection).
+    Worker(commands::worker::Args),
+    /// Serve the worker registry and keep a pool of workers (gRPC).
+    Coordinator(commands::coordinator::Args),
     /// Measure simulation and calibration speed and print the figures.
     Bench(commands::bench::Args),
     /// Inspect, export or import an evaluation store (`calib calibrate --db`).
@@ -68,6 +72,8 @@ fn main() -> ExitCode {
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Diagnose(args) => commands::diagnose::run(args),
+        Command::Worker(args) => commands::worker::run(args),
+        Command::Coordinator(args) => commands::coordinator::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Store(args) => commands::store::run(args),
     };

@@ -241,3 +241,90 @@ fn calibrate_writes_the_result_and_plots() {
         assert!(svg.contains("<svg") && svg.contains("calibrated"), "{plot}");
     }
 }
+
+/// A `calib worker` process, killed when dropped.
+struct WorkerProcess {
+    child: std::process::Child,
+    address: String,
+}
+
+impl WorkerProcess {
+    fn start() -> Self {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+            .args(["worker", "--listen", "127.0.0.1:0", "--slots", "1"])
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("start calib worker");
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let address = line
+            .strip_prefix("worker listening on ")
+            .and_then(|rest| rest.split_whitespace().next())
+            .unwrap_or_else(|| panic!("unexpected first line: {line}"))
+            .to_string();
+        Self { child, address }
+    }
+}
+
+impl Drop for WorkerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn calibrate_over_a_worker_process() {
+    let worker = WorkerProcess::start();
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\"]\nmax_evaluations = 40\nseed = 2";
+    let campaign = write(dir.path(), "c.toml", &clean_campaign(search));
+    let out_dir = dir.path().join("out");
+    let workers = format!("http://{}", worker.address);
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "calibrate",
+            campaign.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+            "--json",
+        ];
+        args.extend_from_slice(extra);
+        let out = calib(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json["best"]["objective"].as_f64().unwrap()
+    };
+    let remote = run(&["--workers", &workers]);
+    let local = run(&[]);
+    assert_eq!(remote.to_bits(), local.to_bits());
+}
+
+#[test]
+fn bad_worker_addresses_are_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = write(
+        dir.path(),
+        "c.toml",
+        &clean_campaign("methods = [\"nelder-mead\"]\nmax_evaluations = 50"),
+    );
+    let out = calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--workers",
+        "localhost:50051",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("--workers") && stderr.contains("http://HOST:PORT"),
+        "{stderr}"
+    );
+}

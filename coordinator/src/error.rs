@@ -26,6 +26,9 @@ pub enum Error {
     /// The evaluation store failed (disk, corruption, in use by another process).
     #[error(transparent)]
     Store(#[from] StoreError),
+    /// The cluster machinery (runtime, server, workers) failed.
+    #[error("dispatch: {0}")]
+    Dispatch(String),
 }
 
 impl Error {

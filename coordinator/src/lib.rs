@@ -1,15 +1,18 @@
 //! calib's coordinator: campaigns, their objective, the optimisers that search it, the
-//! evaluators that run it, and the reports that show the result.
+//! evaluators that run it (in this process or on remote workers), the reports that show
+//! the result, and the coordinator's gRPC server.
 
 pub mod calibration;
 pub mod campaign;
 pub mod diagnosis;
+pub mod dispatch;
 pub mod error;
 pub mod evaluator;
 pub mod measurement;
 pub mod objective;
 pub mod optim;
 pub mod report;
+pub mod server;
 pub mod store;
 
 pub use error::{Error, Result};

@@ -7,31 +7,10 @@
 
 use crate::campaign::{Campaign, CampaignError};
 use crate::measurement::Measurement;
+use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
 
-/// Objective value given to parameter sets whose simulation failed: finite, so optimisers
-/// that compare or average costs keep working, and far above any real fit.
-pub const FAILURE_PENALTY: f64 = 1e30;
-
-/// One point's outcome.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Evaluation {
-    pub objective: f64,
-    /// Unweighted sum of squared errors per output, in campaign order.
-    pub sse: Vec<f64>,
-    /// Why the simulation failed, when it did (then `objective` is the penalty).
-    pub failure: Option<String>,
-}
-
-impl Evaluation {
-    pub fn failed(outputs: usize, why: String) -> Self {
-        Self {
-            objective: FAILURE_PENALTY,
-            sse: vec![f64::NAN; outputs],
-            failure: Some(why),
-        }
-    }
-}
+pub use calib_worker::scoring::{Evaluation, FAILURE_PENALTY};
 
 /// Everything needed to score a parameter vector: the model, the fixed parameters, the
 /// measured series on the window's grid and the weights.
@@ -174,12 +153,25 @@ impl Objective {
         full
     }
 
-    /// Simulate at `free_values` and score against the measurement.
-    pub fn evaluate(&self, free_values: &[f64]) -> Evaluation {
-        match self.simulate(free_values) {
-            Err(e) => Evaluation::failed(self.outputs.len(), e.to_string()),
-            Ok(values) => self.score(&values),
+    /// What points are scored against: grid, outputs, measured series, weights, solver.
+    pub fn target(&self) -> Target<'_> {
+        Target {
+            grid: &self.grid,
+            outputs: &self.outputs,
+            measured: &self.measured,
+            weights: &self.weights,
+            solver: &self.solver,
         }
+    }
+
+    /// Simulate at `free_values` and score against the measurement (the same computation a
+    /// remote worker makes, bit for bit).
+    pub fn evaluate(&self, free_values: &[f64]) -> Evaluation {
+        scoring::evaluate(
+            self.model,
+            &self.full_parameters(free_values),
+            &self.target(),
+        )
     }
 
     /// The mapped outputs on the grid at `free_values` (one series per output).
@@ -192,20 +184,6 @@ impl Objective {
 
     /// Score simulated series (one per output, on the grid).
     pub fn score(&self, simulated: &[Vec<f64>]) -> Evaluation {
-        let sse: Vec<f64> = simulated
-            .iter()
-            .zip(&self.measured)
-            .map(|(y, w)| y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum())
-            .collect();
-        let objective: f64 = sse.iter().zip(&self.weights).map(|(s, k)| s * k).sum();
-        if objective.is_finite() {
-            Evaluation {
-                objective,
-                sse,
-                failure: None,
-            }
-        } else {
-            Evaluation::failed(self.outputs.len(), "simulated output is not finite".into())
-        }
+        scoring::score(simulated, &self.measured, &self.weights)
     }
 }

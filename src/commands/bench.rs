@@ -32,6 +32,10 @@ pub struct Args {
     /// Campaign of the calibration benchmarks.
     #[arg(long, default_value = "examples/furuta_real.toml")]
     campaign: PathBuf,
+    /// Measure dispatch over gRPC instead: overhead per evaluation, scaling with workers,
+    /// and the dispatcher's capacity (workers serve in this process, on loopback).
+    #[arg(long)]
+    cluster: bool,
     #[command(subcommand)]
     suite: Option<Suite>,
 }
@@ -66,6 +70,9 @@ fn ms(d: Duration) -> f64 {
 }
 
 pub fn run(args: Args) -> Outcome {
+    if args.cluster {
+        return super::bench_cluster::run(args.repeat, &args.campaign);
+    }
     match args.suite {
         Some(Suite::Store(store)) => return super::bench_store::run(store),
         Some(Suite::Diagnose(diagnose)) => return super::bench_diagnose::run(diagnose),

@@ -1,6 +1,7 @@
 use super::{Failure, Outcome};
 use calib_coordinator::calibration;
 use calib_coordinator::campaign::Campaign;
+use calib_coordinator::dispatch::{self, DispatchConfig, RemoteWorkers};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
 use calib_coordinator::report;
@@ -21,6 +22,8 @@ pub struct Args {
     /// Print result.json to standard output instead of the summary table.
     #[arg(long)]
     json: bool,
+    #[command(flatten)]
+    workers: super::WorkersArgs,
     /// Evaluation store (a folder, created when absent): every simulated point is kept
     /// there, so an interrupted campaign resumes where it stopped and a repeated one
     /// simulates nothing [default: results/.calib-db beside the campaign file].
@@ -86,17 +89,15 @@ pub fn run(args: Args) -> Outcome {
         .clone()
         .unwrap_or_else(|| default_db(&args.campaign));
     let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
-    if std::env::var(PROGRESS_ENV).is_ok_and(|v| v == "lines") {
-        let progress = Lines {
-            state: Mutex::new((0, f64::INFINITY, None)),
-        };
-        let calibration =
-            calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, &progress)?;
-        return report_result(&args, &campaign, &calibration);
-    }
+    let lines = std::env::var(PROGRESS_ENV).is_ok_and(|v| v == "lines");
     let runs = campaign.search.methods.len() * campaign.search.starts;
     let budget = (runs * campaign.search.max_evaluations + 1) as u64;
-    let bar = ProgressBar::with_draw_target(Some(budget), ProgressDrawTarget::stderr());
+    let target = if lines {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    };
+    let bar = ProgressBar::with_draw_target(Some(budget), target);
     bar.set_style(
         ProgressStyle::with_template(
             "{spinner} {elapsed_precise} [{bar:30}] {pos}/{len} evaluations (budget) {msg}",
@@ -104,12 +105,40 @@ pub fn run(args: Args) -> Outcome {
         .expect("valid template")
         .progress_chars("=> "),
     );
-    let progress = Bar {
+    let bar = Bar {
         bar,
         best: Mutex::new(f64::INFINITY),
     };
-    let result = calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, &progress);
-    progress.bar.finish_and_clear();
+    let line_progress = Lines {
+        state: Mutex::new((0, f64::INFINITY, None)),
+    };
+    let progress: &dyn Progress = if lines { &line_progress } else { &bar };
+    let result = match &args.workers.workers {
+        None => calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, progress),
+        Some(list) => {
+            let addresses =
+                dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
+            let config = args.workers.apply(DispatchConfig::new(addresses));
+            let wait = config.wait_for_workers;
+            let workers = RemoteWorkers::connect(config)?;
+            if !workers.wait_until_up(1, wait) {
+                bar.bar.finish_and_clear();
+                let states: Vec<String> = workers
+                    .pool()
+                    .workers()
+                    .iter()
+                    .map(|w| format!("{} ({:?})", w.url, w.health))
+                    .collect();
+                return Err(Failure::internal(format!(
+                    "no worker up after {:.0} s: {}",
+                    wait.as_secs_f64(),
+                    states.join(", ")
+                )));
+            }
+            calibration::calibrate_with_store(&campaign, workers.evaluator(), &store, progress)
+        }
+    };
+    bar.bar.finish_and_clear();
     report_result(&args, &campaign, &result?)
 }
 

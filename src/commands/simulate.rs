@@ -120,9 +120,14 @@ pub fn run(args: Args) -> Outcome {
     let mut noise = vec![0.0; outputs.len()];
     for assignment in &args.noise {
         let Some((name, sigma)) = assignment.split_once('=') else {
-            return Err(Failure::input(format!("--noise {assignment}: expected NAME=SIGMA")));
+            return Err(Failure::input(format!(
+                "--noise {assignment}: expected NAME=SIGMA"
+            )));
         };
-        let Some(k) = outputs.iter().position(|&o| info.outputs[o].name == name.trim()) else {
+        let Some(k) = outputs
+            .iter()
+            .position(|&o| info.outputs[o].name == name.trim())
+        else {
             return Err(Failure::input(format!(
                 "--noise {assignment}: `{name}` is not among the written outputs"
             )));

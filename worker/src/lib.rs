@@ -1,12 +1,15 @@
-//! calib's worker side: the hosted models and the ODE solver they run on.
+//! calib's worker side: the hosted models, the ODE solver they run on, the scoring of a
+//! simulation against measured data, and the gRPC Simulator service that serves them.
 //!
 //! The worker is stateless: it simulates a model for a parameter vector and returns
-//! trajectories (or, later, objective values against a cached measurement).
+//! trajectories, or objective values against a measurement it caches by content hash.
 
 pub mod effects;
 pub mod model;
 pub mod models;
 pub mod ode;
+pub mod scoring;
+pub mod service;
 
 pub use model::{
     EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,

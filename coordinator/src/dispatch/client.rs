@@ -1,0 +1,195 @@
+//! One worker as the dispatcher sees it: prost types stop here.
+
+use super::error::WorkerError;
+use crate::objective::{Evaluation, Objective};
+use calib_proto::v1 as proto;
+use calib_proto::v1::simulator_client::SimulatorClient;
+use calib_worker::scoring;
+use calib_worker::service::limits::MAX_MESSAGE_BYTES;
+use std::time::Duration;
+use tonic::transport::{Channel, Endpoint};
+use tonic_health::pb::health_client::HealthClient;
+
+/// What a probe learns about a worker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WorkerStatus {
+    pub slots: usize,
+}
+
+/// An objective in the form workers take it, built once per objective.
+pub struct WireObjective {
+    /// Everything but the points and the measurement.
+    pub template: proto::EvaluateRequest,
+    pub measurement: proto::Measurement,
+    pub outputs: usize,
+}
+
+impl WireObjective {
+    pub fn new(objective: &Objective) -> Self {
+        let info = objective.model.info();
+        let parameters = objective
+            .base
+            .iter()
+            .enumerate()
+            .map(|(i, &value)| proto::ParameterValue {
+                name: info.name_at(i).to_string(),
+                value,
+            })
+            .collect();
+        let template = proto::EvaluateRequest {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            model: info.name.clone(),
+            parameters,
+            free_parameters: objective
+                .free
+                .iter()
+                .map(|&i| info.name_at(i).to_string())
+                .collect(),
+            outputs: objective
+                .outputs
+                .iter()
+                .zip(&objective.weights)
+                .map(|(&o, &weight)| proto::ComparedOutput {
+                    output: info.outputs[o].name.clone(),
+                    weight,
+                })
+                .collect(),
+            measurement_hash: scoring::measurement_hash(&objective.grid, &objective.measured)
+                .to_vec(),
+            measurement: None,
+            points: Vec::new(),
+            solver: Some(proto::SolverOptions {
+                rtol: objective.solver.rtol,
+                atol: objective.solver.atol,
+                max_steps: objective.solver.max_steps as u64,
+            }),
+        };
+        let measurement = proto::Measurement {
+            times: objective.grid.clone(),
+            columns: objective
+                .measured
+                .iter()
+                .map(|values| proto::Column {
+                    values: values.clone(),
+                })
+                .collect(),
+        };
+        Self {
+            template,
+            measurement,
+            outputs: objective.outputs.len(),
+        }
+    }
+}
+
+#[derive(Clone)]
+pub struct WorkerClient {
+    url: String,
+    simulator: SimulatorClient<Channel>,
+    health: HealthClient<Channel>,
+}
+
+impl WorkerClient {
+    /// A client for the worker at `url`; connects on first use and reconnects as needed.
+    pub fn new(url: &str) -> Result<Self, String> {
+        let channel = Endpoint::from_shared(url.to_string())
+            .map_err(|e| format!("`{url}` is not a worker URL: {e}"))?
+            .connect_timeout(Duration::from_secs(3))
+            .tcp_nodelay(true)
+            .http2_keep_alive_interval(Duration::from_secs(10))
+            .keep_alive_timeout(Duration::from_secs(10))
+            .keep_alive_while_idle(true)
+            .connect_lazy();
+        Ok(Self {
+            url: url.to_string(),
+            simulator: SimulatorClient::new(channel.clone())
+                .max_decoding_message_size(MAX_MESSAGE_BYTES)
+                .max_encoding_message_size(MAX_MESSAGE_BYTES),
+            health: HealthClient::new(channel),
+        })
+    }
+
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// Health check, then the worker's capacity.
+    pub async fn probe(&self, deadline: Duration) -> Result<WorkerStatus, WorkerError> {
+        use tonic_health::pb::health_check_response::ServingStatus;
+        let mut request = tonic::Request::new(tonic_health::pb::HealthCheckRequest {
+            service: "calib.v1.Simulator".into(),
+        });
+        request.set_timeout(deadline);
+        let health = self.health.clone().check(request).await?.into_inner();
+        if health.status != ServingStatus::Serving as i32 {
+            return Err(WorkerError::Unavailable("not serving".into()));
+        }
+        let mut request = tonic::Request::new(proto::StatusRequest {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+        });
+        request.set_timeout(deadline);
+        let status = self.simulator.clone().status(request).await?.into_inner();
+        if status.protocol_version != calib_proto::PROTOCOL_VERSION {
+            return Err(WorkerError::Incompatible(format!(
+                "worker speaks protocol {}, this coordinator {}",
+                status.protocol_version,
+                calib_proto::PROTOCOL_VERSION
+            )));
+        }
+        Ok(WorkerStatus {
+            slots: (status.slots as usize).max(1),
+        })
+    }
+
+    /// Score `points` of `objective`; the measurement is sent along only when the worker
+    /// answers that it lacks it.
+    pub async fn evaluate(
+        &self,
+        objective: &WireObjective,
+        points: Vec<Vec<f64>>,
+        deadline: Duration,
+    ) -> Result<Vec<Evaluation>, WorkerError> {
+        let count = points.len();
+        let mut message = objective.template.clone();
+        message.points = points
+            .into_iter()
+            .map(|values| proto::Point { values })
+            .collect();
+        let answer = match self.call(message.clone(), deadline).await {
+            Err(WorkerError::MeasurementMissing) => {
+                tracing::debug!(worker = %self.url, "uploading the measurement");
+                message.measurement = Some(objective.measurement.clone());
+                self.call(message, deadline).await?
+            }
+            other => other?,
+        };
+        if answer.results.len() != count {
+            return Err(WorkerError::Malformed(format!(
+                "{} results for {count} points",
+                answer.results.len()
+            )));
+        }
+        Ok(answer
+            .results
+            .into_iter()
+            .map(|r| match r.failure {
+                Some(failure) => Evaluation::failed(objective.outputs, failure.message),
+                None => Evaluation {
+                    objective: r.objective,
+                    sse: r.sse,
+                    failure: None,
+                },
+            })
+            .collect())
+    }
+
+    async fn call(
+        &self,
+        message: proto::EvaluateRequest,
+        deadline: Duration,
+    ) -> Result<proto::EvaluateResponse, WorkerError> {
+        let mut request = tonic::Request::new(message);
+        request.set_timeout(deadline);
+        Ok(self.simulator.clone().evaluate(request).await?.into_inner())
+    }
+}

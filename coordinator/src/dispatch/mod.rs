@@ -1,0 +1,117 @@
+//! Evaluations on remote workers: the pool of workers ([`pool`]), how they are found
+//! ([`discovery`], [`registry`]), one worker's client ([`client`]) and the [`Evaluator`]
+//! that spreads batches over them ([`grpc`]).
+//!
+//! [`Evaluator`]: crate::evaluator::Evaluator
+
+pub mod client;
+pub mod discovery;
+pub mod error;
+pub mod grpc;
+pub mod pool;
+pub mod registry;
+
+pub use discovery::{parse_list, WorkerAddress};
+pub use error::WorkerError;
+pub use grpc::GrpcEvaluator;
+pub use pool::{Health, WorkerPool, WorkerView};
+
+use crate::error::{Error, Result};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How the coordinator finds and uses workers.
+#[derive(Debug, Clone)]
+pub struct DispatchConfig {
+    pub workers: Vec<WorkerAddress>,
+    /// Deadline of one request to a worker (one chunk of a batch).
+    pub deadline: Duration,
+    /// Chunks in flight per worker, each of at most one point per slot: 2 keeps a worker
+    /// busy while an answer travels back.
+    pub depth: usize,
+    /// How often workers that are down or joining are probed.
+    pub probe_interval: Duration,
+    /// Deadline of one probe.
+    pub probe_timeout: Duration,
+    /// How often DNS names are resolved again.
+    pub resolve_interval: Duration,
+    /// Attempts at one point (on different workers, as they fail) before it is given up.
+    pub max_attempts: u32,
+    /// How long a batch waits for any worker to be up before its points fail.
+    pub wait_for_workers: Duration,
+    /// Heartbeat interval asked of registering workers.
+    pub heartbeat: Duration,
+}
+
+impl DispatchConfig {
+    pub fn new(workers: Vec<WorkerAddress>) -> Self {
+        Self {
+            workers,
+            deadline: Duration::from_secs(120),
+            depth: 2,
+            probe_interval: Duration::from_secs(1),
+            probe_timeout: Duration::from_secs(3),
+            resolve_interval: Duration::from_secs(10),
+            max_attempts: 5,
+            wait_for_workers: Duration::from_secs(300),
+            heartbeat: Duration::from_secs(5),
+        }
+    }
+}
+
+/// Start a pool on the current runtime and put the configured workers in it.
+pub fn start_pool(config: DispatchConfig) -> Result<Arc<WorkerPool>> {
+    let addresses = config.workers.clone();
+    let pool = WorkerPool::start(config);
+    discovery::discover(&pool, &addresses).map_err(Error::InvalidRequest)?;
+    Ok(pool)
+}
+
+/// Remote workers for synchronous callers (`calib calibrate --workers`): a pool on a
+/// runtime of its own.
+pub struct RemoteWorkers {
+    runtime: tokio::runtime::Runtime,
+    pool: Arc<WorkerPool>,
+}
+
+impl RemoteWorkers {
+    pub fn connect(config: DispatchConfig) -> Result<Self> {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .thread_name("calib-dispatch")
+            .enable_all()
+            .build()
+            .map_err(|e| Error::Dispatch(format!("cannot start the dispatch runtime: {e}")))?;
+        let pool = runtime.block_on(async { start_pool(config) })?;
+        Ok(Self { runtime, pool })
+    }
+
+    pub fn pool(&self) -> &Arc<WorkerPool> {
+        &self.pool
+    }
+
+    /// An evaluator over these workers.
+    pub fn evaluator(&self) -> GrpcEvaluator {
+        GrpcEvaluator::new(self.pool.clone(), self.runtime.handle().clone())
+    }
+
+    /// Wait until at least `count` workers are up; false when `timeout` passes first.
+    pub fn wait_until_up(&self, count: usize, timeout: Duration) -> bool {
+        let until = Instant::now() + timeout;
+        loop {
+            let up = self
+                .pool
+                .workers()
+                .iter()
+                .filter(|w| w.health == Health::Up)
+                .count();
+            if up >= count {
+                return true;
+            }
+            if Instant::now() > until {
+                return false;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}

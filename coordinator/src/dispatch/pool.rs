@@ -1,0 +1,397 @@
+//! The workers a coordinator knows, their health and their free slots.
+//!
+//! A worker enters as `Joining` and serves only once a probe (health check, then its
+//! capacity) succeeds. A worker that fails a request is marked `Down` and probed back in
+//! by the pool's maintenance task; one that speaks another protocol is set aside for good.
+//! Slots are leased to dispatchers point by point, spread evenly over the workers, so a
+//! batch fills every worker's slots and no worker is sent more than it can run at once.
+
+use super::client::WorkerClient;
+use super::DispatchConfig;
+use std::sync::{Arc, Mutex, Weak};
+use std::time::Instant;
+use tokio::sync::Notify;
+
+/// How the pool learned of a worker.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Origin {
+    /// Named on the command line or in the configuration.
+    Static,
+    /// One of the addresses a DNS name resolved to (the name is kept).
+    Dns(String),
+    /// Registered itself; dropped when its registration expires.
+    Registered { expires: Instant },
+}
+
+impl Origin {
+    /// A word for logs.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Origin::Static => "static",
+            Origin::Dns(_) => "dns",
+            Origin::Registered { .. } => "registered",
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Health {
+    Joining,
+    Up,
+    Down {
+        reason: String,
+    },
+    /// Speaks another protocol: never used.
+    Incompatible {
+        reason: String,
+    },
+}
+
+struct Worker {
+    id: u64,
+    client: WorkerClient,
+    origin: Origin,
+    health: Health,
+    slots: usize,
+    busy: usize,
+    evaluated: u64,
+    probing: bool,
+    /// Failures since the worker last answered: each doubles the wait before the next probe,
+    /// so that a worker that passes health checks but fails its work is rarely sent work.
+    failures: u32,
+    next_probe: Instant,
+}
+
+impl Worker {
+    fn failed(&mut self, reason: String, probe_interval: std::time::Duration) {
+        self.failures = self.failures.saturating_add(1);
+        let backoff = probe_interval
+            .saturating_mul(1 << (self.failures - 1).min(8))
+            .min(MAX_BACKOFF);
+        self.next_probe = Instant::now() + backoff;
+        self.health = Health::Down { reason };
+    }
+}
+
+/// Longest wait between two probes of a failing worker.
+const MAX_BACKOFF: std::time::Duration = std::time::Duration::from_secs(30);
+
+/// A worker as reported by [`WorkerPool::workers`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorkerView {
+    pub url: String,
+    pub origin: Origin,
+    pub health: Health,
+    pub slots: usize,
+    pub busy: usize,
+    /// Points this worker answered.
+    pub evaluated: u64,
+}
+
+/// Slots of one worker granted to one dispatcher.
+pub struct Lease {
+    pub worker: u64,
+    pub client: WorkerClient,
+    pub points: usize,
+}
+
+#[derive(Default)]
+struct State {
+    workers: Vec<Worker>,
+    next_id: u64,
+    /// Rotates the worker a lease starts from, so small batches spread over workers.
+    cursor: usize,
+}
+
+pub struct WorkerPool {
+    config: DispatchConfig,
+    state: Mutex<State>,
+    changed: Notify,
+}
+
+impl WorkerPool {
+    /// A pool with no worker yet and its maintenance task (probes, expiry) on the current
+    /// tokio runtime.
+    pub fn start(config: DispatchConfig) -> Arc<Self> {
+        let pool = Arc::new(Self {
+            config,
+            state: Mutex::new(State::default()),
+            changed: Notify::new(),
+        });
+        tokio::spawn(maintain(Arc::downgrade(&pool)));
+        pool
+    }
+
+    pub fn config(&self) -> &DispatchConfig {
+        &self.config
+    }
+
+    /// Add the worker at `url` unless present; a registered worker's expiry is renewed.
+    pub fn add(self: &Arc<Self>, url: &str, origin: Origin) -> Result<(), String> {
+        let mut state = self.state.lock().expect("pool lock");
+        if let Some(w) = state.workers.iter_mut().find(|w| w.client.url() == url) {
+            if let Origin::Registered { .. } = origin {
+                w.origin = origin;
+            }
+            return Ok(());
+        }
+        let client = WorkerClient::new(url)?;
+        let id = state.next_id;
+        state.next_id += 1;
+        tracing::info!(worker = %url, origin = origin.kind(), "worker added");
+        state.workers.push(Worker {
+            id,
+            client,
+            origin,
+            health: Health::Joining,
+            slots: 0,
+            busy: 0,
+            evaluated: 0,
+            probing: false,
+            failures: 0,
+            next_probe: Instant::now(),
+        });
+        drop(state);
+        self.probe_soon(id);
+        Ok(())
+    }
+
+    /// Forget the worker at `url` (its leases in flight finish or fail on their own).
+    pub fn remove(&self, url: &str) {
+        let mut state = self.state.lock().expect("pool lock");
+        state.workers.retain(|w| {
+            let keep = w.client.url() != url;
+            if !keep {
+                tracing::info!(worker = %url, "worker removed");
+            }
+            keep
+        });
+    }
+
+    /// URLs of the workers that came from the DNS name `name`.
+    pub fn urls_from(&self, name: &str) -> Vec<String> {
+        let state = self.state.lock().expect("pool lock");
+        state
+            .workers
+            .iter()
+            .filter(|w| matches!(&w.origin, Origin::Dns(n) if n == name))
+            .map(|w| w.client.url().to_string())
+            .collect()
+    }
+
+    pub fn workers(&self) -> Vec<WorkerView> {
+        let state = self.state.lock().expect("pool lock");
+        state
+            .workers
+            .iter()
+            .map(|w| WorkerView {
+                url: w.client.url().to_string(),
+                origin: w.origin.clone(),
+                health: w.health.clone(),
+                slots: w.slots,
+                busy: w.busy,
+                evaluated: w.evaluated,
+            })
+            .collect()
+    }
+
+    /// Lease up to `wanted` points of capacity, one point at a time round the workers that are
+    /// up; a worker takes up to `depth` chunks of `slots` points at once.
+    pub fn acquire(&self, wanted: usize) -> Vec<Lease> {
+        let mut state = self.state.lock().expect("pool lock");
+        let n = state.workers.len();
+        if n == 0 || wanted == 0 {
+            return Vec::new();
+        }
+        let depth = self.config.depth.max(1);
+        let start = state.cursor % n;
+        state.cursor = state.cursor.wrapping_add(1);
+        let mut granted = vec![0usize; n];
+        let mut remaining = wanted;
+        while remaining > 0 {
+            let mut gave = false;
+            for k in 0..n {
+                let i = (start + k) % n;
+                let w = &state.workers[i];
+                if w.health == Health::Up && w.busy + granted[i] < w.slots * depth {
+                    granted[i] += 1;
+                    remaining -= 1;
+                    gave = true;
+                    if remaining == 0 {
+                        break;
+                    }
+                }
+            }
+            if !gave {
+                break;
+            }
+        }
+        // Chunks of at most one point per slot: the worker runs one while the next waits in
+        // its queue, so no slot idles while an answer travels back.
+        let mut leases = Vec::new();
+        for (i, &points) in granted.iter().enumerate() {
+            let w = &mut state.workers[i];
+            w.busy += points;
+            let mut left = points;
+            while left > 0 {
+                let chunk = left.min(w.slots);
+                left -= chunk;
+                leases.push(Lease {
+                    worker: w.id,
+                    client: w.client.clone(),
+                    points: chunk,
+                });
+            }
+        }
+        leases
+    }
+
+    /// Return a lease's slots; `answered` points were evaluated by the worker.
+    pub fn release(&self, lease: &Lease, answered: usize) {
+        let mut state = self.state.lock().expect("pool lock");
+        if let Some(w) = state.workers.iter_mut().find(|w| w.id == lease.worker) {
+            w.busy -= lease.points;
+            w.evaluated += answered as u64;
+            if answered > 0 {
+                w.failures = 0;
+            }
+        }
+        drop(state);
+        self.changed.notify_waiters();
+    }
+
+    /// Take a worker out of service until a probe brings it back.
+    pub fn mark_down(&self, worker: u64, reason: String) {
+        let mut state = self.state.lock().expect("pool lock");
+        if let Some(w) = state.workers.iter_mut().find(|w| w.id == worker) {
+            if w.health == Health::Up {
+                tracing::warn!(worker = %w.client.url(), %reason, "worker taken out");
+            }
+            if !matches!(w.health, Health::Incompatible { .. }) {
+                w.failed(reason, self.config.probe_interval);
+            }
+        }
+    }
+
+    /// Set a worker aside for good: it speaks another protocol.
+    pub fn mark_incompatible(&self, worker: u64, reason: String) {
+        let mut state = self.state.lock().expect("pool lock");
+        if let Some(w) = state.workers.iter_mut().find(|w| w.id == worker) {
+            tracing::error!(worker = %w.client.url(), %reason, "incompatible worker set aside");
+            w.health = Health::Incompatible { reason };
+        }
+    }
+
+    /// Completes when slots are released or a worker comes up (call `enable` on it before
+    /// looking at the pool, so that no change is missed).
+    pub fn notified(&self) -> tokio::sync::futures::Notified<'_> {
+        self.changed.notified()
+    }
+
+    /// False when every known worker is set aside for good (an empty pool may still fill).
+    pub fn has_prospects(&self) -> bool {
+        let state = self.state.lock().expect("pool lock");
+        state.workers.is_empty()
+            || state
+                .workers
+                .iter()
+                .any(|w| !matches!(w.health, Health::Incompatible { .. }))
+    }
+
+    fn probe_soon(self: &Arc<Self>, worker: u64) {
+        let client = {
+            let mut state = self.state.lock().expect("pool lock");
+            let Some(w) = state.workers.iter_mut().find(|w| w.id == worker) else {
+                return;
+            };
+            if w.probing {
+                return;
+            }
+            w.probing = true;
+            w.client.clone()
+        };
+        let pool = Arc::downgrade(self);
+        let deadline = self.config.probe_timeout;
+        tokio::spawn(async move {
+            let outcome = client.probe(deadline).await;
+            if let Some(pool) = pool.upgrade() {
+                pool.probed(worker, outcome);
+            }
+        });
+    }
+
+    fn probed(
+        &self,
+        worker: u64,
+        outcome: Result<super::client::WorkerStatus, super::error::WorkerError>,
+    ) {
+        let mut state = self.state.lock().expect("pool lock");
+        let Some(w) = state.workers.iter_mut().find(|w| w.id == worker) else {
+            return;
+        };
+        w.probing = false;
+        match outcome {
+            Ok(status) => {
+                if w.health != Health::Up {
+                    tracing::info!(worker = %w.client.url(), slots = status.slots, "worker up");
+                }
+                w.health = Health::Up;
+                w.slots = status.slots;
+            }
+            Err(super::error::WorkerError::Incompatible(reason)) => {
+                tracing::error!(worker = %w.client.url(), %reason, "incompatible worker set aside");
+                w.health = Health::Incompatible { reason };
+            }
+            Err(e) => {
+                if w.health == Health::Up {
+                    tracing::warn!(worker = %w.client.url(), error = %e, "worker failed its probe");
+                }
+                w.failed(e.to_string(), self.config.probe_interval);
+            }
+        }
+        drop(state);
+        self.changed.notify_waiters();
+    }
+
+    /// One maintenance round: drop expired registrations, probe workers not up.
+    fn maintain_once(self: &Arc<Self>) {
+        let now = Instant::now();
+        let to_probe: Vec<u64> = {
+            let mut state = self.state.lock().expect("pool lock");
+            state.workers.retain(|w| match w.origin {
+                Origin::Registered { expires } if expires < now => {
+                    tracing::info!(worker = %w.client.url(), "registration expired");
+                    false
+                }
+                _ => true,
+            });
+            state
+                .workers
+                .iter()
+                .filter(|w| match w.health {
+                    Health::Joining => true,
+                    Health::Down { .. } => w.next_probe <= now,
+                    _ => false,
+                })
+                .map(|w| w.id)
+                .collect()
+        };
+        for id in to_probe {
+            self.probe_soon(id);
+        }
+    }
+}
+
+async fn maintain(pool: Weak<WorkerPool>) {
+    let interval = match pool.upgrade() {
+        Some(p) => p.config.probe_interval,
+        None => return,
+    };
+    let mut ticker = tokio::time::interval(interval);
+    ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        ticker.tick().await;
+        let Some(pool) = pool.upgrade() else { return };
+        pool.maintain_once();
+    }
+}

@@ -1,0 +1,17 @@
+//! Compiles `calib/v1/*.proto` with a vendored `protoc`, so that a fresh machine needs
+//! nothing but cargo, and writes the descriptor set the reflection service serves.
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let protoc = protoc_bin_vendored::protoc_bin_path()?;
+    // SAFETY: build scripts run single-threaded; prost-build reads PROTOC from the environment.
+    unsafe { std::env::set_var("PROTOC", protoc) };
+    let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
+    tonic_prost_build::configure()
+        .file_descriptor_set_path(out.join("calib_descriptor.bin"))
+        .compile_protos(
+            &["calib/v1/simulator.proto", "calib/v1/registry.proto"],
+            &["."],
+        )?;
+    println!("cargo:rerun-if-changed=calib");
+    Ok(())
+}

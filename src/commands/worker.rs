@@ -1,0 +1,61 @@
+use super::{Failure, Outcome};
+use calib_worker::service::{self, WorkerConfig};
+use std::net::SocketAddr;
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Address to serve the Simulator service on (port 0: any free port, printed).
+    #[arg(long, default_value = "0.0.0.0:50051")]
+    listen: SocketAddr,
+    /// Simulations at once [default: one per core].
+    #[arg(long)]
+    slots: Option<usize>,
+    /// Simulations that may wait for a slot before requests are refused with
+    /// RESOURCE_EXHAUSTED [default: 64 per slot].
+    #[arg(long)]
+    queue: Option<usize>,
+    /// Bound of the measurement cache [MiB].
+    #[arg(long, default_value_t = 256)]
+    cache_mib: usize,
+    /// Register with the coordinator at this URL (e.g. http://coordinator:50050) and renew
+    /// the registration as a heartbeat.
+    #[arg(long, value_name = "URL")]
+    register: Option<String>,
+    /// URL the coordinator should dial back [default: the bound address, or this host's
+    /// name when listening on every interface].
+    #[arg(long, value_name = "URL")]
+    advertise: Option<String>,
+}
+
+pub fn run(args: Args) -> Outcome {
+    let mut config = WorkerConfig::new(args.listen);
+    if let Some(slots) = args.slots {
+        if slots == 0 {
+            return Err(Failure::input("--slots: must be at least 1"));
+        }
+        config.slots = slots;
+        config.queue_bound = 64 * slots;
+    }
+    if let Some(queue) = args.queue {
+        config.queue_bound = queue;
+    }
+    config.cache_bytes = args.cache_mib << 20;
+    config.register = args.register;
+    config.advertise = args.advertise;
+    let runtime = super::runtime()?;
+    runtime.block_on(async {
+        let worker = service::start_worker(config.clone())
+            .await
+            .map_err(|e| Failure::input(format!("--listen {}: {e}", config.listen)))?;
+        println!(
+            "worker listening on {} ({} slots, queue bound {})",
+            worker.address(),
+            config.slots,
+            config.queue_bound
+        );
+        worker
+            .wait()
+            .await
+            .map_err(|e| Failure::internal(format!("worker server failed: {e}")))
+    })
+}

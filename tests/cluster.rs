@@ -1,0 +1,270 @@
+//! Calibration spread over workers: same results as in one process, whatever happens to
+//! the workers; workers found by registration and by DNS.
+
+mod common;
+
+use calib_coordinator::calibration::{calibrate, Calibration};
+use calib_coordinator::campaign::Campaign;
+use calib_coordinator::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerAddress};
+use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::problem::Silent;
+use common::cluster::*;
+use common::*;
+use std::time::Duration;
+
+fn campaign(dir: &std::path::Path, max_evaluations: usize) -> Campaign {
+    let search = format!(
+        "methods = [\"nelder-mead\", \"powell\"]\nstarts = 2\nmax_evaluations = {max_evaluations}\nseed = 3"
+    );
+    Campaign::load(&write(dir, "c.toml", &clean_campaign(&search))).unwrap()
+}
+
+/// Every run found the same point with the same objective, bit for bit, in as many evaluations.
+fn assert_same(local: &Calibration, cluster: &Calibration) {
+    assert_eq!(local.runs.len(), cluster.runs.len());
+    for (a, b) in local.runs.iter().zip(&cluster.runs) {
+        let bits = |p: &[f64]| p.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        assert_eq!(
+            bits(&a.point),
+            bits(&b.point),
+            "{} from {}",
+            a.method,
+            a.start
+        );
+        assert_eq!(a.objective.to_bits(), b.objective.to_bits());
+        assert_eq!(a.evaluations, b.evaluations);
+        assert_eq!(a.iterations, b.iterations);
+    }
+    assert_eq!(local.best, cluster.best);
+    assert_eq!(
+        local.nominal.objective.to_bits(),
+        cluster.nominal.objective.to_bits()
+    );
+    assert_eq!(local.best_evaluation.sse, cluster.best_evaluation.sse);
+    // Which of two concurrent runs asking for one point simulates it is a race: only the
+    // count of requests is fixed.
+    assert_eq!(local.stats.requested, cluster.stats.requested);
+}
+
+#[test]
+fn a_cluster_run_equals_the_local_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 150);
+    let local = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let remote_result = calibrate(&campaign, remote.evaluator(), &Silent).unwrap();
+    assert_same(&local, &remote_result);
+    let simulations: Vec<u64> = cluster.workers.iter().map(|w| w.simulations()).collect();
+    println!(
+        "{} simulated, per worker {simulations:?}",
+        remote_result.stats.simulated
+    );
+    assert!(simulations.iter().all(|&s| s > 0), "{simulations:?}");
+    assert_eq!(
+        simulations.iter().sum::<u64>(),
+        remote_result.stats.simulated
+    );
+}
+
+#[test]
+fn a_worker_killed_mid_campaign_costs_only_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 400);
+    let local = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    let mut cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let evaluator = remote.evaluator();
+    let (result, at_kill) = std::thread::scope(|scope| {
+        let run = scope.spawn(|| calibrate(&campaign, evaluator, &Silent));
+        await_condition(
+            "worker 0 to serve 20 simulations",
+            Duration::from_secs(60),
+            || cluster.workers[0].simulations() >= 20,
+        );
+        assert!(!run.is_finished(), "the campaign ended before the kill");
+        cluster.workers[0].kill();
+        let at_kill = cluster.workers[1].simulations();
+        (run.join().unwrap(), at_kill)
+    });
+    let result = result.unwrap();
+    assert_same(&local, &result);
+    let survivor = cluster.workers[1].simulations();
+    println!(
+        "killed worker served {}, survivor {at_kill} before the kill and {survivor} in all, of {}",
+        cluster.workers[0].simulations(),
+        result.stats.simulated
+    );
+    assert!(survivor > at_kill, "the survivor did the rest");
+    let views = remote.pool().workers();
+    assert!(
+        matches!(views[0].health, Health::Down { .. }),
+        "{:?}",
+        views[0]
+    );
+}
+
+#[test]
+fn a_registered_worker_serves_the_coordinator() {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (coordinator, worker) = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let mut dispatch = DispatchConfig::new(Vec::new());
+        dispatch.probe_interval = Duration::from_millis(100);
+        let coordinator = calib_coordinator::server::serve_coordinator(
+            listener,
+            calib_coordinator::server::CoordinatorConfig {
+                listen: "127.0.0.1:0".parse().unwrap(),
+                dispatch,
+            },
+        )
+        .unwrap();
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let mut config = calib_worker::service::WorkerConfig::new(listener.local_addr().unwrap());
+        config.slots = 1;
+        config.register = Some(format!("http://{}", coordinator.address()));
+        let worker = calib_worker::service::serve_worker(listener, config).unwrap();
+        (coordinator, worker)
+    });
+    let url = format!("http://{}", worker.address());
+    await_condition(
+        "the worker to register and come up",
+        Duration::from_secs(20),
+        || {
+            coordinator
+                .pool()
+                .workers()
+                .iter()
+                .any(|w| w.url == url && w.health == Health::Up)
+        },
+    );
+    let evaluator = calib_coordinator::dispatch::GrpcEvaluator::new(
+        coordinator.pool().clone(),
+        runtime.handle().clone(),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 30);
+    let result = calibrate(&campaign, evaluator, &Silent).unwrap();
+    assert!(result.stats.simulated > 0);
+    assert_eq!(worker.load().completed, result.stats.simulated);
+}
+
+#[test]
+fn a_dns_name_resolves_to_workers() {
+    let cluster = TestCluster::start(1, 1);
+    let port = cluster.workers[0].address().port();
+    let mut config = DispatchConfig::new(vec![WorkerAddress::Dns {
+        host: "localhost".into(),
+        port,
+    }]);
+    config.probe_interval = Duration::from_millis(100);
+    config.resolve_interval = Duration::from_millis(200);
+    let remote = RemoteWorkers::connect(config).unwrap();
+    assert!(
+        remote.wait_until_up(1, Duration::from_secs(10)),
+        "{:?}",
+        remote.pool().workers()
+    );
+    let up: Vec<_> = remote
+        .pool()
+        .workers()
+        .into_iter()
+        .filter(|w| w.health == Health::Up)
+        .collect();
+    assert_eq!(up[0].url, format!("http://127.0.0.1:{port}"));
+}
+
+#[test]
+fn an_invalid_request_fails_its_points_and_is_not_retried() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let mut objective =
+        calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let g = objective.model.info().parameter_index("g").unwrap();
+    objective.base[g] = f64::NAN;
+    let cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let evaluations = remote
+        .evaluator()
+        .evaluate(&objective, &[vec![0.01, 0.002], vec![0.011, 0.002]]);
+    for e in &evaluations {
+        let why = e.failure.as_deref().unwrap();
+        assert!(why.contains("rejected by worker"), "{why}");
+        assert!(why.contains("parameters["), "{why}");
+        assert_eq!(e.objective, calib_coordinator::objective::FAILURE_PENALTY);
+    }
+    // Nobody simulated, and no worker was taken out for the client's mistake.
+    assert!(cluster.workers.iter().all(|w| w.simulations() == 0));
+    assert!(remote
+        .pool()
+        .workers()
+        .iter()
+        .all(|w| w.health == Health::Up));
+}
+
+#[test]
+fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let good = TestWorker::start(1, 64);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let (hanging_url, hanging) = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let url = format!("http://{}", listener.local_addr().unwrap());
+        let napper =
+            calib_worker::service::napping::serve_napping(listener, Duration::from_secs(3600), 1)
+                .await;
+        (url, napper)
+    });
+    let mut config = DispatchConfig::new(vec![
+        WorkerAddress::Url(good.url()),
+        WorkerAddress::Url(hanging_url),
+    ]);
+    config.probe_interval = Duration::from_millis(100);
+    config.deadline = Duration::from_millis(300);
+    let remote = RemoteWorkers::connect(config).unwrap();
+    assert!(remote.wait_until_up(2, Duration::from_secs(10)));
+    let points: Vec<Vec<f64>> = (0..8)
+        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
+        .collect();
+    let expected: Vec<_> = points.iter().map(|p| objective.evaluate(p)).collect();
+    let answered = remote.evaluator().evaluate(&objective, &points);
+    assert_eq!(answered, expected);
+    assert!(
+        hanging.requests() >= 1,
+        "the hanging worker was never tried"
+    );
+    assert_eq!(good.simulations(), 8);
+}
+
+#[test]
+fn the_test_cluster_binds_distinct_ports_and_kill_closes_one() {
+    let mut cluster = TestCluster::start(3, 1);
+    let mut ports: Vec<u16> = cluster.workers.iter().map(|w| w.address().port()).collect();
+    ports.sort_unstable();
+    ports.dedup();
+    assert_eq!(ports.len(), 3);
+    let address = cluster.workers[1].address();
+    assert!(std::net::TcpStream::connect(address).is_ok());
+    cluster.workers[1].kill();
+    assert!(!cluster.workers[1].is_alive());
+    await_condition(
+        "the killed worker's port to close",
+        Duration::from_secs(5),
+        || std::net::TcpStream::connect(address).is_err(),
+    );
+    assert!(std::net::TcpStream::connect(cluster.workers[0].address()).is_ok());
+}

@@ -1,0 +1,526 @@
+//! The Simulator service as any client sees it: every bad request answered with the right
+//! code naming the field, failures typed, floods refused, health and counters served.
+
+mod common;
+
+use calib_proto::v1 as proto;
+use calib_proto::v1::simulator_client::SimulatorClient;
+use common::cluster::TestWorker;
+use tonic::transport::Channel;
+use tonic::Code;
+
+const V: u32 = calib_proto::PROTOCOL_VERSION;
+
+fn runtime() -> tokio::runtime::Runtime {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+}
+
+async fn client(worker: &TestWorker) -> SimulatorClient<Channel> {
+    SimulatorClient::connect(worker.url())
+        .await
+        .unwrap()
+        .max_decoding_message_size(64 << 20)
+        .max_encoding_message_size(64 << 20)
+}
+
+fn grid(stop: f64, step: f64) -> Vec<f64> {
+    let n = (stop / step).round() as usize;
+    (0..=n).map(|i| i as f64 * step).collect()
+}
+
+fn simulate_request() -> proto::SimulateRequest {
+    proto::SimulateRequest {
+        protocol_version: V,
+        model: "furuta".into(),
+        parameters: vec![proto::ParameterValue {
+            name: "armFriction".into(),
+            value: 0.01,
+        }],
+        times: grid(1.0, 0.01),
+        outputs: vec!["armJoint.phi".into()],
+        solver: None,
+    }
+}
+
+/// A measurement of one output on a short grid, with its hash.
+fn measurement() -> (proto::Measurement, Vec<u8>) {
+    let times = grid(1.0, 0.1);
+    let values = vec![0.0; times.len()];
+    let hash = calib_worker::scoring::measurement_hash(&times, std::slice::from_ref(&values));
+    (
+        proto::Measurement {
+            times,
+            columns: vec![proto::Column { values }],
+        },
+        hash.to_vec(),
+    )
+}
+
+fn evaluate_request(points: usize) -> proto::EvaluateRequest {
+    let (measurement, hash) = measurement();
+    proto::EvaluateRequest {
+        protocol_version: V,
+        model: "furuta".into(),
+        parameters: Vec::new(),
+        free_parameters: vec!["armFriction".into()],
+        outputs: vec![proto::ComparedOutput {
+            output: "armJoint.phi".into(),
+            weight: 1.0,
+        }],
+        measurement_hash: hash,
+        measurement: Some(measurement),
+        points: (0..points)
+            .map(|i| proto::Point {
+                values: vec![0.01 + 1e-4 * i as f64],
+            })
+            .collect(),
+        solver: None,
+    }
+}
+
+/// A bad request: what is wrong, how to spoil a good request, the code and field expected.
+type Case<R> = (&'static str, Box<dyn Fn(&mut R)>, Code, &'static str);
+
+/// Expect `code` with a message that starts with `field`.
+fn expect(
+    case: &str,
+    result: Result<impl std::fmt::Debug, tonic::Status>,
+    code: Code,
+    field: &str,
+) {
+    let status = result.expect_err(case);
+    assert_eq!(status.code(), code, "{case}: {}", status.message());
+    assert!(
+        status.message().starts_with(field),
+        "{case}: `{}` does not name `{field}`",
+        status.message()
+    );
+}
+
+#[test]
+fn every_bad_simulate_request_names_its_field() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let cases: Vec<Case<proto::SimulateRequest>> = vec![
+            (
+                "unknown model",
+                Box::new(|r| r.model = "furuta9".into()),
+                Code::InvalidArgument,
+                "model",
+            ),
+            (
+                "unknown parameter",
+                Box::new(|r| r.parameters[0].name = "armFrict".into()),
+                Code::InvalidArgument,
+                "parameters[0].name",
+            ),
+            (
+                "NaN value",
+                Box::new(|r| r.parameters[0].value = f64::NAN),
+                Code::InvalidArgument,
+                "parameters[0].value",
+            ),
+            (
+                "infinite value",
+                Box::new(|r| r.parameters[0].value = f64::INFINITY),
+                Code::InvalidArgument,
+                "parameters[0].value",
+            ),
+            (
+                "value out of range",
+                Box::new(|r| r.parameters[0].value = 5.0),
+                Code::InvalidArgument,
+                "parameters[0].value",
+            ),
+            (
+                "negative stop time",
+                Box::new(|r| r.times = vec![-1.0]),
+                Code::InvalidArgument,
+                "times",
+            ),
+            (
+                "absurd stop time",
+                Box::new(|r| r.times = vec![0.0, 1e9]),
+                Code::InvalidArgument,
+                "times",
+            ),
+            (
+                "NaN time",
+                Box::new(|r| r.times[3] = f64::NAN),
+                Code::InvalidArgument,
+                "times[3]",
+            ),
+            (
+                "decreasing times",
+                Box::new(|r| r.times.swap(3, 4)),
+                Code::InvalidArgument,
+                "times[4]",
+            ),
+            (
+                "empty grid",
+                Box::new(|r| r.times.clear()),
+                Code::InvalidArgument,
+                "times",
+            ),
+            (
+                "too many points",
+                Box::new(|r| r.times = vec![0.0; 500_001]),
+                Code::InvalidArgument,
+                "times",
+            ),
+            (
+                "unknown output",
+                Box::new(|r| r.outputs = vec!["armJoint.angle".into()]),
+                Code::InvalidArgument,
+                "outputs[0]",
+            ),
+            (
+                "bad tolerance",
+                Box::new(|r| {
+                    r.solver = Some(proto::SolverOptions {
+                        rtol: 0.0,
+                        atol: 1e-9,
+                        max_steps: 1000,
+                    })
+                }),
+                Code::InvalidArgument,
+                "solver.rtol",
+            ),
+            (
+                "protocol version unset",
+                Box::new(|r| r.protocol_version = 0),
+                Code::FailedPrecondition,
+                "protocol_version",
+            ),
+            (
+                "protocol version ahead",
+                Box::new(|r| r.protocol_version = V + 1),
+                Code::FailedPrecondition,
+                "protocol_version",
+            ),
+        ];
+        for (case, change, code, field) in &cases {
+            let mut request = simulate_request();
+            change(&mut request);
+            expect(case, c.simulate(request).await, *code, field);
+        }
+        // The unchanged request succeeds, and the worker simulated nothing else.
+        let answer = c.simulate(simulate_request()).await.unwrap().into_inner();
+        assert!(answer.failure.is_none());
+        assert_eq!(answer.series[0].values.len(), 101);
+        assert_eq!(worker.simulations(), 1);
+    });
+}
+
+#[test]
+fn every_bad_evaluate_request_names_its_field() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let cases: Vec<Case<proto::EvaluateRequest>> = vec![
+            (
+                "unknown model",
+                Box::new(|r| r.model = "nope".into()),
+                Code::InvalidArgument,
+                "model",
+            ),
+            (
+                "unknown free parameter",
+                Box::new(|r| r.free_parameters[0] = "nope".into()),
+                Code::InvalidArgument,
+                "free_parameters[0]",
+            ),
+            (
+                "NaN point",
+                Box::new(|r| r.points[1].values[0] = f64::NAN),
+                Code::InvalidArgument,
+                "points[1].values[0]",
+            ),
+            (
+                "infinite point",
+                Box::new(|r| r.points[0].values[0] = f64::NEG_INFINITY),
+                Code::InvalidArgument,
+                "points[0].values[0]",
+            ),
+            (
+                "short point",
+                Box::new(|r| r.points[0].values.clear()),
+                Code::InvalidArgument,
+                "points[0].values",
+            ),
+            (
+                "no point",
+                Box::new(|r| r.points.clear()),
+                Code::InvalidArgument,
+                "points",
+            ),
+            (
+                "too many points",
+                Box::new(|r| r.points = vec![proto::Point { values: vec![0.01] }; 10_001]),
+                Code::InvalidArgument,
+                "points",
+            ),
+            (
+                "negative weight",
+                Box::new(|r| r.outputs[0].weight = -1.0),
+                Code::InvalidArgument,
+                "outputs[0].weight",
+            ),
+            (
+                "no output",
+                Box::new(|r| r.outputs.clear()),
+                Code::InvalidArgument,
+                "outputs",
+            ),
+            (
+                "short hash",
+                Box::new(|r| r.measurement_hash.truncate(8)),
+                Code::InvalidArgument,
+                "measurement_hash",
+            ),
+            (
+                "wrong hash",
+                Box::new(|r| r.measurement_hash[0] ^= 1),
+                Code::InvalidArgument,
+                "measurement",
+            ),
+            (
+                "empty measurement",
+                Box::new(|r| r.measurement.as_mut().unwrap().times.clear()),
+                Code::InvalidArgument,
+                "measurement.times",
+            ),
+            (
+                "ragged measurement",
+                Box::new(|r| {
+                    r.measurement.as_mut().unwrap().columns[0].values.pop();
+                }),
+                Code::InvalidArgument,
+                "measurement.columns[0]",
+            ),
+            (
+                "protocol mismatch",
+                Box::new(|r| r.protocol_version = 7),
+                Code::FailedPrecondition,
+                "protocol_version",
+            ),
+            (
+                "measurement not sent",
+                Box::new(|r| r.measurement = None),
+                Code::NotFound,
+                "measurement_hash",
+            ),
+        ];
+        for (case, change, code, field) in &cases {
+            let mut request = evaluate_request(2);
+            change(&mut request);
+            expect(case, c.evaluate(request).await, *code, field);
+        }
+        assert_eq!(worker.simulations(), 0, "no bad request was simulated");
+        // Once sent, the measurement is cached: the hash alone suffices.
+        let answer = c.evaluate(evaluate_request(2)).await.unwrap().into_inner();
+        assert_eq!(answer.results.len(), 2);
+        let mut by_hash = evaluate_request(3);
+        by_hash.measurement = None;
+        let answer = c.evaluate(by_hash).await.unwrap().into_inner();
+        assert_eq!(answer.results.len(), 3);
+        assert!(answer
+            .results
+            .iter()
+            .all(|r| r.failure.is_none() && r.objective > 0.0));
+        let status = c
+            .status(proto::StatusRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(status.simulations, 5);
+        assert_eq!(status.evaluations, 5);
+        assert_eq!(status.cached_measurements, 1);
+    });
+}
+
+#[test]
+fn a_failed_simulation_is_a_typed_answer() {
+    use proto::simulation_failure::Kind;
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let mut request = simulate_request();
+        request.solver = Some(proto::SolverOptions {
+            rtol: 1e-8,
+            atol: 1e-10,
+            max_steps: 5,
+        });
+        let answer = c.simulate(request).await.unwrap().into_inner();
+        let failure = answer.failure.expect("a failure");
+        assert_eq!(failure.kind, Kind::StepLimit as i32, "{failure:?}");
+        assert!(answer.series.is_empty());
+
+        let mut request = evaluate_request(2);
+        request.solver = Some(proto::SolverOptions {
+            rtol: 1e-8,
+            atol: 1e-10,
+            max_steps: 5,
+        });
+        let answer = c.evaluate(request).await.unwrap().into_inner();
+        for r in &answer.results {
+            assert_eq!(r.objective, calib_worker::scoring::FAILURE_PENALTY);
+            assert_eq!(r.failure.as_ref().unwrap().kind, Kind::StepLimit as i32);
+        }
+        // The worker is still there.
+        assert!(c.simulate(simulate_request()).await.is_ok());
+    });
+}
+
+#[test]
+fn a_flood_beyond_the_queue_is_refused() {
+    // One slot, two waiting: a 300 s evaporator transient (≈ 16 ms) per request keeps the
+    // slot busy while the flood arrives.
+    let worker = TestWorker::start(1, 2);
+    runtime().block_on(async {
+        let c = client(&worker).await;
+        let long = proto::SimulateRequest {
+            protocol_version: V,
+            model: "hx_lowfi".into(),
+            parameters: Vec::new(),
+            times: grid(300.0, 1.0),
+            outputs: Vec::new(),
+            solver: None,
+        };
+        let mut calls = tokio::task::JoinSet::new();
+        for _ in 0..24 {
+            let (mut c, request) = (c.clone(), long.clone());
+            calls.spawn(async move { c.simulate(request).await.map(|_| ()) });
+        }
+        let (mut served, mut refused) = (0, 0);
+        while let Some(result) = calls.join_next().await {
+            match result.unwrap() {
+                Ok(()) => served += 1,
+                Err(status) => {
+                    assert_eq!(status.code(), Code::ResourceExhausted, "{status:?}");
+                    refused += 1;
+                }
+            }
+        }
+        println!("{served} served, {refused} refused");
+        assert!(served >= 3, "{served} served");
+        assert!(refused > 0, "nothing refused");
+        // A batch larger than slots plus queue is refused whole, before anything runs.
+        let before = worker.simulations();
+        expect(
+            "oversized batch",
+            c.clone().evaluate(evaluate_request(4)).await,
+            Code::ResourceExhausted,
+            "the worker's queue is full",
+        );
+        assert_eq!(worker.simulations(), before);
+        // And the worker still serves.
+        assert!(c.clone().simulate(simulate_request()).await.is_ok());
+    });
+}
+
+#[test]
+fn health_and_models_are_served() {
+    use tonic_health::pb::health_client::HealthClient;
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut health = HealthClient::new(
+            Channel::from_shared(worker.url())
+                .unwrap()
+                .connect()
+                .await
+                .unwrap(),
+        );
+        for service in ["", "calib.v1.Simulator"] {
+            let answer = health
+                .check(tonic_health::pb::HealthCheckRequest {
+                    service: service.into(),
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(
+                answer.status,
+                tonic_health::pb::health_check_response::ServingStatus::Serving as i32
+            );
+        }
+        let mut c = client(&worker).await;
+        let models = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .models;
+        let names: Vec<_> = models.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(names, ["furuta", "hx_highfi", "hx_lowfi"]);
+        let furuta = c
+            .describe(proto::DescribeRequest {
+                protocol_version: V,
+                model: "furuta".into(),
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .model
+            .unwrap();
+        assert!(furuta
+            .parameters
+            .iter()
+            .any(|p| p.name == "armFriction" && p.unit.contains('N')));
+        expect(
+            "describe unknown",
+            c.describe(proto::DescribeRequest {
+                protocol_version: V,
+                model: "x".into(),
+            })
+            .await,
+            Code::InvalidArgument,
+            "model",
+        );
+    });
+}
+
+#[test]
+fn reflection_lists_the_services() {
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let channel = Channel::from_shared(worker.url())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        let mut reflection = ServerReflectionClient::new(channel);
+        let request = ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(MessageRequest::ListServices(String::new())),
+        };
+        let mut answers = reflection
+            .server_reflection_info(tokio_stream::iter(vec![request]))
+            .await
+            .unwrap()
+            .into_inner();
+        let answer = answers.message().await.unwrap().unwrap();
+        let Some(MessageResponse::ListServicesResponse(list)) = answer.message_response else {
+            panic!("unexpected answer {answer:?}");
+        };
+        let names: Vec<_> = list.service.iter().map(|s| s.name.as_str()).collect();
+        for expected in ["calib.v1.Simulator", "grpc.health.v1.Health"] {
+            assert!(
+                names.contains(&expected),
+                "{expected} missing from {names:?}"
+            );
+        }
+    });
+}

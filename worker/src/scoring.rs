@@ -1,0 +1,135 @@
+//! Scoring a simulation against measured data: the one place where the calibration
+//! objective is computed, so that a point scored in the coordinator's process and a point
+//! scored by a remote worker give the same bits.
+//!
+//! `f(p) = Σ_i k_i Σ_t (y_i(p, t) − w_i(t))²`, outputs read at the measurement times. A
+//! simulation that fails (diverged, step limit) or yields a non-finite value scores
+//! [`FAILURE_PENALTY`]: finite, so optimisers that compare or average costs keep working.
+
+use crate::{Model, SimulationError, SolverOptions};
+
+/// Objective value given to parameter sets whose simulation failed: far above any real fit.
+pub const FAILURE_PENALTY: f64 = 1e30;
+
+/// One point's outcome.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evaluation {
+    pub objective: f64,
+    /// Unweighted sum of squared errors per output, in campaign order.
+    pub sse: Vec<f64>,
+    /// Why the simulation failed, when it did (then `objective` is the penalty).
+    pub failure: Option<String>,
+}
+
+impl Evaluation {
+    pub fn failed(outputs: usize, why: String) -> Self {
+        Self {
+            objective: FAILURE_PENALTY,
+            sse: vec![f64::NAN; outputs],
+            failure: Some(why),
+        }
+    }
+}
+
+/// Why a simulated output scored nothing although the solver finished.
+pub const NON_FINITE_OUTPUT: &str = "simulated output is not finite";
+
+/// Score simulated series against measured ones (one per output, on the same grid).
+pub fn score(simulated: &[Vec<f64>], measured: &[Vec<f64>], weights: &[f64]) -> Evaluation {
+    let sse: Vec<f64> = simulated
+        .iter()
+        .zip(measured)
+        .map(|(y, w)| y.iter().zip(w).map(|(a, b)| (a - b) * (a - b)).sum())
+        .collect();
+    let objective: f64 = sse.iter().zip(weights).map(|(s, k)| s * k).sum();
+    if objective.is_finite() {
+        Evaluation {
+            objective,
+            sse,
+            failure: None,
+        }
+    } else {
+        Evaluation::failed(measured.len(), NON_FINITE_OUTPUT.into())
+    }
+}
+
+/// What a point is scored against: the measured series on their grid, and the weights.
+#[derive(Debug, Clone, Copy)]
+pub struct Target<'a> {
+    pub grid: &'a [f64],
+    /// Model output indices, one per measured series.
+    pub outputs: &'a [usize],
+    pub measured: &'a [Vec<f64>],
+    pub weights: &'a [f64],
+    pub solver: &'a SolverOptions,
+}
+
+/// Simulate `model` with the full parameter vector `params` and score it. A failed
+/// simulation is returned as the error so that callers can report its kind; see
+/// [`evaluate`] for the penalised form.
+pub fn simulate_and_score(
+    model: &dyn Model,
+    params: &[f64],
+    target: &Target,
+) -> Result<Evaluation, SimulationError> {
+    let trajectory = model.simulate(params, target.grid, target.outputs, target.solver)?;
+    Ok(score(&trajectory.values, target.measured, target.weights))
+}
+
+/// Simulate and score, a failed simulation scoring [`FAILURE_PENALTY`].
+pub fn evaluate(model: &dyn Model, params: &[f64], target: &Target) -> Evaluation {
+    simulate_and_score(model, params, target)
+        .unwrap_or_else(|e| Evaluation::failed(target.measured.len(), e.to_string()))
+}
+
+/// Content hash of a measurement on its grid, as the Simulator protocol defines it: BLAKE3
+/// over "calib-measurement-v1", the count and bits of the times, then the count of columns
+/// and each column's length and bits, integers as little-endian `u64`.
+pub fn measurement_hash(times: &[f64], columns: &[Vec<f64>]) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(b"calib-measurement-v1");
+    let series = |h: &mut blake3::Hasher, values: &[f64]| {
+        h.update(&(values.len() as u64).to_le_bytes());
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        h.update(&bytes);
+    };
+    series(&mut h, times);
+    h.update(&(columns.len() as u64).to_le_bytes());
+    for column in columns {
+        series(&mut h, column);
+    }
+    *h.finalize().as_bytes()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn score_weights_each_output() {
+        let e = score(
+            &[vec![1.0, 2.0], vec![0.0, 0.0]],
+            &[vec![0.0, 0.0], vec![1.0, 1.0]],
+            &[2.0, 0.5],
+        );
+        assert_eq!(e.sse, vec![5.0, 2.0]);
+        assert_eq!(e.objective, 11.0);
+        assert!(e.failure.is_none());
+    }
+
+    #[test]
+    fn non_finite_output_scores_the_penalty() {
+        let e = score(&[vec![f64::NAN]], &[vec![0.0]], &[1.0]);
+        assert_eq!(e.objective, FAILURE_PENALTY);
+        assert_eq!(e.failure.as_deref(), Some(NON_FINITE_OUTPUT));
+    }
+
+    #[test]
+    fn measurement_hash_sees_every_bit_and_the_layout() {
+        let a = measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0]]);
+        assert_eq!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0]]));
+        assert_ne!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0 + 1e-15]]));
+        assert_ne!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0], vec![2.0]]));
+        assert_ne!(a, measurement_hash(&[0.0, -0.0], &[vec![1.0, 2.0]]));
+    }
+}

@@ -1,0 +1,170 @@
+//! The worker's gRPC server: the `calib.v1.Simulator` service over the hosted models, with
+//! the standard health and reflection services.
+//!
+//! Simulations run on a bounded pool of blocking threads ([`pool`]), so the async runtime
+//! keeps answering health checks and refusals while every core simulates. Requests are
+//! checked completely on arrival ([`request`]); measurements are cached by content hash
+//! ([`cache`]). A worker given a coordinator's address registers with it and renews the
+//! registration as a heartbeat ([`registration`]).
+
+pub mod cache;
+pub mod error;
+pub mod napping;
+pub mod pool;
+pub mod registration;
+pub mod request;
+pub mod simulator;
+
+pub use error::Error;
+pub use pool::PoolLoad;
+
+use calib_proto::v1::simulator_server::SimulatorServer;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tokio::sync::oneshot;
+use tokio::task::JoinHandle;
+use tonic::transport::server::TcpIncoming;
+
+/// Bounds on what one request may ask for.
+pub mod limits {
+    /// Largest gRPC message accepted or sent [bytes].
+    pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+    /// Most times in one grid.
+    pub const MAX_TIMES: usize = 500_000;
+    /// Most points in one Evaluate request.
+    pub const MAX_POINTS: usize = 10_000;
+    /// Latest stop time [s].
+    pub const MAX_STOP_TIME: f64 = 1e6;
+    /// Largest step budget of one simulation.
+    pub const MAX_STEPS: u64 = 10_000_000;
+}
+
+/// How a worker runs.
+#[derive(Debug, Clone)]
+pub struct WorkerConfig {
+    pub listen: SocketAddr,
+    /// Simulations at once.
+    pub slots: usize,
+    /// Simulations that may wait for a slot; beyond, requests get `RESOURCE_EXHAUSTED`.
+    pub queue_bound: usize,
+    /// Bound of the measurement cache [bytes].
+    pub cache_bytes: usize,
+    /// Coordinator to register with (its Registry service), e.g. `http://coordinator:50050`.
+    pub register: Option<String>,
+    /// URL the coordinator should dial back; default: derived from the bound address.
+    pub advertise: Option<String>,
+}
+
+impl WorkerConfig {
+    /// A worker on `listen` with one slot per core and the default bounds.
+    pub fn new(listen: SocketAddr) -> Self {
+        let slots = std::thread::available_parallelism().map_or(1, |n| n.get());
+        Self {
+            listen,
+            slots,
+            queue_bound: 64 * slots,
+            cache_bytes: 256 << 20,
+            register: None,
+            advertise: None,
+        }
+    }
+}
+
+/// A worker serving in this process.
+pub struct RunningWorker {
+    address: SocketAddr,
+    service: Arc<simulator::SimulatorService>,
+    shutdown: Option<oneshot::Sender<()>>,
+    server: JoinHandle<Result<(), tonic::transport::Error>>,
+    registration: Option<JoinHandle<()>>,
+}
+
+impl RunningWorker {
+    /// The address the server is bound to (the real port when asked for port 0).
+    pub fn address(&self) -> SocketAddr {
+        self.address
+    }
+
+    /// Load and counters of the simulation pool (simulations completed included).
+    pub fn load(&self) -> PoolLoad {
+        self.service.load()
+    }
+
+    /// Serve until the server fails.
+    pub async fn wait(mut self) -> Result<(), tonic::transport::Error> {
+        (&mut self.server)
+            .await
+            .unwrap_or_else(|e| panic!("worker server task failed: {e}"))
+    }
+
+    /// Stop accepting requests and finish those in flight.
+    pub async fn shutdown(mut self) {
+        if let Some(task) = self.registration.take() {
+            task.abort();
+        }
+        if let Some(tx) = self.shutdown.take() {
+            let _ = tx.send(());
+        }
+        let _ = (&mut self.server).await;
+    }
+}
+
+/// Bind `config.listen` and serve.
+pub async fn start_worker(config: WorkerConfig) -> std::io::Result<RunningWorker> {
+    let listener = TcpListener::bind(config.listen).await?;
+    serve_worker(listener, config)
+}
+
+/// Serve on an already bound listener (tests bind `127.0.0.1:0` first).
+pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Result<RunningWorker> {
+    let address = listener.local_addr()?;
+    let service = Arc::new(simulator::SimulatorService::new(
+        pool::SimulationPool::new(config.slots, config.queue_bound),
+        cache::MeasurementCache::new(config.cache_bytes),
+    ));
+    let (health_reporter, health) = tonic_health::server::health_reporter();
+    let reflection = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .build_v1()
+        .map_err(std::io::Error::other)?;
+    let simulator = SimulatorServer::from_arc(service.clone())
+        .max_decoding_message_size(limits::MAX_MESSAGE_BYTES)
+        .max_encoding_message_size(limits::MAX_MESSAGE_BYTES);
+    let (shutdown_tx, shutdown_rx) = oneshot::channel::<()>();
+    let incoming = TcpIncoming::from(listener)
+        .with_nodelay(Some(true))
+        .with_keepalive(Some(Duration::from_secs(30)));
+    let server = tokio::spawn(async move {
+        health_reporter
+            .set_serving::<SimulatorServer<simulator::SimulatorService>>()
+            .await;
+        tonic::transport::Server::builder()
+            .http2_keepalive_interval(Some(Duration::from_secs(10)))
+            .http2_keepalive_timeout(Some(Duration::from_secs(20)))
+            .add_service(health)
+            .add_service(reflection)
+            .add_service(simulator)
+            .serve_with_incoming_shutdown(incoming, async {
+                let _ = shutdown_rx.await;
+            })
+            .await
+    });
+    let registration = config.register.clone().map(|coordinator| {
+        let advertised = config
+            .advertise
+            .clone()
+            .unwrap_or_else(|| registration::advertised_url(address));
+        tokio::spawn(registration::heartbeat(coordinator, advertised))
+    });
+    tracing::info!(%address, slots = config.slots, queue_bound = config.queue_bound, "worker serving");
+    Ok(RunningWorker {
+        address,
+        service,
+        shutdown: Some(shutdown_tx),
+        server,
+        registration,
+    })
+}

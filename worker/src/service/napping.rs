@@ -1,0 +1,113 @@
+//! A Simulator that simulates nothing: it answers every Evaluate after a nap per point.
+//!
+//! For measuring the coordinator's dispatch without the cost of simulations, and for fault
+//! tests (a nap of `Duration::MAX` is a worker that hangs). It serves the health service
+//! and `Status` like a real worker, and refuses everything else as unimplemented.
+
+use calib_proto::v1 as proto;
+use calib_proto::v1::simulator_server::{Simulator, SimulatorServer};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::net::TcpListener;
+use tonic::{Request, Response, Status};
+
+pub struct NappingSimulator {
+    nap: Duration,
+    slots: u32,
+    requests: AtomicU64,
+}
+
+impl NappingSimulator {
+    /// Requests to Evaluate received so far.
+    pub fn requests(&self) -> u64 {
+        self.requests.load(Ordering::Relaxed)
+    }
+}
+
+/// Serve a napping worker on `listener` (on the current runtime).
+pub async fn serve_napping(
+    listener: TcpListener,
+    nap: Duration,
+    slots: u32,
+) -> Arc<NappingSimulator> {
+    let simulator = Arc::new(NappingSimulator {
+        nap,
+        slots,
+        requests: AtomicU64::new(0),
+    });
+    let (reporter, health) = tonic_health::server::health_reporter();
+    reporter
+        .set_serving::<SimulatorServer<NappingSimulator>>()
+        .await;
+    let incoming = tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true));
+    tokio::spawn(
+        tonic::transport::Server::builder()
+            .add_service(health)
+            .add_service(SimulatorServer::from_arc(simulator.clone()))
+            .serve_with_incoming(incoming),
+    );
+    simulator
+}
+
+fn unimplemented<T>() -> Result<Response<T>, Status> {
+    Err(Status::unimplemented("a napping worker only evaluates"))
+}
+
+#[tonic::async_trait]
+impl Simulator for NappingSimulator {
+    async fn list_models(
+        &self,
+        _: Request<proto::ListModelsRequest>,
+    ) -> Result<Response<proto::ListModelsResponse>, Status> {
+        unimplemented()
+    }
+
+    async fn describe(
+        &self,
+        _: Request<proto::DescribeRequest>,
+    ) -> Result<Response<proto::DescribeResponse>, Status> {
+        unimplemented()
+    }
+
+    async fn simulate(
+        &self,
+        _: Request<proto::SimulateRequest>,
+    ) -> Result<Response<proto::SimulateResponse>, Status> {
+        unimplemented()
+    }
+
+    async fn evaluate(
+        &self,
+        request: Request<proto::EvaluateRequest>,
+    ) -> Result<Response<proto::EvaluateResponse>, Status> {
+        self.requests.fetch_add(1, Ordering::Relaxed);
+        let request = request.into_inner();
+        let rounds = (request.points.len() as u32).div_ceil(self.slots.max(1));
+        tokio::time::sleep(self.nap.saturating_mul(rounds)).await;
+        let outputs = request.outputs.len();
+        Ok(Response::new(proto::EvaluateResponse {
+            results: request
+                .points
+                .iter()
+                .map(|_| proto::PointResult {
+                    objective: 1.0,
+                    sse: vec![1.0; outputs],
+                    failure: None,
+                })
+                .collect(),
+        }))
+    }
+
+    async fn status(
+        &self,
+        _: Request<proto::StatusRequest>,
+    ) -> Result<Response<proto::StatusResponse>, Status> {
+        Ok(Response::new(proto::StatusResponse {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            release: env!("CARGO_PKG_VERSION").into(),
+            slots: self.slots,
+            ..Default::default()
+        }))
+    }
+}

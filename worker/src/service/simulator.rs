@@ -1,0 +1,275 @@
+//! The `calib.v1.Simulator` handlers: decode and check, run on the simulation pool,
+//! encode. The models and the scoring do the work.
+
+use super::cache::MeasurementCache;
+use super::error::{Error, Result};
+use super::pool::{PoolLoad, SimulationPool};
+use super::request::{self, Evaluation, Simulation};
+use crate::scoring::{self, Target, FAILURE_PENALTY};
+use crate::{models, ModelInfo, SimulationError};
+use calib_proto::v1 as proto;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use tonic::{Request, Response, Status};
+
+pub struct SimulatorService {
+    pool: SimulationPool,
+    cache: MeasurementCache,
+    evaluations: AtomicU64,
+}
+
+impl SimulatorService {
+    pub fn new(pool: SimulationPool, cache: MeasurementCache) -> Self {
+        Self {
+            pool,
+            cache,
+            evaluations: AtomicU64::new(0),
+        }
+    }
+
+    pub fn load(&self) -> PoolLoad {
+        self.pool.load()
+    }
+
+    async fn simulate(&self, request: proto::SimulateRequest) -> Result<proto::SimulateResponse> {
+        let Simulation {
+            model,
+            params,
+            times,
+            outputs,
+            solver,
+        } = Simulation::try_from(request)?;
+        let admission = self.pool.admit(1)?;
+        let times = Arc::new(times);
+        let grid = times.clone();
+        let wanted = outputs.clone();
+        let handle = self
+            .pool
+            .start(&admission, move || {
+                model.simulate(&params, &grid, &wanted, &solver)
+            })
+            .await?;
+        let outcome = SimulationPool::finish(handle).await?;
+        let info = model.info();
+        let times = Arc::unwrap_or_clone(times);
+        Ok(match outcome {
+            Ok(trajectory) => proto::SimulateResponse {
+                times,
+                series: outputs
+                    .iter()
+                    .zip(trajectory.values)
+                    .map(|(&o, values)| proto::Series {
+                        output: info.outputs[o].name.clone(),
+                        values,
+                    })
+                    .collect(),
+                failure: None,
+                statistics: Some(proto::SolverStatistics {
+                    accepted_steps: trajectory.stats.accepted_steps as u64,
+                    rejected_steps: trajectory.stats.rejected_steps as u64,
+                    rhs_evaluations: trajectory.stats.rhs_evaluations as u64,
+                    events: trajectory.stats.events as u64,
+                }),
+            },
+            Err(e) => proto::SimulateResponse {
+                times,
+                series: Vec::new(),
+                failure: Some(failure(&e)),
+                statistics: None,
+            },
+        })
+    }
+
+    async fn evaluate(&self, request: proto::EvaluateRequest) -> Result<proto::EvaluateResponse> {
+        let mut evaluation = Evaluation::try_from(request)?;
+        let measured = match evaluation.measurement.take() {
+            Some(data) => self.cache.insert(evaluation.measurement_hash, data),
+            None => self
+                .cache
+                .get(&evaluation.measurement_hash)
+                .ok_or_else(|| Error::MeasurementMissing {
+                    hash: hex(&evaluation.measurement_hash),
+                })?,
+        };
+        if measured.columns.len() != evaluation.outputs.len() {
+            return Err(Error::invalid(
+                "outputs",
+                format!(
+                    "{} outputs compared with a measurement of {} columns",
+                    evaluation.outputs.len(),
+                    measured.columns.len()
+                ),
+            ));
+        }
+        let count = evaluation.points.len();
+        let admission = self.pool.admit(count)?;
+        let evaluation = Arc::new(evaluation);
+        let mut handles = Vec::with_capacity(count);
+        for i in 0..count {
+            let (evaluation, measured) = (evaluation.clone(), measured.clone());
+            let handle = self
+                .pool
+                .start(&admission, move || {
+                    let target = Target {
+                        grid: &measured.times,
+                        outputs: &evaluation.outputs,
+                        measured: &measured.columns,
+                        weights: &evaluation.weights,
+                        solver: &evaluation.solver,
+                    };
+                    scoring::simulate_and_score(
+                        evaluation.model,
+                        &evaluation.parameters(i),
+                        &target,
+                    )
+                })
+                .await?;
+            handles.push(handle);
+        }
+        let mut results = Vec::with_capacity(count);
+        for handle in handles {
+            results.push(match SimulationPool::finish(handle).await? {
+                Ok(e) => proto::PointResult {
+                    objective: e.objective,
+                    sse: e.sse,
+                    failure: e.failure.map(|message| proto::SimulationFailure {
+                        kind: proto::simulation_failure::Kind::NonFiniteOutput.into(),
+                        message,
+                        time: f64::NAN,
+                    }),
+                },
+                Err(e) => proto::PointResult {
+                    objective: FAILURE_PENALTY,
+                    sse: vec![f64::NAN; evaluation.outputs.len()],
+                    failure: Some(failure(&e)),
+                },
+            });
+        }
+        self.evaluations.fetch_add(count as u64, Ordering::Relaxed);
+        Ok(proto::EvaluateResponse { results })
+    }
+
+    fn status(&self) -> proto::StatusResponse {
+        let load = self.pool.load();
+        let (measurements, bytes) = self.cache.usage();
+        proto::StatusResponse {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            release: env!("CARGO_PKG_VERSION").into(),
+            slots: load.slots as u32,
+            queue_bound: load.queue_bound as u32,
+            running: load.running as u32,
+            queued: load.queued as u32,
+            simulations: load.completed,
+            evaluations: self.evaluations.load(Ordering::Relaxed),
+            cached_measurements: measurements as u32,
+            cached_bytes: bytes as u64,
+        }
+    }
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// A failed simulation as the protocol reports it.
+fn failure(e: &SimulationError) -> proto::SimulationFailure {
+    use proto::simulation_failure::Kind;
+    let (kind, time) = match e {
+        SimulationError::StepLimit { time, .. } => (Kind::StepLimit, *time),
+        SimulationError::StepTooSmall { time } => (Kind::StepTooSmall, *time),
+        SimulationError::Diverged { time } => (Kind::Diverged, *time),
+        SimulationError::InvalidInput(_) => (Kind::Unspecified, f64::NAN),
+    };
+    proto::SimulationFailure {
+        kind: kind.into(),
+        message: e.to_string(),
+        time,
+    }
+}
+
+pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
+    proto::ModelDescription {
+        name: info.name.clone(),
+        version: info.version,
+        description: info.description.clone(),
+        parameters: info
+            .parameters
+            .iter()
+            .map(|p| proto::ParameterDescription {
+                name: p.name.clone(),
+                unit: p.unit.clone(),
+                default_value: p.default,
+                min: p.min,
+                max: p.max,
+                description: p.description.clone(),
+            })
+            .collect(),
+        outputs: info
+            .outputs
+            .iter()
+            .map(|o| proto::OutputDescription {
+                name: o.name.clone(),
+                unit: o.unit.clone(),
+                description: o.description.clone(),
+            })
+            .collect(),
+        effects: info
+            .effects
+            .iter()
+            .map(|e| proto::ParameterDescription {
+                name: e.name.clone(),
+                unit: e.unit.clone(),
+                default_value: 0.0,
+                min: e.min,
+                max: e.max,
+                description: e.description.clone(),
+            })
+            .collect(),
+    }
+}
+
+#[tonic::async_trait]
+impl proto::simulator_server::Simulator for SimulatorService {
+    async fn list_models(
+        &self,
+        request: Request<proto::ListModelsRequest>,
+    ) -> Result<Response<proto::ListModelsResponse>, Status> {
+        request::check_protocol(request.get_ref().protocol_version)?;
+        let models = models::all().iter().map(|m| describe(m.info())).collect();
+        Ok(Response::new(proto::ListModelsResponse { models }))
+    }
+
+    async fn describe(
+        &self,
+        request: Request<proto::DescribeRequest>,
+    ) -> Result<Response<proto::DescribeResponse>, Status> {
+        let request = request.into_inner();
+        request::check_protocol(request.protocol_version)?;
+        let model = request::hosted_model(&request.model)?;
+        Ok(Response::new(proto::DescribeResponse {
+            model: Some(describe(model.info())),
+        }))
+    }
+
+    async fn simulate(
+        &self,
+        request: Request<proto::SimulateRequest>,
+    ) -> Result<Response<proto::SimulateResponse>, Status> {
+        Ok(Response::new(self.simulate(request.into_inner()).await?))
+    }
+
+    async fn evaluate(
+        &self,
+        request: Request<proto::EvaluateRequest>,
+    ) -> Result<Response<proto::EvaluateResponse>, Status> {
+        Ok(Response::new(self.evaluate(request.into_inner()).await?))
+    }
+
+    async fn status(
+        &self,
+        request: Request<proto::StatusRequest>,
+    ) -> Result<Response<proto::StatusResponse>, Status> {
+        request::check_protocol(request.get_ref().protocol_version)?;
+        Ok(Response::new(self.status()))
+    }
+}
