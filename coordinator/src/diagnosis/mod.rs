@@ -56,6 +56,10 @@ pub const NEAR_EXACT: f64 = 0.9999;
 /// Decrease of the information criterion that selects a richer model.
 pub const MIN_BIC_DECREASE: f64 = 10.0;
 
+/// A candidate whose ranking descent already removed this share of the residual starts its
+/// refit from there; below it, larger sizes of the effect are tried as starts too.
+pub const WELL_RANKED: f64 = 0.9;
+
 /// Share of the window held out when the data does not extend beyond it.
 pub const HOLDOUT_FRACTION: f64 = 0.2;
 
@@ -277,6 +281,33 @@ where
     })
 }
 
+/// Calibrate each refit campaign concurrently; the fits in the same order.
+fn refit_all<E: Evaluator + Simulator>(
+    campaigns: &[Campaign],
+    sets: &[Vec<&Candidate>],
+    engine: &E,
+    progress: &dyn Progress,
+    holdout: &Objective,
+) -> Result<Vec<Fit>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = campaigns
+            .iter()
+            .zip(sets)
+            .map(|(c, set)| {
+                scope.spawn(move || -> Result<Fit> {
+                    let calibration = calibrate(c, engine, progress)?;
+                    let names: Vec<String> = set.iter().map(|c| c.effect.clone()).collect();
+                    fit_of(&calibration, &names, engine, holdout)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect::<Result<Vec<Fit>>>()
+    })
+}
+
 /// What steps 4 to 7 conclude.
 struct Judgement {
     refits: Vec<Fit>,
@@ -306,43 +337,54 @@ fn refit_and_select<E: Evaluator + Simulator>(
         .filter(|c| c.score > 0.0)
         .take(fit_campaign.diagnosis.refit)
         .collect();
-    let mut sets: Vec<Vec<&Candidate>> = top.iter().map(|c| vec![*c]).collect();
-    for i in 0..top.len() {
-        for j in i + 1..top.len() {
-            sets.push(vec![top[i], top[j]]);
-        }
-    }
-    let refit_campaigns: Vec<Campaign> = sets
+    let singles: Vec<Vec<&Candidate>> = top.iter().map(|c| vec![*c]).collect();
+    let mut sets = singles.clone();
+    let mut refit_campaigns: Vec<Campaign> = singles
         .iter()
         .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
         .collect();
-    let refits: Vec<Fit> = std::thread::scope(|scope| {
-        let handles: Vec<_> = refit_campaigns
-            .iter()
-            .zip(&sets)
-            .map(|(c, set)| {
-                let holdout = &holdout_objective;
-                scope.spawn(move || -> Result<Fit> {
-                    let calibration = calibrate(c, engine, progress)?;
-                    let names: Vec<String> = set.iter().map(|c| c.effect.clone()).collect();
-                    fit_of(&calibration, &names, engine, holdout)
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
-            .collect::<Result<Vec<Fit>>>()
-    })?;
-    let mut refits = refits;
-    polish_singles_from_pairs(
-        &mut refits,
+    let mut refits = refit_all(
         &refit_campaigns,
-        measurement,
+        &singles,
         engine,
         progress,
         holdout_objective,
     )?;
+    // Pairs only when no single effect brings the error down to the noise: a pair cannot
+    // beat a single effect that already leaves nothing but noise.
+    let explains = |f: &Fit| {
+        f.objective <= NOISE_FACTOR * noise_floor
+            || (baseline.objective - f.objective) >= NEAR_EXACT * baseline.objective
+    };
+    if !refits.iter().any(|f| improves(f, baseline) && explains(f)) {
+        let mut pairs: Vec<Vec<&Candidate>> = Vec::new();
+        for i in 0..top.len() {
+            for j in i + 1..top.len() {
+                pairs.push(vec![top[i], top[j]]);
+            }
+        }
+        let pair_campaigns: Vec<Campaign> = pairs
+            .iter()
+            .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
+            .collect();
+        refits.extend(refit_all(
+            &pair_campaigns,
+            &pairs,
+            engine,
+            progress,
+            holdout_objective,
+        )?);
+        refit_campaigns.extend(pair_campaigns);
+        sets.extend(pairs);
+        polish_singles_from_pairs(
+            &mut refits,
+            &refit_campaigns,
+            measurement,
+            engine,
+            progress,
+            holdout_objective,
+        )?;
+    }
     for c in candidates.iter_mut() {
         c.objective = refits
             .iter()
@@ -558,10 +600,10 @@ fn refit_campaign(
     at_baseline.extend(&estimates);
     c.search.extra_starts.push(at_baseline);
     if let [single] = set {
-        // Larger sizes too: the baseline's parameters compensate for the missing effect, so
+        // Larger sizes too (unless the ranking's descent already found the effect): the baseline's parameters compensate for the missing effect, so
         // the effect's best size with them held is often far below its true size.
         let sign = if single.estimate < 0.0 { -1.0 } else { 1.0 };
-        for m in [10.0, 100.0] {
+        for m in [10.0, 100.0].iter().filter(|_| single.score < WELL_RANKED) {
             let mut start = baseline.point.clone();
             start.push(sign * m * single.centre);
             c.search.extra_starts.push(start);
