@@ -1,0 +1,129 @@
+//! Diagnosis on the heat exchanger: a slow heat-flow sensor and heat lost to the room are
+//! found in records the project's own low-fidelity model makes.
+
+mod common;
+
+use calib_coordinator::campaign::Campaign;
+use calib_coordinator::diagnosis::{diagnose, Verdict};
+use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::problem::Silent;
+use calib_worker::{models, SolverOptions};
+use common::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use std::path::Path;
+
+/// A 300 s `hx_lowfi` record with `set` applied, 50 Pa and 5 W of noise, on a 1 s grid.
+fn record(dir: &Path, set: &[(&str, f64)]) -> std::path::PathBuf {
+    let model = models::find("hx_lowfi").unwrap();
+    let info = model.info();
+    let mut p = info.default_vector();
+    for (name, v) in [("CF_RefHT", 1.5), ("CF_Refdp", 1.3)].iter().chain(set) {
+        p[info.parameter_index(name).unwrap()] = *v;
+    }
+    let grid: Vec<f64> = (0..=300).map(f64::from).collect();
+    let outputs = [
+        info.output_index("dp_ref").unwrap(),
+        info.output_index("Qdot_refTotal").unwrap(),
+    ];
+    let t = model
+        .simulate(&p, &grid, &outputs, &SolverOptions::default())
+        .unwrap();
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut noise = |sigma: f64| {
+        let u1: f64 = rng.random::<f64>().max(1e-300);
+        let u2: f64 = rng.random();
+        sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+    };
+    let mut text = String::from("time,dp_ref,Qdot_refTotal\n");
+    for (i, time) in grid.iter().enumerate() {
+        let dp = t.values[0][i] + noise(50.0);
+        let q = t.values[1][i] + noise(5.0);
+        text.push_str(&format!("{time},{dp},{q}\n"));
+    }
+    write(dir, "hx.csv", &text)
+}
+
+fn campaign(dir: &Path, data: &Path) -> std::path::PathBuf {
+    let text = format!(
+        r#"
+name = "hx_table"
+[model]
+name = "hx_lowfi"
+stop_time = 300.0
+[measurement]
+file = "{}"
+[[outputs]]
+model = "dp_ref"
+measured = "dp_ref"
+[[outputs]]
+model = "Qdot_refTotal"
+measured = "Qdot_refTotal"
+weight = 100.0
+[[parameters]]
+name = "CF_RefHT"
+nominal = 1.0
+min = 0.1
+max = 5.0
+[[parameters]]
+name = "CF_Refdp"
+nominal = 1.0
+min = 0.1
+max = 5.0
+[window]
+start = 50.0
+stop = 230.0
+[search]
+methods = ["nelder-mead"]
+starts = 1
+max_evaluations = 150
+seed = 1
+[diagnosis]
+holdout_start = 231.0
+holdout_stop = 300.0
+refit = 2
+"#,
+        data.display()
+    );
+    write(dir, "hx.toml", &text)
+}
+
+fn finds(effect: &str, value: f64) {
+    let dir = tempfile::tempdir().unwrap();
+    let data = record(dir.path(), &[(effect, value)]);
+    let c = Campaign::load(&campaign(dir.path(), &data)).unwrap();
+    let d = diagnose(&c, &LocalEvaluator, &Silent).unwrap();
+    println!(
+        "{effect}: verdict {:?}, selected {:?}, {:.4e} -> {:.4e} (floor {:.4e}), ranked {:?}, {:.1} s",
+        d.verdict,
+        d.selected,
+        d.baseline.objective,
+        d.final_fit.objective,
+        d.noise_floor,
+        d.candidates.iter().take(3).map(|c| (&c.effect, c.score)).collect::<Vec<_>>(),
+        d.elapsed.as_secs_f64()
+    );
+    assert_eq!(d.selected.first().map(String::as_str), Some(effect));
+    assert_eq!(d.verdict, Verdict::Explained);
+    let found = d
+        .final_fit
+        .parameters
+        .iter()
+        .find(|p| p.name == effect)
+        .unwrap();
+    assert!(
+        (found.value / value - 1.0).abs() < 0.1,
+        "{} vs {value}",
+        found.value
+    );
+}
+
+#[test]
+fn a_slow_heat_flow_sensor_is_found() {
+    finds("lag(Qdot_refTotal)", 8.0);
+}
+
+#[test]
+fn heat_lost_to_the_room_is_found() {
+    finds("ambient_loss", 20.0);
+}
