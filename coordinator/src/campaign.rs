@@ -663,7 +663,7 @@ fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> 
         }
     };
 
-    let mut solver = SolverOptions::default();
+    let mut solver = model.default_options();
     if let Some(s) = file.solver {
         let span = s.span();
         let s = s.into_inner();

@@ -158,7 +158,9 @@ pub fn run(args: Args) -> Outcome {
 
 /// One 300 s simulation of each heat-exchanger model, both calibrated outputs on a 1 s grid.
 fn hx(repeat: usize) -> Outcome {
-    let options = SolverOptions::default();
+    let options = models::find("hx_lowfi")
+        .expect("the hx models are hosted")
+        .default_options();
     let grid: Vec<f64> = (0..=300).map(f64::from).collect();
     println!(
         "heat exchanger, one 300 s simulation (rtol {:e}, dp_ref and Qdot_refTotal, 301 output points):",

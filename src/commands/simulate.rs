@@ -1,5 +1,5 @@
 use super::{Failure, Outcome};
-use calib_worker::{models, SolverOptions};
+use calib_worker::models;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::io::Write;
@@ -21,9 +21,9 @@ pub struct Args {
     /// Outputs to write, comma separated (default: all).
     #[arg(long, value_delimiter = ',')]
     outputs: Vec<String>,
-    /// Relative tolerance of the ODE solver.
-    #[arg(long, default_value_t = SolverOptions::default().rtol)]
-    rtol: f64,
+    /// Relative tolerance of the ODE solver [default: the model's calibration tolerance].
+    #[arg(long)]
+    rtol: Option<f64>,
     /// Add white Gaussian noise to an output: NAME=SIGMA in the output's unit (repeatable),
     /// to make a synthetic record.
     #[arg(long = "noise", value_name = "NAME=SIGMA")]
@@ -89,11 +89,13 @@ pub fn run(args: Args) -> Outcome {
             args.step
         )));
     }
-    if !(args.rtol > 0.0 && args.rtol < 1.0) {
-        return Err(Failure::input(format!(
-            "--rtol {}: must be in (0, 1)",
-            args.rtol
-        )));
+    let mut options = model.default_options();
+    if let Some(rtol) = args.rtol {
+        if !(rtol > 0.0 && rtol < 1.0) {
+            return Err(Failure::input(format!("--rtol {rtol}: must be in (0, 1)")));
+        }
+        options.rtol = rtol;
+        options.atol = rtol * 1e-2;
     }
     let outputs: Vec<usize> = if args.outputs.is_empty() {
         (0..info.outputs.len()).collect()
@@ -112,11 +114,6 @@ pub fn run(args: Args) -> Outcome {
     };
     let n = (args.stop / args.step + 1e-9).floor() as usize;
     let grid: Vec<f64> = (0..=n).map(|i| i as f64 * args.step).collect();
-    let options = SolverOptions {
-        rtol: args.rtol,
-        atol: args.rtol * 1e-2,
-        ..SolverOptions::default()
-    };
     let mut noise = vec![0.0; outputs.len()];
     for assignment in &args.noise {
         let Some((name, sigma)) = assignment.split_once('=') else {

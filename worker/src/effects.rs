@@ -91,6 +91,10 @@ impl<M: Model> Model for WithOutputEffects<M> {
         &self.info
     }
 
+    fn default_options(&self) -> SolverOptions {
+        self.inner.default_options()
+    }
+
     fn simulate(
         &self,
         params: &[f64],

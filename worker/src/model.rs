@@ -194,6 +194,12 @@ pub enum SimulationError {
 pub trait Model: Send + Sync {
     fn info(&self) -> &ModelInfo;
 
+    /// The accuracy a calibration of this model needs: tight enough that the solver's error
+    /// stays far below what sensors resolve, no tighter. Campaigns may override it.
+    fn default_options(&self) -> SolverOptions {
+        SolverOptions::default()
+    }
+
     /// Simulate with the full parameter vector `params` (base parameters then effects,
     /// see [`ModelInfo::full_len`]) from t = 0 and return the outputs listed in
     /// `outputs` (indices into [`ModelInfo::outputs`]) at the times of `grid`
