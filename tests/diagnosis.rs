@@ -9,7 +9,7 @@ use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Silent;
 use calib_worker::{models, SolverOptions};
 use common::*;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 
@@ -122,11 +122,7 @@ fn record(dir: &Path, set: &[(&str, f64)], disturb: impl Fn(f64) -> f64) -> std:
         .simulate(&p, &grid, &[0, 1], &SolverOptions::default())
         .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
-    let mut noise = || {
-        let u1: f64 = rng.random::<f64>().max(1e-300);
-        let u2: f64 = rng.random();
-        0.002 * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    };
+    let mut noise = || gaussian(&mut rng, 0.002);
     let mut text = String::from("time_s,arm_angle_rad,pendulum_angle_rad\n");
     for (i, time) in grid.iter().enumerate() {
         let a = t.values[0][i] + disturb(*time) + noise();

@@ -9,7 +9,7 @@ use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Silent;
 use calib_worker::{models, SolverOptions};
 use common::*;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 
@@ -30,11 +30,7 @@ fn record(dir: &Path, set: &[(&str, f64)]) -> std::path::PathBuf {
         .simulate(&p, &grid, &outputs, &SolverOptions::default())
         .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
-    let mut noise = |sigma: f64| {
-        let u1: f64 = rng.random::<f64>().max(1e-300);
-        let u2: f64 = rng.random();
-        sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-    };
+    let mut noise = |sigma: f64| gaussian(&mut rng, sigma);
     let mut text = String::from("time,dp_ref,Qdot_refTotal\n");
     for (i, time) in grid.iter().enumerate() {
         let dp = t.values[0][i] + noise(50.0);

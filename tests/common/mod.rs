@@ -144,3 +144,12 @@ pub fn await_condition(
         std::thread::sleep(std::time::Duration::from_millis(10));
     }
 }
+
+/// A draw of zero-mean Gaussian noise of standard deviation `sigma` (Box–Muller), for
+/// synthetic records made by the project's own models.
+pub fn gaussian(rng: &mut rand_chacha::ChaCha8Rng, sigma: f64) -> f64 {
+    use rand::Rng;
+    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
+    let u2: f64 = rng.random();
+    sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
