@@ -117,10 +117,10 @@ fn a_registered_worker_serves_the_coordinator() {
         dispatch.probe_interval = Duration::from_millis(100);
         let coordinator = calib_coordinator::server::serve_coordinator(
             listener,
-            calib_coordinator::server::CoordinatorConfig {
-                listen: "127.0.0.1:0".parse().unwrap(),
+            calib_coordinator::server::CoordinatorConfig::new(
+                "127.0.0.1:0".parse().unwrap(),
                 dispatch,
-            },
+            ),
         )
         .unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
