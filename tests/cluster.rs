@@ -117,10 +117,10 @@ fn a_registered_worker_serves_the_coordinator() {
         dispatch.probe_interval = Duration::from_millis(100);
         let coordinator = calib_coordinator::server::serve_coordinator(
             listener,
-            calib_coordinator::server::CoordinatorConfig {
-                listen: "127.0.0.1:0".parse().unwrap(),
+            calib_coordinator::server::CoordinatorConfig::new(
+                "127.0.0.1:0".parse().unwrap(),
                 dispatch,
-            },
+            ),
         )
         .unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -267,4 +267,69 @@ fn the_test_cluster_binds_distinct_ports_and_kill_closes_one() {
         || std::net::TcpStream::connect(address).is_err(),
     );
     assert!(std::net::TcpStream::connect(cluster.workers[0].address()).is_ok());
+}
+
+/// The viscous-arm example with two starts, its measurement path made absolute.
+fn small_diagnosis(dir: &std::path::Path) -> Campaign {
+    let text = std::fs::read_to_string(repo().join("examples/furuta_viscous_arm.toml"))
+        .unwrap()
+        .replace("starts = 4", "starts = 2")
+        .replace(
+            "file = \"data/furuta_viscous_arm.csv\"",
+            &format!(
+                "file = \"{}\"",
+                repo()
+                    .join("examples/data/furuta_viscous_arm.csv")
+                    .display()
+            ),
+        );
+    Campaign::load(&write(dir, "viscous.toml", &text)).unwrap()
+}
+
+#[test]
+fn a_diagnosis_on_the_cluster_equals_the_local_one() {
+    use calib_coordinator::diagnosis::diagnose;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = small_diagnosis(dir.path());
+    let local = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let remote_result = diagnose(&campaign, &remote.evaluator(), &Silent).unwrap();
+
+    // `Simulate` runs the same model call on the same parameters, grid, outputs and solver
+    // settings as `Objective::simulate`: everything agrees bit for bit.
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(local.selected, remote_result.selected);
+    assert_eq!(local.verdict, remote_result.verdict);
+    let ranking = |d: &calib_coordinator::diagnosis::Diagnosis| {
+        d.candidates
+            .iter()
+            .map(|c| {
+                (
+                    c.effect.clone(),
+                    c.score.to_bits(),
+                    c.objective.map(f64::to_bits),
+                )
+            })
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(ranking(&local), ranking(&remote_result));
+    for (a, b) in [
+        (&local.baseline, &remote_result.baseline),
+        (&local.final_fit, &remote_result.final_fit),
+    ] {
+        assert_eq!(a.objective.to_bits(), b.objective.to_bits());
+        assert_eq!(
+            a.held_out_objective.to_bits(),
+            b.held_out_objective.to_bits()
+        );
+        assert_eq!(bits(&a.point), bits(&b.point));
+        assert_eq!(bits(&a.rms), bits(&b.rms));
+    }
+    let simulations: Vec<u64> = cluster.workers.iter().map(|w| w.simulations()).collect();
+    println!(
+        "selected {:?}, objective {:.4e} -> {:.4e}; per worker {simulations:?}",
+        remote_result.selected, remote_result.baseline.objective, remote_result.final_fit.objective
+    );
+    assert!(simulations.iter().all(|&s| s > 0), "{simulations:?}");
 }

@@ -93,13 +93,25 @@ pub fn resume_unfinished<E: Evaluator>(
     progress: &dyn Progress,
 ) -> Result<Vec<Calibration>> {
     let mut resumed = Vec::new();
+    resume_unfinished_each(store, evaluator, progress, |c| resumed.push(c))?;
+    Ok(resumed)
+}
+
+/// [`resume_unfinished`], handing each campaign to `finished` as soon as it is done (a
+/// long-lived coordinator reports one campaign without waiting for the others).
+pub fn resume_unfinished_each<E: Evaluator>(
+    store: &dyn Store,
+    evaluator: &E,
+    progress: &dyn Progress,
+    mut finished: impl FnMut(Calibration),
+) -> Result<()> {
     for (id, record) in store.campaigns()? {
         if record.status != CampaignStatus::Running {
             continue;
         }
         tracing::info!(campaign = %record.name, id = %hex(&id), "resuming campaign");
         match resume(store, &id, &record, evaluator, progress) {
-            Ok(calibration) => resumed.push(calibration),
+            Ok(calibration) => finished(calibration),
             Err(Error::Store(e)) => return Err(Error::Store(e)),
             Err(e) => {
                 tracing::warn!(campaign = %record.name, error = %e, "cannot resume campaign");
@@ -107,7 +119,7 @@ pub fn resume_unfinished<E: Evaluator>(
             }
         }
     }
-    Ok(resumed)
+    Ok(())
 }
 
 fn resume<E: Evaluator>(

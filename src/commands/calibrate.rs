@@ -1,7 +1,6 @@
 use super::{Failure, Outcome};
 use calib_coordinator::calibration;
 use calib_coordinator::campaign::Campaign;
-use calib_coordinator::dispatch::{self, DispatchConfig, RemoteWorkers};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
 use calib_coordinator::report;
@@ -115,28 +114,15 @@ pub fn run(args: Args) -> Outcome {
     let progress: &dyn Progress = if lines { &line_progress } else { &bar };
     let result = match &args.workers.workers {
         None => calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, progress),
-        Some(list) => {
-            let addresses =
-                dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
-            let config = args.workers.apply(DispatchConfig::new(addresses));
-            let wait = config.wait_for_workers;
-            let workers = RemoteWorkers::connect(config)?;
-            if !workers.wait_until_up(1, wait) {
-                bar.bar.finish_and_clear();
-                let states: Vec<String> = workers
-                    .pool()
-                    .workers()
-                    .iter()
-                    .map(|w| format!("{} ({:?})", w.url, w.health))
-                    .collect();
-                return Err(Failure::internal(format!(
-                    "no worker up after {:.0} s: {}",
-                    wait.as_secs_f64(),
-                    states.join(", ")
-                )));
+        Some(list) => match args.workers.connect(list) {
+            Ok(workers) => {
+                calibration::calibrate_with_store(&campaign, workers.evaluator(), &store, progress)
             }
-            calibration::calibrate_with_store(&campaign, workers.evaluator(), &store, progress)
-        }
+            Err(failure) => {
+                bar.bar.finish_and_clear();
+                return Err(failure);
+            }
+        },
     };
     bar.bar.finish_and_clear();
     report_result(&args, &campaign, &result?)

@@ -2,6 +2,7 @@ use super::{Failure, Outcome};
 use calib_coordinator::dispatch::{self, DispatchConfig};
 use calib_coordinator::server::{self, CoordinatorConfig};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -10,6 +11,17 @@ pub struct Args {
     listen: SocketAddr,
     #[command(flatten)]
     workers: super::WorkersArgs,
+    /// Evaluation store (a folder, as for `calib calibrate --db`). Campaigns it holds
+    /// unfinished (their `calib calibrate` or coordinator was killed) are resumed on the
+    /// workers as soon as the coordinator is up, replaying every stored evaluation instead of
+    /// simulating it again.
+    #[arg(long, value_name = "DIR")]
+    db: Option<PathBuf>,
+    /// Folder for the results of resumed campaigns: result.json and the plots of each in
+    /// DIR/<campaign name>/ [default: results/<campaign name>/ beside each campaign file,
+    /// where `calib calibrate` puts them].
+    #[arg(long, value_name = "DIR", requires = "db")]
+    out: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -19,10 +31,12 @@ pub fn run(args: Args) -> Outcome {
         }
         None => Vec::new(),
     };
-    let config = CoordinatorConfig {
-        listen: args.listen,
-        dispatch: args.workers.apply(DispatchConfig::new(addresses)),
-    };
+    let mut config = CoordinatorConfig::new(
+        args.listen,
+        args.workers.apply(DispatchConfig::new(addresses)),
+    );
+    config.store = args.db;
+    config.results = args.out;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let coordinator = server::start_coordinator(config).await?;

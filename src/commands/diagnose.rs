@@ -18,6 +18,9 @@ pub struct Args {
     /// Print diagnosis.json to standard output instead of the summary.
     #[arg(long)]
     json: bool,
+    /// Spread the calibrations and the simulations of the diagnosis over workers.
+    #[command(flatten)]
+    workers: super::WorkersArgs,
 }
 
 /// A spinner counting evaluations, drawn only on a terminal.
@@ -31,6 +34,10 @@ impl Progress for Spinner {
 
 pub fn run(args: Args) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let workers = match &args.workers.workers {
+        Some(list) => Some(args.workers.connect(list)?),
+        None => None,
+    };
     let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
     bar.set_style(
         ProgressStyle::with_template("{spinner} {elapsed_precise} {pos} evaluations {msg}")
@@ -39,7 +46,10 @@ pub fn run(args: Args) -> Outcome {
     bar.set_message("calibrating, ranking candidate effects, refitting");
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let spinner = Spinner(bar);
-    let result = diagnosis::diagnose(&campaign, &LocalEvaluator, &spinner);
+    let result = match &workers {
+        Some(workers) => diagnosis::diagnose(&campaign, &workers.evaluator(), &spinner),
+        None => diagnosis::diagnose(&campaign, &LocalEvaluator, &spinner),
+    };
     spinner.0.finish_and_clear();
     let d = result?;
     let out = args.out.unwrap_or_else(|| {

@@ -73,6 +73,33 @@ pub struct WorkersArgs {
 }
 
 impl WorkersArgs {
+    /// Connect to the workers of `list` and wait for one to be up (`--wait-for-workers`).
+    pub fn connect(
+        &self,
+        list: &str,
+    ) -> Result<calib_coordinator::dispatch::RemoteWorkers, Failure> {
+        use calib_coordinator::dispatch::{self, DispatchConfig, RemoteWorkers};
+        let addresses =
+            dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
+        let config = self.apply(DispatchConfig::new(addresses));
+        let wait = config.wait_for_workers;
+        let workers = RemoteWorkers::connect(config)?;
+        if !workers.wait_until_up(1, wait) {
+            let states: Vec<String> = workers
+                .pool()
+                .workers()
+                .iter()
+                .map(|w| format!("{} ({:?})", w.url, w.health))
+                .collect();
+            return Err(Failure::internal(format!(
+                "no worker up after {:.0} s: {}",
+                wait.as_secs_f64(),
+                states.join(", ")
+            )));
+        }
+        Ok(workers)
+    }
+
     pub fn apply(
         &self,
         mut config: calib_coordinator::dispatch::DispatchConfig,

@@ -48,6 +48,12 @@ impl TestWorker {
         self.worker.load().completed
     }
 
+    /// True when no simulation runs or waits (those of a client that went away included).
+    pub fn is_idle(&self) -> bool {
+        let load = self.worker.load();
+        load.running == 0 && load.queued == 0
+    }
+
     /// Stop the worker abruptly: its runtime goes, and with it every connection.
     pub fn kill(&mut self) {
         if let Some(runtime) = self.runtime.take() {
@@ -76,6 +82,35 @@ impl TestCluster {
         Self {
             workers: (0..count).map(|_| TestWorker::start(slots, 64)).collect(),
         }
+    }
+
+    /// `--workers` for the `calib` binary: every worker of the cluster.
+    pub fn workers_arg(&self) -> String {
+        let urls: Vec<String> = self.workers.iter().map(|w| w.url()).collect();
+        urls.join(",")
+    }
+
+    /// Simulations completed by all workers together.
+    pub fn simulations(&self) -> u64 {
+        self.workers.iter().map(|w| w.simulations()).sum()
+    }
+
+    /// Wait until every worker is idle, and return the simulations they completed.
+    pub fn settled_simulations(&self) -> u64 {
+        // Idle at two polls in a row with the same count: a simulation that just left its
+        // slot is counted.
+        let mut last = None;
+        super::await_condition(
+            "the workers to finish what they were given",
+            Duration::from_secs(60),
+            || {
+                let now = self.simulations();
+                let settled = self.workers.iter().all(|w| w.is_idle()) && last == Some(now);
+                last = Some(now);
+                settled
+            },
+        );
+        self.simulations()
     }
 
     /// Dispatch settings for tests: every worker of the cluster, quick probes.

@@ -1,6 +1,7 @@
 //! One worker as the dispatcher sees it: prost types stop here.
 
 use super::error::WorkerError;
+use crate::evaluator::Outputs;
 use crate::objective::{Evaluation, Objective};
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
@@ -79,6 +80,68 @@ impl WireObjective {
             measurement,
             outputs: objective.outputs.len(),
         }
+    }
+}
+
+/// A simulation of an objective's mapped outputs on its grid, in the form workers take it:
+/// each point becomes one `Simulate` request with every parameter set by name, so that the
+/// worker simulates exactly what [`Objective::simulate`] would, bit for bit.
+pub struct WireSimulation {
+    /// Everything but the parameters.
+    pub template: proto::SimulateRequest,
+    /// Name of each entry of the full parameter vector.
+    names: Vec<String>,
+    /// The full parameter vector and where the free entries go, as in the objective.
+    base: Vec<f64>,
+    free: Vec<usize>,
+}
+
+impl WireSimulation {
+    pub fn new(objective: &Objective) -> Self {
+        let info = objective.model.info();
+        let template = proto::SimulateRequest {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            model: info.name.clone(),
+            parameters: Vec::new(),
+            times: objective.grid.clone(),
+            outputs: objective
+                .outputs
+                .iter()
+                .map(|&o| info.outputs[o].name.clone())
+                .collect(),
+            solver: Some(proto::SolverOptions {
+                rtol: objective.solver.rtol,
+                atol: objective.solver.atol,
+                max_steps: objective.solver.max_steps as u64,
+            }),
+        };
+        Self {
+            template,
+            names: (0..objective.base.len())
+                .map(|i| info.name_at(i).to_string())
+                .collect(),
+            base: objective.base.clone(),
+            free: objective.free.clone(),
+        }
+    }
+
+    /// The request for the free parameters at `point`.
+    fn request(&self, point: &[f64]) -> proto::SimulateRequest {
+        let mut full = self.base.clone();
+        for (&i, &value) in self.free.iter().zip(point) {
+            full[i] = value;
+        }
+        let mut request = self.template.clone();
+        request.parameters = self
+            .names
+            .iter()
+            .zip(full)
+            .map(|(name, value)| proto::ParameterValue {
+                name: name.clone(),
+                value,
+            })
+            .collect();
+        request
     }
 }
 
@@ -181,6 +244,33 @@ impl WorkerClient {
                 },
             })
             .collect())
+    }
+
+    /// The mapped outputs of `simulation` at `point`; a failed simulation is an `Err` of
+    /// the outputs, not of the call.
+    pub async fn simulate(
+        &self,
+        simulation: &WireSimulation,
+        point: &[f64],
+        deadline: Duration,
+    ) -> Result<Outputs, WorkerError> {
+        let mut request = tonic::Request::new(simulation.request(point));
+        request.set_timeout(deadline);
+        let answer = self.simulator.clone().simulate(request).await?.into_inner();
+        if let Some(failure) = answer.failure {
+            return Ok(Err(failure.message));
+        }
+        let (outputs, times) = (
+            simulation.template.outputs.len(),
+            simulation.template.times.len(),
+        );
+        if answer.series.len() != outputs || answer.series.iter().any(|s| s.values.len() != times) {
+            return Err(WorkerError::Malformed(format!(
+                "{} series for {outputs} outputs of {times} times",
+                answer.series.len()
+            )));
+        }
+        Ok(Ok(answer.series.into_iter().map(|s| s.values).collect()))
     }
 
     async fn call(

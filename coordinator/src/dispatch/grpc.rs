@@ -1,4 +1,4 @@
-//! [`GrpcEvaluator`]: evaluations spread over the pool's workers.
+//! [`GrpcEvaluator`]: evaluations and simulations spread over the pool's workers.
 //!
 //! A batch is cut into chunks of at most one point per slot of a worker, up to two chunks
 //! per worker at once (one running, one waiting in the worker's queue, so that no slot idles
@@ -7,17 +7,23 @@
 //! worker, and the worker is probed back in later; a chunk the worker rejects as invalid is
 //! never retried: its points fail with the worker's reason.
 //!
-//! [`Evaluator::evaluate`] is synchronous and called from many run threads at once; each
-//! call drives its batch on the pool's tokio runtime with [`Handle::block_on`].
+//! Evaluations go as one `Evaluate` request per chunk ([`WireObjective`]); simulations,
+//! whose outputs the diagnosis needs, as one `Simulate` request per point of the chunk, all
+//! at once ([`WireSimulation`]). Both take the same path through the pool.
+//!
+//! [`Evaluator::evaluate`] and [`Simulator::simulate`] are synchronous and called from many
+//! run threads at once; each call drives its batch on the pool's tokio runtime with
+//! [`Handle::block_on`].
 
-use super::client::WireObjective;
+use super::client::{WireObjective, WireSimulation, WorkerClient};
 use super::error::WorkerError;
 use super::pool::{Lease, WorkerPool};
-use crate::evaluator::Evaluator;
+use crate::evaluator::{Evaluator, Outputs, Simulator};
 use crate::objective::{Evaluation, Objective};
 use std::collections::{HashMap, VecDeque};
+use std::future::Future;
 use std::sync::{Arc, Mutex};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 use tokio::runtime::Handle;
 use tokio::task::JoinSet;
 
@@ -61,25 +67,104 @@ impl Evaluator for GrpcEvaluator {
     }
 }
 
-/// What one chunk came back with.
-struct ChunkOutcome {
-    lease: Lease,
-    indices: Vec<usize>,
-    result: Result<Vec<Evaluation>, WorkerError>,
+impl Simulator for GrpcEvaluator {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
+        if points.is_empty() {
+            return Vec::new();
+        }
+        let wire = Arc::new(WireSimulation::new(objective));
+        self.runtime
+            .block_on(dispatch(self.pool.clone(), wire, points.to_vec()))
+    }
 }
 
-/// Evaluate `points` on the pool's workers, retrying what failed elsewhere.
-pub async fn dispatch(
+/// A kind of work a batch is made of: how one worker is asked for a chunk of points, and
+/// what a point answers when it cannot be done.
+pub trait Work: Send + Sync + 'static {
+    type Answer: Send + 'static;
+
+    /// Ask `client` for `points`: one answer each, in order.
+    fn ask(
+        self: Arc<Self>,
+        client: WorkerClient,
+        points: Vec<Vec<f64>>,
+        deadline: Duration,
+    ) -> impl Future<Output = Result<Vec<Self::Answer>, WorkerError>> + Send;
+
+    /// The answer of a point given up for `reason`.
+    fn failed(&self, reason: String) -> Self::Answer;
+}
+
+impl Work for WireObjective {
+    type Answer = Evaluation;
+
+    async fn ask(
+        self: Arc<Self>,
+        client: WorkerClient,
+        points: Vec<Vec<f64>>,
+        deadline: Duration,
+    ) -> Result<Vec<Evaluation>, WorkerError> {
+        client.evaluate(&self, points, deadline).await
+    }
+
+    fn failed(&self, reason: String) -> Evaluation {
+        Evaluation::failed(self.outputs, reason)
+    }
+}
+
+impl Work for WireSimulation {
+    type Answer = Outputs;
+
+    /// Every point of the chunk at once, one request each: the chunk holds at most as many
+    /// points as the worker has slots (twice, with the chunk queued behind it).
+    async fn ask(
+        self: Arc<Self>,
+        client: WorkerClient,
+        points: Vec<Vec<f64>>,
+        deadline: Duration,
+    ) -> Result<Vec<Outputs>, WorkerError> {
+        let count = points.len();
+        let mut requests = JoinSet::new();
+        for (i, point) in points.into_iter().enumerate() {
+            let (wire, client) = (self.clone(), client.clone());
+            requests.spawn(async move { (i, client.simulate(&wire, &point, deadline).await) });
+        }
+        let mut answers: Vec<Option<Outputs>> = (0..count).map(|_| None).collect();
+        while let Some(joined) = requests.join_next().await {
+            let (i, answer) = joined.map_err(|e| WorkerError::Unavailable(e.to_string()))?;
+            // The first failure fails the chunk; dropping the set cancels the others.
+            answers[i] = Some(answer?);
+        }
+        Ok(answers
+            .into_iter()
+            .map(|a| a.expect("every point answered"))
+            .collect())
+    }
+
+    fn failed(&self, reason: String) -> Outputs {
+        Err(reason)
+    }
+}
+
+/// What one chunk came back with.
+struct ChunkOutcome<A> {
+    lease: Lease,
+    indices: Vec<usize>,
+    result: Result<Vec<A>, WorkerError>,
+}
+
+/// Do `work` at `points` on the pool's workers, retrying what failed elsewhere.
+pub async fn dispatch<W: Work>(
     pool: Arc<WorkerPool>,
-    objective: Arc<WireObjective>,
+    work: Arc<W>,
     points: Vec<Vec<f64>>,
-) -> Vec<Evaluation> {
+) -> Vec<W::Answer> {
     let config = pool.config().clone();
-    let mut answers: Vec<Option<Evaluation>> = vec![None; points.len()];
+    let mut answers: Vec<Option<W::Answer>> = (0..points.len()).map(|_| None).collect();
     let mut attempts = vec![0u32; points.len()];
     let mut last_error: Vec<Option<String>> = vec![None; points.len()];
     let mut pending: VecDeque<usize> = (0..points.len()).collect();
-    let mut in_flight: JoinSet<ChunkOutcome> = JoinSet::new();
+    let mut in_flight: JoinSet<ChunkOutcome<W::Answer>> = JoinSet::new();
     let mut idle_since: Option<Instant> = None;
     let points = Arc::new(points);
 
@@ -91,10 +176,10 @@ pub async fn dispatch(
         for lease in pool.acquire(pending.len()) {
             let indices: Vec<usize> = pending.drain(..lease.points).collect();
             let chunk: Vec<Vec<f64>> = indices.iter().map(|&i| points[i].clone()).collect();
-            let objective = objective.clone();
+            let work = work.clone();
             let deadline = config.deadline;
             in_flight.spawn(async move {
-                let result = lease.client.evaluate(&objective, chunk, deadline).await;
+                let result = work.ask(lease.client.clone(), chunk, deadline).await;
                 ChunkOutcome {
                     lease,
                     indices,
@@ -113,7 +198,7 @@ pub async fn dispatch(
                 tracing::error!(points = pending.len(), "{why}");
                 for i in pending.drain(..) {
                     let reason = last_error[i].clone().unwrap_or_else(|| why.clone());
-                    answers[i] = Some(Evaluation::failed(objective.outputs, reason));
+                    answers[i] = Some(work.failed(reason));
                 }
                 break;
             }
@@ -136,9 +221,9 @@ pub async fn dispatch(
             Err(e) => panic!("dispatch task failed: {e}"),
         };
         match result {
-            Ok(evaluations) => {
+            Ok(done) => {
                 pool.release(&lease, indices.len());
-                for (i, e) in indices.into_iter().zip(evaluations) {
+                for (i, e) in indices.into_iter().zip(done) {
                     answers[i] = Some(e);
                 }
             }
@@ -146,10 +231,10 @@ pub async fn dispatch(
                 pool.release(&lease, 0);
                 tracing::warn!(worker = %lease.client.url(), %reason, "worker rejected a request");
                 for i in indices {
-                    answers[i] = Some(Evaluation::failed(
-                        objective.outputs,
-                        format!("rejected by worker {}: {reason}", lease.client.url()),
-                    ));
+                    answers[i] = Some(work.failed(format!(
+                        "rejected by worker {}: {reason}",
+                        lease.client.url()
+                    )));
                 }
             }
             Err(error) => {
@@ -165,14 +250,11 @@ pub async fn dispatch(
                     attempts[i] += 1;
                     last_error[i] = Some(format!("{}: {error}", lease.client.url()));
                     if attempts[i] >= config.max_attempts {
-                        answers[i] = Some(Evaluation::failed(
-                            objective.outputs,
-                            format!(
-                                "gave up after {} attempts, last: {}",
-                                attempts[i],
-                                last_error[i].as_deref().unwrap_or_default()
-                            ),
-                        ));
+                        answers[i] = Some(work.failed(format!(
+                            "gave up after {} attempts, last: {}",
+                            attempts[i],
+                            last_error[i].as_deref().unwrap_or_default()
+                        )));
                     } else {
                         pending.push_front(i);
                     }

@@ -13,7 +13,7 @@ pub mod registry;
 
 pub use discovery::{parse_list, WorkerAddress};
 pub use error::WorkerError;
-pub use grpc::GrpcEvaluator;
+pub use grpc::{GrpcEvaluator, Work};
 pub use pool::{Health, WorkerPool, WorkerView};
 
 use crate::error::{Error, Result};

@@ -1,11 +1,16 @@
 //! The coordinator's gRPC server: health, reflection and the worker Registry, over a pool
-//! of workers kept alive for campaigns.
+//! of workers kept alive for campaigns. Given an evaluation store, it finishes the campaigns
+//! a previous coordinator left unfinished ([`resume`]).
+
+pub mod resume;
 
 use crate::dispatch::registry::RegistryService;
-use crate::dispatch::{self, DispatchConfig, WorkerPool};
+use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
 use crate::error::{Error, Result};
+use crate::store::SledStore;
 use calib_proto::v1::registry_server::RegistryServer;
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use tokio::net::TcpListener;
 use tokio::sync::oneshot;
@@ -17,6 +22,24 @@ use tonic::transport::server::TcpIncoming;
 pub struct CoordinatorConfig {
     pub listen: SocketAddr,
     pub dispatch: DispatchConfig,
+    /// Evaluation store (a folder): the campaigns it holds unfinished are resumed on the
+    /// workers once the server is up.
+    pub store: Option<PathBuf>,
+    /// Folder for the results of resumed campaigns, one `<name>/` each [default:
+    /// `results/<name>/` beside each campaign file].
+    pub results: Option<PathBuf>,
+}
+
+impl CoordinatorConfig {
+    /// Serve on `listen` over the workers of `dispatch`, without a store.
+    pub fn new(listen: SocketAddr, dispatch: DispatchConfig) -> Self {
+        Self {
+            listen,
+            dispatch,
+            store: None,
+            results: None,
+        }
+    }
 }
 
 /// A coordinator serving in this process.
@@ -25,6 +48,7 @@ pub struct RunningCoordinator {
     pool: Arc<WorkerPool>,
     shutdown: Option<oneshot::Sender<()>>,
     server: JoinHandle<std::result::Result<(), tonic::transport::Error>>,
+    resume: Option<JoinHandle<Result<usize>>>,
 }
 
 impl RunningCoordinator {
@@ -35,6 +59,17 @@ impl RunningCoordinator {
     /// The workers this coordinator dispatches to.
     pub fn pool(&self) -> &Arc<WorkerPool> {
         &self.pool
+    }
+
+    /// Wait until the unfinished campaigns of the store are finished; how many there were
+    /// (0 without a store, and on every call after the first).
+    pub async fn resumed(&mut self) -> Result<usize> {
+        match self.resume.take() {
+            Some(task) => task
+                .await
+                .map_err(|e| Error::Dispatch(format!("resume task failed: {e}")))?,
+            None => Ok(0),
+        }
     }
 
     /// Serve until the server fails.
@@ -69,6 +104,11 @@ pub fn serve_coordinator(
     let address = listener
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
+    // Open the store first: one held by another process stops the coordinator at once.
+    let store = match &config.store {
+        Some(path) => Some(SledStore::open(path)?),
+        None => None,
+    };
     let pool = dispatch::start_pool(config.dispatch.clone())?;
     let registry = RegistryServer::new(RegistryService::new(
         pool.clone(),
@@ -96,10 +136,24 @@ pub fn serve_coordinator(
             .await
     });
     tracing::info!(%address, "coordinator serving");
+    let resume = store.map(|store| {
+        let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
+        let results = config.results.clone();
+        // Campaigns block for as long as they run: on a thread of their own.
+        tokio::task::spawn_blocking(move || {
+            let resumed = resume::resume_campaigns(&store, &evaluator, results.as_deref());
+            match &resumed {
+                Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
+                Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
+            }
+            resumed
+        })
+    });
     Ok(RunningCoordinator {
         address,
         pool,
         shutdown: Some(shutdown_tx),
         server,
+        resume,
     })
 }

@@ -1,0 +1,246 @@
+//! A campaign on workers whose coordinator is killed with SIGKILL: rerun, or picked up by a
+//! long-lived `calib coordinator --db`, it finishes with the uninterrupted result, and the
+//! workers simulate no stored evaluation again.
+
+mod common;
+
+use calib_coordinator::store::{CampaignStatus, SledStore, Store};
+use common::cluster::*;
+use common::*;
+use serde_json::Value;
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Runs of the long campaign (one method, two starts) and its population (`max(15, 10 n)`
+/// for two free parameters): each run has at most one generation in flight.
+const RUNS: u64 = 2;
+const POPULATION: u64 = 20;
+
+/// A campaign that runs for a few seconds: differential evolution from two starts.
+fn long_campaign(dir: &Path) -> PathBuf {
+    let search =
+        "methods = [\"differential-evolution\"]\nstarts = 2\nmax_evaluations = 1500\nseed = 5";
+    write(dir, "long.toml", &clean_campaign(search))
+}
+
+/// `calib calibrate` on the cluster's workers, to completion; result.json.
+fn calibrate_on(cluster: &TestCluster, campaign: &Path, db: &Path, out: &Path) -> Value {
+    json_of(&calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--workers",
+        &cluster.workers_arg(),
+        "--json",
+    ]))
+}
+
+/// Start `calib calibrate` on the cluster's workers and SIGKILL it once it has reported
+/// `enough` evaluations (each one stored before it is reported).
+fn interrupt(cluster: &TestCluster, campaign: &Path, db: &Path, enough: u64) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args([
+            "calibrate",
+            campaign.to_str().unwrap(),
+            "--db",
+            db.to_str().unwrap(),
+            "--workers",
+            &cluster.workers_arg(),
+        ])
+        .env("CALIB_PROGRESS", "lines")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let reported = Arc::new(AtomicU64::new(0));
+    let reader = {
+        let reported = reported.clone();
+        let stderr = child.stderr.take().unwrap();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                // "progress: N evaluations, best X"
+                if let Some(n) = line
+                    .strip_prefix("progress: ")
+                    .and_then(|rest| rest.split_whitespace().next())
+                    .and_then(|n| n.parse().ok())
+                {
+                    reported.store(n, Ordering::SeqCst);
+                }
+            }
+        })
+    };
+    await_condition(
+        "the calibration to store enough evaluations",
+        Duration::from_secs(180),
+        || reported.load(Ordering::SeqCst) >= enough,
+    );
+    child.kill().unwrap(); // SIGKILL on Unix
+    let status = child.wait().unwrap();
+    assert!(
+        !status.success(),
+        "the calibration finished before the kill"
+    );
+    reader.join().unwrap();
+}
+
+fn stored_evaluations(db: &Path) -> u64 {
+    json_of(&calib(&[
+        "store",
+        "stats",
+        "--db",
+        db.to_str().unwrap(),
+        "--json",
+    ]))["evaluations"]
+        .as_u64()
+        .unwrap()
+}
+
+/// The resumed result is the uninterrupted one: best point and objective bit for bit, and
+/// every run alike.
+fn assert_same_result(resumed: &Value, fresh: &Value) {
+    let bits = |v: &Value| v.as_f64().unwrap().to_bits();
+    assert_eq!(
+        bits(&resumed["best"]["objective"]),
+        bits(&fresh["best"]["objective"])
+    );
+    let parameters = |v: &Value| -> Vec<(String, u64)> {
+        v["best"]["parameters"]
+            .as_object()
+            .unwrap()
+            .iter()
+            .map(|(name, value)| (name.clone(), bits(value)))
+            .collect()
+    };
+    assert_eq!(parameters(resumed), parameters(fresh));
+    assert_eq!(resumed["runs"], fresh["runs"]);
+    assert_eq!(resumed["nominal_objective"], fresh["nominal_objective"]);
+}
+
+/// An uninterrupted run on a fresh store, and the same campaign killed on another store:
+/// (result, simulations of the killed run counted on the workers, evaluations it stored).
+fn fresh_and_interrupted(
+    cluster: &TestCluster,
+    campaign: &Path,
+    dir: &Path,
+    db: &Path,
+) -> (Value, u64, u64) {
+    let fresh = calibrate_on(cluster, campaign, &dir.join("fresh-db"), &dir.join("fresh"));
+    let simulated_fresh = fresh["simulated"].as_u64().unwrap();
+    assert_eq!(
+        cluster.settled_simulations(),
+        simulated_fresh,
+        "every simulation is counted on the workers"
+    );
+
+    let before = cluster.simulations();
+    interrupt(cluster, campaign, db, simulated_fresh / 4);
+    let simulated_before_kill = cluster.settled_simulations() - before;
+    let stored = stored_evaluations(db);
+    assert!(stored >= simulated_fresh / 4, "{stored}");
+    assert!(stored < simulated_fresh, "{stored} of {simulated_fresh}");
+    // Every stored evaluation was simulated once; beyond those, only the points in flight
+    // at the kill: a batch is stored once all of it is answered, so at most the batch each
+    // run was waiting for (one differential evolution generation).
+    assert!(simulated_before_kill >= stored);
+    assert!(
+        simulated_before_kill - stored <= RUNS * POPULATION,
+        "{simulated_before_kill} simulated, {stored} stored"
+    );
+    (fresh, simulated_before_kill, stored)
+}
+
+#[test]
+fn a_cluster_calibration_killed_with_sigkill_resumes_without_repeating_a_simulation() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = long_campaign(dir.path());
+    let cluster = TestCluster::start(2, 1);
+    let db = dir.path().join("db");
+    let (fresh, before_kill, stored) = fresh_and_interrupted(&cluster, &campaign, dir.path(), &db);
+    let simulated_fresh = fresh["simulated"].as_u64().unwrap();
+
+    let counted = cluster.simulations();
+    let resumed = calibrate_on(&cluster, &campaign, &db, &dir.path().join("resumed"));
+    let rerun = cluster.settled_simulations() - counted;
+    assert_same_result(&resumed, &fresh);
+    assert_eq!(
+        resumed["simulated"].as_u64().unwrap(),
+        simulated_fresh - stored,
+        "every evaluation stored before the kill is served from the store"
+    );
+    assert_eq!(rerun, simulated_fresh - stored, "counted on the workers");
+    println!(
+        "killed after {stored} stored ({before_kill} simulated) of {simulated_fresh}; \
+         the rerun simulated {rerun}: {} repeated, all in flight at the kill",
+        before_kill + rerun - simulated_fresh
+    );
+}
+
+#[test]
+fn a_coordinator_started_on_the_store_finishes_the_campaign_on_its_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = long_campaign(dir.path());
+    let cluster = TestCluster::start(2, 1);
+    let db = dir.path().join("db");
+    let (fresh, _, stored) = fresh_and_interrupted(&cluster, &campaign, dir.path(), &db);
+    let simulated_fresh = fresh["simulated"].as_u64().unwrap();
+
+    let counted = cluster.simulations();
+    let out = dir.path().join("resumed");
+    let mut coordinator = Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args([
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--db",
+            db.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--workers",
+            &cluster.workers_arg(),
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // The results are written once the campaign is recorded finished.
+    let result_file = out.join("clean").join("result.json");
+    let mut resumed = Value::Null;
+    await_condition(
+        "the coordinator to write the resumed campaign's result",
+        Duration::from_secs(180),
+        || {
+            if let Ok(Some(status)) = coordinator.try_wait() {
+                panic!("the coordinator exited: {status}");
+            }
+            match std::fs::read(&result_file).map(|b| serde_json::from_slice::<Value>(&b)) {
+                Ok(Ok(value)) => {
+                    resumed = value;
+                    true
+                }
+                _ => false,
+            }
+        },
+    );
+    coordinator.kill().unwrap();
+    coordinator.wait().unwrap();
+    let rerun = cluster.settled_simulations() - counted;
+
+    assert_same_result(&resumed, &fresh);
+    assert_eq!(
+        resumed["simulated"].as_u64().unwrap(),
+        simulated_fresh - stored
+    );
+    assert_eq!(rerun, simulated_fresh - stored, "counted on the workers");
+    let store = SledStore::open(&db).unwrap();
+    let campaigns = store.campaigns().unwrap();
+    assert_eq!(campaigns.len(), 1);
+    assert_eq!(campaigns[0].1.status, CampaignStatus::Finished);
+    assert_eq!(store.stats().unwrap().evaluations, simulated_fresh);
+}
