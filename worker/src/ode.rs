@@ -504,7 +504,7 @@ mod tests {
         fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
             self.bounces.push(t);
             y[0] = 0.0;
-            y[1] = -0.5 * y[1];
+            y[1] *= -0.5;
         }
     }
 
