@@ -3,7 +3,7 @@
 //!
 //! - overhead: a batch of `furuta` evaluations over one worker versus in this process, on
 //!   the same cores;
-//! - scaling: evaluations per second of a ≥ 5 ms model (`hx_lowfi`) with one and two
+//! - scaling: evaluations per second of a ≥ 5 ms model (`hx_highfi`) with one and two
 //!   single-slot workers;
 //! - dispatcher capacity: many workers that only sleep, so that what limits the rate is
 //!   the coordinator's dispatch, not the simulations ([`napping`]).
@@ -110,9 +110,9 @@ fn objective_of(campaign: &Path) -> Result<Objective, Failure> {
     Objective::new(&campaign, &measurement).map_err(|e| Failure::input(e.to_string()))
 }
 
-/// An `hx_lowfi` objective against its own nominal transient (written to a scratch folder).
+/// An `hx_highfi` objective against its own nominal transient (written to a scratch folder).
 fn hx_objective() -> Result<Objective, Failure> {
-    let model = models::find("hx_lowfi").expect("hx_lowfi is hosted");
+    let model = models::find("hx_highfi").expect("hx_highfi is hosted");
     let info = model.info();
     let grid: Vec<f64> = (0..=300).map(f64::from).collect();
     let trajectory = model
@@ -122,7 +122,7 @@ fn hx_objective() -> Result<Objective, Failure> {
             &[0, 1],
             &SolverOptions::default(),
         )
-        .map_err(|e| Failure::internal(format!("hx_lowfi failed: {e}")))?;
+        .map_err(|e| Failure::internal(format!("hx_highfi failed: {e}")))?;
     let dir = std::env::temp_dir().join(format!("calib-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| Failure::internal(e.to_string()))?;
     let mut csv = String::from("time,dp,q\n");
@@ -140,7 +140,7 @@ fn hx_objective() -> Result<Objective, Failure> {
         "hx.toml",
         r#"
 [model]
-name = "hx_lowfi"
+name = "hx_highfi"
 [measurement]
 file = "hx.csv"
 [[outputs]]
