@@ -8,11 +8,9 @@ use calib_coordinator::store::{CampaignStatus, SledStore, Store};
 use common::cluster::*;
 use common::*;
 use serde_json::Value;
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 /// Runs of the long campaign (one method, two starts) and its population (`max(15, 10 n)`
@@ -59,23 +57,7 @@ fn interrupt(cluster: &TestCluster, campaign: &Path, db: &Path, enough: u64) {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let reported = Arc::new(AtomicU64::new(0));
-    let reader = {
-        let reported = reported.clone();
-        let stderr = child.stderr.take().unwrap();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                // "progress: N evaluations, best X"
-                if let Some(n) = line
-                    .strip_prefix("progress: ")
-                    .and_then(|rest| rest.split_whitespace().next())
-                    .and_then(|n| n.parse().ok())
-                {
-                    reported.store(n, Ordering::SeqCst);
-                }
-            }
-        })
-    };
+    let (reported, reader) = watch_progress(&mut child);
     await_condition(
         "the calibration to store enough evaluations",
         Duration::from_secs(180),

@@ -12,11 +12,9 @@ use calib_coordinator::store::{CampaignStatus, MemoryStore, SledStore, Store};
 use calib_worker::{Model, ModelInfo, SimulationError, SolverOptions, Trajectory};
 use common::*;
 use serde_json::Value;
-use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
-use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 /// Calibrate `campaign` with the CLI on store `db`, results in `out`; result.json.
@@ -110,23 +108,7 @@ fn a_calibration_killed_with_sigkill_resumes_without_repeating_a_simulation() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    let reported = Arc::new(AtomicU64::new(0));
-    let reader = {
-        let reported = reported.clone();
-        let stderr = child.stderr.take().unwrap();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                // "progress: N evaluations, best X": the N are already stored.
-                if let Some(n) = line
-                    .strip_prefix("progress: ")
-                    .and_then(|rest| rest.split_whitespace().next())
-                    .and_then(|n| n.parse().ok())
-                {
-                    reported.store(n, Ordering::SeqCst);
-                }
-            }
-        })
-    };
+    let (reported, reader) = watch_progress(&mut child);
     let enough = simulated_fresh / 4;
     await_condition(
         "the child to store a quarter of the campaign",

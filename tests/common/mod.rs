@@ -153,3 +153,31 @@ pub fn gaussian(rng: &mut rand_chacha::ChaCha8Rng, sigma: f64) -> f64 {
     let u2: f64 = rng.random();
     sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
+
+/// Follow the `CALIB_PROGRESS=lines` progress of a `calib calibrate` child: the returned
+/// counter holds the evaluations it last reported (all of them already stored), updated by
+/// the returned reader thread until the child's standard error closes.
+pub fn watch_progress(
+    child: &mut std::process::Child,
+) -> (
+    std::sync::Arc<std::sync::atomic::AtomicU64>,
+    std::thread::JoinHandle<()>,
+) {
+    use std::io::{BufRead, BufReader};
+    let reported = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let counter = reported.clone();
+    let stderr = child.stderr.take().expect("the child's stderr is piped");
+    let reader = std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            // "progress: N evaluations, best X"
+            if let Some(n) = line
+                .strip_prefix("progress: ")
+                .and_then(|rest| rest.split_whitespace().next())
+                .and_then(|n| n.parse().ok())
+            {
+                counter.store(n, std::sync::atomic::Ordering::SeqCst);
+            }
+        }
+    });
+    (reported, reader)
+}
