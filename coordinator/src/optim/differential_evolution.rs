@@ -58,10 +58,10 @@
 //!   Practical Approach to Global Optimization. Springer (bounce-back boundary
 //!   handling, dither).
 
-use super::sanitize;
+use super::{check_start, invalid, sanitize};
 use argmin::core::{
-    ArgminError, CostFunction, Error, PopulationState, Problem, Solver, SyncAlias,
-    TerminationReason, TerminationStatus, KV,
+    CostFunction, Error, PopulationState, Problem, Solver, SyncAlias, TerminationReason,
+    TerminationStatus, KV,
 };
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -328,17 +328,8 @@ where
         problem: &mut Problem<O>,
         state: DifferentialEvolutionState,
     ) -> Result<(DifferentialEvolutionState, Option<KV>), Error> {
+        check_start("DifferentialEvolution", &self.start)?;
         let n = self.start.len();
-        if n == 0 {
-            return Err(invalid(
-                "`DifferentialEvolution`: the start point is empty.",
-            ));
-        }
-        if !self.start.iter().all(|v| (0.0..=1.0).contains(v)) {
-            return Err(invalid(
-                "`DifferentialEvolution`: the start point must lie in [0, 1]^n.",
-            ));
-        }
         self.rng = ChaCha8Rng::seed_from_u64(self.seed);
         let mut population = Vec::with_capacity(self.population_size);
         population.push(self.start.clone());
@@ -421,10 +412,6 @@ where
         }
         TerminationStatus::NotTerminated
     }
-}
-
-fn invalid(text: &str) -> Error {
-    ArgminError::InvalidParameter { text: text.into() }.into()
 }
 
 #[cfg(test)]

@@ -28,6 +28,24 @@ mod test_problems;
 
 pub use differential_evolution::{DifferentialEvolution, Strategy};
 
+/// An invalid setting or start of a solver, as argmin reports it.
+pub(crate) fn invalid(text: &str) -> argmin::core::Error {
+    argmin::core::ArgminError::InvalidParameter { text: text.into() }.into()
+}
+
+/// The start point of `solver` must be non-empty and lie in the unit box.
+pub(crate) fn check_start(solver: &str, start: &[f64]) -> Result<(), argmin::core::Error> {
+    if start.is_empty() {
+        return Err(invalid(&format!("`{solver}`: the start point is empty.")));
+    }
+    if !start.iter().all(|v| (0.0..=1.0).contains(v)) {
+        return Err(invalid(&format!(
+            "`{solver}`: the start point must lie in [0, 1]^n."
+        )));
+    }
+    Ok(())
+}
+
 /// A cost the solvers can order: NaN and +∞ become the largest finite value, so a failed
 /// evaluation ranks last without poisoning comparisons or averages.
 pub(crate) fn sanitize(cost: f64) -> f64 {

@@ -83,7 +83,7 @@
 //!   Recipes, §10.7 "Direction Set (Powell's) Methods in Multidimensions" (the
 //!   direction-replacement rule).
 
-use super::sanitize;
+use super::{check_start, invalid, sanitize};
 use argmin::core::{
     ArgminError, CostFunction, Error, IterState, Problem, Solver, SyncAlias, TerminationReason,
     TerminationStatus, KV,
@@ -505,13 +505,8 @@ where
         problem: &mut Problem<O>,
         state: PowellState,
     ) -> Result<(PowellState, Option<KV>), Error> {
+        check_start("Powell", &self.start)?;
         let n = self.start.len();
-        if n == 0 {
-            return Err(invalid("`Powell`: the start point is empty."));
-        }
-        if !self.start.iter().all(|v| (0.0..=1.0).contains(v)) {
-            return Err(invalid("`Powell`: the start point must lie in [0, 1]^n."));
-        }
         self.reset_directions(n);
         self.steps = match &self.initial_steps {
             Some(steps) if steps.len() == n => steps.clone(),
@@ -665,10 +660,6 @@ where
             TerminationStatus::NotTerminated
         }
     }
-}
-
-fn invalid(text: &str) -> Error {
-    ArgminError::InvalidParameter { text: text.into() }.into()
 }
 
 /// The interval `[t_min, t_max]` (containing 0) of `t` with `x + t d` in the box.
