@@ -28,17 +28,14 @@ pub const SCAN: [f64; 8] = [0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0];
 
 /// A first finite-difference step for switching on `effect`, before rescaling to the
 /// residual's size.
-fn initial_step(effect: &FreeParameter, campaign: &Campaign, residual_rms: f64, dt: f64) -> f64 {
+fn initial_step(effect: &FreeParameter, residual_rms: f64, dt: f64) -> f64 {
     let kind = effect.name.split('(').next().unwrap_or("");
     let range = effect.max - effect.min;
     match kind {
         "offset" => residual_rms.max(1e-12),
         "gain" => 1e-3,
         "delay" | "lag" => dt.max(1e-6),
-        _ => {
-            let _ = campaign;
-            1e-4 * range
-        }
+        _ => 1e-4 * range,
     }
 }
 
@@ -61,7 +58,7 @@ pub fn rank<E: Evaluator + Simulator>(
     let dt = median_step(&objective.grid);
     let steps: Vec<f64> = specs
         .iter()
-        .map(|s| initial_step(s, campaign, residual_rms, dt))
+        .map(|s| initial_step(s, residual_rms, dt))
         .collect();
     let jacobian =
         sensitivity::parameter_jacobian(engine, &base_objective, &campaign.free, &baseline.point)

@@ -40,8 +40,6 @@ fn parameters(fit: &Fit) -> Value {
 }
 
 fn fit_json(d: &Diagnosis, fit: &Fit) -> Value {
-    let white: Vec<f64> = Vec::new();
-    let _ = white;
     json!({
         "effects": fit.effects,
         "objective": fit.objective,
@@ -121,7 +119,7 @@ pub fn verdict_text(d: &Diagnosis) -> String {
     }
 }
 
-fn fit_table(s: &mut String, d: &Diagnosis, fit: &Fit) {
+fn fit_table(s: &mut String, fit: &Fit) {
     let _ = writeln!(s, "| parameter | value | 95% interval |");
     let _ = writeln!(s, "|---|---|---|");
     for p in &fit.parameters {
@@ -151,7 +149,6 @@ fn fit_table(s: &mut String, d: &Diagnosis, fit: &Fit) {
             strong.join(", ")
         );
     }
-    let _ = d;
 }
 
 /// The Markdown report (`diagnosis.md`).
@@ -259,10 +256,10 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
         }
     }
     let _ = writeln!(s, "\n## Baseline parameters\n");
-    fit_table(&mut s, d, &d.baseline);
+    fit_table(&mut s, &d.baseline);
     if !d.selected.is_empty() {
         let _ = writeln!(s, "## Final parameters (with {})\n", d.selected.join(" + "));
-        fit_table(&mut s, d, &d.final_fit);
+        fit_table(&mut s, &d.final_fit);
     }
     let _ = writeln!(s, "## Plots\n");
     for p in plots {
