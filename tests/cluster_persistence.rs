@@ -27,17 +27,7 @@ fn long_campaign(dir: &Path) -> PathBuf {
 
 /// `calib calibrate` on the cluster's workers, to completion; result.json.
 fn calibrate_on(cluster: &TestCluster, campaign: &Path, db: &Path, out: &Path) -> Value {
-    json_of(&calib(&[
-        "calibrate",
-        campaign.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--workers",
-        &cluster.workers_arg(),
-        "--json",
-    ]))
+    calibrate_json(campaign, db, out, &["--workers", &cluster.workers_arg()])
 }
 
 /// Start `calib calibrate` on the cluster's workers and SIGKILL it once it has reported

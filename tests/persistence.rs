@@ -19,15 +19,7 @@ use std::time::Duration;
 
 /// Calibrate `campaign` with the CLI on store `db`, results in `out`; result.json.
 fn calibrate_cli(campaign: &Path, db: &Path, out: &Path) -> Value {
-    json_of(&calib(&[
-        "calibrate",
-        campaign.to_str().unwrap(),
-        "--db",
-        db.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ]))
+    calibrate_json(campaign, db, out, &[])
 }
 
 /// What must not change between an interrupted and an uninterrupted run.

@@ -120,6 +120,22 @@ pub fn calib_with_input(args: &[&str], stdin: &[u8]) -> Output {
 }
 
 /// Standard output of a successful run, as JSON; panics with its standard error otherwise.
+/// `calib calibrate CAMPAIGN --db DB --out OUT --json` plus `extra` arguments, to completion;
+/// its result.json.
+pub fn calibrate_json(campaign: &Path, db: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ];
+    args.extend_from_slice(extra);
+    json_of(&calib(&args))
+}
+
 pub fn json_of(out: &Output) -> serde_json::Value {
     assert!(
         out.status.success(),
