@@ -1,0 +1,117 @@
+//! The campaign file as written: the TOML sections, before they are checked against the
+//! model ([`super::resolve`]). Spans are kept so that every mistake names its line.
+
+use super::Method;
+use serde::Deserialize;
+use toml::Spanned;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct CampaignFile {
+    pub(super) name: Option<String>,
+    pub(super) model: Spanned<ModelSection>,
+    pub(super) measurement: MeasurementSection,
+    #[serde(default)]
+    pub(super) outputs: Vec<Spanned<OutputEntry>>,
+    #[serde(default)]
+    pub(super) parameters: Vec<Spanned<ParameterEntry>>,
+    #[serde(default)]
+    pub(super) effects: Vec<Spanned<ParameterEntry>>,
+    #[serde(default)]
+    pub(super) diagnosis: Option<Spanned<DiagnosisSection>>,
+    pub(super) window: Option<Spanned<WindowSection>>,
+    #[serde(default)]
+    pub(super) search: Option<Spanned<SearchSection>>,
+    #[serde(default)]
+    pub(super) solver: Option<Spanned<SolverSection>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ModelSection {
+    pub(super) name: Spanned<String>,
+    pub(super) stop_time: Option<Spanned<f64>>,
+    #[serde(default)]
+    pub(super) parameters: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct MeasurementSection {
+    pub(super) file: Spanned<String>,
+    #[serde(default = "default_time_column")]
+    pub(super) time_column: String,
+}
+
+pub(super) fn default_time_column() -> String {
+    "time".into()
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct OutputEntry {
+    pub(super) model: Spanned<String>,
+    pub(super) measured: String,
+    #[serde(default = "one")]
+    pub(super) weight: f64,
+}
+
+pub(super) fn one() -> f64 {
+    1.0
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ParameterEntry {
+    pub(super) name: Spanned<String>,
+    pub(super) nominal: Option<f64>,
+    pub(super) min: f64,
+    pub(super) max: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct DiagnosisSection {
+    pub(super) holdout_start: Option<f64>,
+    pub(super) holdout_stop: Option<f64>,
+    pub(super) refit: Option<usize>,
+    pub(super) candidates: Option<Vec<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct WindowSection {
+    pub(super) start: f64,
+    pub(super) stop: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SearchSection {
+    #[serde(default = "default_methods")]
+    pub(super) methods: Vec<Method>,
+    #[serde(default = "default_starts")]
+    pub(super) starts: usize,
+    #[serde(default = "default_max_evaluations")]
+    pub(super) max_evaluations: usize,
+    #[serde(default)]
+    pub(super) seed: u64,
+}
+
+pub(super) fn default_methods() -> Vec<Method> {
+    vec![Method::NelderMead]
+}
+pub(super) fn default_starts() -> usize {
+    1
+}
+pub(super) fn default_max_evaluations() -> usize {
+    1000
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct SolverSection {
+    pub(super) rtol: Option<f64>,
+    pub(super) atol: Option<f64>,
+    pub(super) max_steps: Option<usize>,
+}

@@ -1,0 +1,337 @@
+//! Campaign files: what to calibrate, against which data, how.
+//!
+//! A campaign is written in TOML (unknown keys are rejected) and resolved against the hosted
+//! models before anything runs, so every mistake is reported up front with the file, the
+//! line and the field. See README.md for the format.
+
+mod file;
+mod resolve;
+
+use calib_worker::{Model, SolverOptions};
+use resolve::{resolve, Locator};
+use serde::Deserialize;
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// A mistake in a campaign, located in its file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub struct CampaignError {
+    pub file: PathBuf,
+    pub line: Option<usize>,
+    pub field: String,
+    pub message: String,
+}
+
+impl fmt::Display for CampaignError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}", self.file.display())?;
+        if let Some(line) = self.line {
+            write!(f, ":{line}")?;
+        }
+        if self.field.is_empty() {
+            write!(f, ": {}", self.message)
+        } else {
+            write!(f, ": `{}`: {}", self.field, self.message)
+        }
+    }
+}
+
+/// The optimisation methods a campaign can ask for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Deserialize, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    NelderMead,
+    Powell,
+    DifferentialEvolution,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::NelderMead => "nelder-mead",
+            Method::Powell => "powell",
+            Method::DifferentialEvolution => "differential-evolution",
+        }
+    }
+}
+
+impl fmt::Display for Method {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A parameter the optimisers search over.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FreeParameter {
+    pub name: String,
+    /// Position in the model's full parameter vector.
+    pub index: usize,
+    pub nominal: f64,
+    pub min: f64,
+    pub max: f64,
+    /// Whether this is one of the model's effects (absent at 0) rather than a base parameter.
+    pub effect: bool,
+}
+
+/// A model output compared with a measured column.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct OutputMapping {
+    pub model: String,
+    pub model_index: usize,
+    pub measured: String,
+    pub weight: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Search {
+    pub methods: Vec<Method>,
+    /// Start points per method: the nominal point, then seeded quasi-random points.
+    pub starts: usize,
+    /// Evaluation budget of each run (one method from one start).
+    pub max_evaluations: usize,
+    pub seed: u64,
+    /// Further start points (physical values of the free parameters), tried after the
+    /// nominal point; set by diagnosis, not by campaign files.
+    pub extra_starts: Vec<Vec<f64>>,
+}
+
+/// A campaign checked against the model it names.
+#[derive(Clone)]
+pub struct Campaign {
+    pub name: String,
+    /// The campaign file, when the campaign came from one.
+    pub source: Option<PathBuf>,
+    /// The campaign's text as written (the store keeps it to resume the campaign).
+    pub spec: String,
+    pub model: &'static dyn Model,
+    /// End of the simulated horizon (plots run to it; the fit uses the window).
+    pub stop_time: f64,
+    /// The full parameter vector: model defaults, then the campaign's fixed values, with the
+    /// free parameters at their nominal values.
+    pub base: Vec<f64>,
+    pub free: Vec<FreeParameter>,
+    pub measurement_file: PathBuf,
+    pub time_column: String,
+    pub outputs: Vec<OutputMapping>,
+    pub window: (f64, f64),
+    pub search: Search,
+    pub solver: SolverOptions,
+    pub diagnosis: DiagnosisSettings,
+}
+
+/// How `calib diagnose` treats a campaign.
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize)]
+pub struct DiagnosisSettings {
+    /// Held-out window [s]; default: the data after the fitted window, or else the last
+    /// fifth of the window (which is then not fitted).
+    pub holdout: Option<(f64, f64)>,
+    /// How many of the best-ranked candidates are refitted (alone, and in pairs).
+    pub refit: usize,
+    /// Restrict the candidates to these effects (default: every effect the model has).
+    pub candidates: Option<Vec<String>>,
+}
+
+impl fmt::Debug for Campaign {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.debug_struct("Campaign")
+            .field("name", &self.name)
+            .field("model", &self.model.info().name)
+            .field("free", &self.free)
+            .field("outputs", &self.outputs)
+            .field("window", &self.window)
+            .field("search", &self.search)
+            .finish()
+    }
+}
+
+impl Campaign {
+    /// Read and resolve a campaign file.
+    pub fn load(path: &Path) -> Result<Campaign, CampaignError> {
+        let text = std::fs::read_to_string(path).map_err(|e| CampaignError {
+            file: path.to_path_buf(),
+            line: None,
+            field: String::new(),
+            message: format!("cannot read campaign file: {e}"),
+        })?;
+        Self::parse(&text, path)
+    }
+
+    /// Resolve campaign text; `path` locates errors and relative measurement files.
+    pub fn parse(text: &str, path: &Path) -> Result<Campaign, CampaignError> {
+        let locate = Locator { text, path };
+        let file: file::CampaignFile = toml::from_str(text).map_err(|e| CampaignError {
+            file: path.to_path_buf(),
+            line: e.span().map(|s| locate.line(s.start)),
+            field: String::new(),
+            message: e.message().trim().to_string(),
+        })?;
+        resolve(file, &locate)
+    }
+
+    /// Nominal values of the free parameters.
+    pub fn nominal(&self) -> Vec<f64> {
+        self.free.iter().map(|p| p.nominal).collect()
+    }
+
+    /// The full parameter vector with the free parameters set to `free_values`.
+    pub fn full_parameters(&self, free_values: &[f64]) -> Vec<f64> {
+        let mut full = self.base.clone();
+        for (p, v) in self.free.iter().zip(free_values) {
+            full[p.index] = *v;
+        }
+        full
+    }
+
+    /// A hash of the resolved campaign run on the measurement with content hash
+    /// `measurement_hash`: name, model and version, parameters (fixed and free, with bounds
+    /// and nominal values), outputs and weights, window, horizon, search and solver
+    /// settings. Two campaigns with the same identity compute the same result; the file's
+    /// formatting, comments and location do not count.
+    pub fn identity(&self, measurement_hash: &[u8; 32]) -> [u8; 32] {
+        let info = self.model.info();
+        let mut h = blake3::Hasher::new();
+        h.update(b"calib.campaign.v1\0");
+        let text = |h: &mut blake3::Hasher, s: &str| {
+            h.update(&(s.len() as u64).to_le_bytes());
+            h.update(s.as_bytes());
+        };
+        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
+            h.update(&(v.len() as u64).to_le_bytes());
+            for x in v {
+                h.update(&x.to_bits().to_le_bytes());
+            }
+        };
+        let count = |h: &mut blake3::Hasher, n: usize| {
+            h.update(&(n as u64).to_le_bytes());
+        };
+        text(&mut h, &self.name);
+        text(&mut h, &info.name);
+        h.update(&info.version.to_le_bytes());
+        f64s(&mut h, &self.base);
+        f64s(&mut h, &[self.stop_time, self.window.0, self.window.1]);
+        count(&mut h, self.free.len());
+        for p in &self.free {
+            count(&mut h, p.index);
+            f64s(&mut h, &[p.nominal, p.min, p.max]);
+        }
+        h.update(measurement_hash);
+        count(&mut h, self.outputs.len());
+        for o in &self.outputs {
+            count(&mut h, o.model_index);
+            text(&mut h, &o.measured);
+            f64s(&mut h, &[o.weight]);
+        }
+        count(&mut h, self.search.methods.len());
+        for m in &self.search.methods {
+            text(&mut h, m.name());
+        }
+        count(&mut h, self.search.starts);
+        count(&mut h, self.search.max_evaluations);
+        h.update(&self.search.seed.to_le_bytes());
+        count(&mut h, self.search.extra_starts.len());
+        for start in &self.search.extra_starts {
+            f64s(&mut h, start);
+        }
+        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
+        count(&mut h, self.solver.max_steps);
+        *h.finalize().as_bytes()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"
+name = "clean"
+[model]
+name = "furuta"
+stop_time = 40.0
+[model.parameters]
+theta0 = 0.5235987755983
+
+[measurement]
+file = "data/furuta_clean.csv"
+time_column = "time_s"
+
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+weight = 1.0
+
+[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 0.0
+max = 0.9
+
+[window]
+start = 0.0
+stop = 40.0
+
+[search]
+methods = ["nelder-mead", "powell"]
+starts = 3
+max_evaluations = 300
+seed = 7
+"#;
+
+    fn parse(text: &str) -> Result<Campaign, CampaignError> {
+        Campaign::parse(text, Path::new("/campaigns/c.toml"))
+    }
+
+    #[test]
+    fn a_good_campaign_resolves() {
+        let c = parse(GOOD).unwrap();
+        assert_eq!(c.name, "clean");
+        assert_eq!(c.model.info().name, "furuta");
+        assert_eq!(c.free[0].index, 0);
+        assert_eq!(c.outputs[0].model_index, 0);
+        assert_eq!(
+            c.measurement_file,
+            Path::new("/campaigns/data/furuta_clean.csv")
+        );
+        assert_eq!(c.search.methods, vec![Method::NelderMead, Method::Powell]);
+        assert_eq!(c.window, (0.0, 40.0));
+    }
+
+    fn error_for(from: &str, to: &str) -> CampaignError {
+        let text = GOOD.replacen(from, to, 1);
+        assert_ne!(text, GOOD, "replacement `{from}` not found");
+        parse(&text).unwrap_err()
+    }
+
+    #[test]
+    fn mistakes_are_located() {
+        let e = error_for("name = \"furuta\"", "name = \"furuta2\"");
+        assert_eq!(e.line, Some(4));
+        assert!(e.to_string().contains("unknown model `furuta2`"), "{e}");
+
+        let e = error_for("name = \"armFriction\"", "name = \"armFrction\"");
+        assert_eq!(e.line, Some(19), "{e}");
+        assert!(e.message.contains("no parameter `armFrction`"), "{e}");
+
+        let e = error_for("model = \"armJoint.phi\"", "model = \"arm.phi\"");
+        assert!(e.message.contains("no output `arm.phi`"), "{e}");
+
+        let e = error_for("nominal = 0.012", "nominal = 1.5");
+        assert!(e.message.contains("outside its bounds"), "{e}");
+
+        let e = error_for("min = 0.0\nmax = 0.9", "min = 0.5\nmax = 0.5");
+        assert!(e.message.contains("must be below max"), "{e}");
+
+        let e = error_for("seed = 7", "seed = 7\ncolour = 3");
+        assert!(e.message.contains("unknown field `colour`"), "{e}");
+        assert_eq!(e.line, Some(33), "{e}");
+
+        let e = error_for("\"powell\"", "\"simplex\"");
+        assert!(e.message.contains("simplex"), "{e}");
+
+        let e = error_for("theta0 = 0.5235987755983", "theta1 = 0.5");
+        assert!(e.message.contains("no parameter `theta1`"), "{e}");
+
+        let e = error_for("start = 0.0\nstop = 40.0", "start = 10.0\nstop = 5.0");
+        assert_eq!(e.field, "window");
+    }
+}

@@ -1,0 +1,503 @@
+//! Checking a campaign file against the model it names: every section resolved in turn,
+//! each mistake reported with the file, the line and the field.
+
+use super::file::{
+    default_max_evaluations, default_methods, default_starts, CampaignFile, DiagnosisSection,
+    ModelSection, OutputEntry, ParameterEntry, SearchSection, SolverSection, WindowSection,
+};
+use super::{Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, Search};
+use calib_worker::{models, Model, ModelInfo, SolverOptions};
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// Where a campaign's text came from, to turn byte offsets into located errors.
+pub(super) struct Locator<'a> {
+    pub(super) text: &'a str,
+    pub(super) path: &'a Path,
+}
+
+impl Locator<'_> {
+    pub(super) fn line(&self, offset: usize) -> usize {
+        let end = offset.min(self.text.len());
+        self.text.as_bytes()[..end]
+            .iter()
+            .filter(|b| **b == b'\n')
+            .count()
+            + 1
+    }
+
+    fn error<T>(
+        &self,
+        span: std::ops::Range<usize>,
+        field: &str,
+        message: String,
+    ) -> Result<T, CampaignError> {
+        Err(CampaignError {
+            file: self.path.to_path_buf(),
+            line: Some(self.line(span.start)),
+            field: field.to_string(),
+            message,
+        })
+    }
+
+    /// An error about a whole missing section, which has no line.
+    fn unlocated<T>(&self, field: &str, message: &str) -> Result<T, CampaignError> {
+        Err(CampaignError {
+            file: self.path.to_path_buf(),
+            line: None,
+            field: field.into(),
+            message: message.into(),
+        })
+    }
+}
+
+pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> {
+    let model_span = file.model.span();
+    let model_section = file.model.into_inner();
+    let model = resolve_model(&model_section, at)?;
+    let info = model.info();
+
+    let (mut base, fixed) = resolve_fixed(&model_section, info, at)?;
+    let free = resolve_free(&file.parameters, &file.effects, &fixed, &mut base, info, at)?;
+    let outputs = resolve_outputs(&file.outputs, info, at)?;
+    let window = resolve_window(file.window, at)?;
+    let stop_time = resolve_stop_time(&model_section, model_span, window.1, at)?;
+    let search = resolve_search(file.search, free.len(), at)?;
+    let solver = resolve_solver(file.solver, model, at)?;
+    let diagnosis = resolve_diagnosis(file.diagnosis, info, at)?;
+
+    let measurement_path = PathBuf::from(file.measurement.file.get_ref());
+    let measurement_file = if measurement_path.is_absolute() {
+        measurement_path
+    } else {
+        at.path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(measurement_path)
+    };
+    let name = file.name.unwrap_or_else(|| {
+        at.path
+            .file_stem()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|| "campaign".into())
+    });
+
+    Ok(Campaign {
+        name,
+        source: Some(at.path.to_path_buf()),
+        spec: at.text.to_string(),
+        model,
+        stop_time,
+        base,
+        free,
+        measurement_file,
+        time_column: file.measurement.time_column,
+        outputs,
+        window,
+        search,
+        solver,
+        diagnosis,
+    })
+}
+
+fn resolve_model(
+    section: &ModelSection,
+    at: &Locator,
+) -> Result<&'static dyn Model, CampaignError> {
+    let name = section.name.get_ref();
+    match models::find(name) {
+        Some(model) => Ok(model),
+        None => {
+            let known: Vec<_> = models::all()
+                .iter()
+                .map(|m| m.info().name.clone())
+                .collect();
+            at.error(
+                section.name.span(),
+                "model.name",
+                format!("unknown model `{name}` (hosted: {})", known.join(", ")),
+            )
+        }
+    }
+}
+
+/// Every parameter and effect name of the model, for "it has: …" messages.
+fn known_parameters(info: &ModelInfo) -> String {
+    let mut names: Vec<&str> = info.parameters.iter().map(|p| p.name.as_str()).collect();
+    names.extend(info.effects.iter().map(|e| e.name.as_str()));
+    names.join(", ")
+}
+
+/// The model defaults with the campaign's fixed values, and the indices it fixed.
+fn resolve_fixed(
+    section: &ModelSection,
+    info: &ModelInfo,
+    at: &Locator,
+) -> Result<(Vec<f64>, Vec<usize>), CampaignError> {
+    let mut base = info.default_vector();
+    let mut fixed = Vec::new();
+    for (name, value) in &section.parameters {
+        let field = format!("model.parameters.{}", name.get_ref());
+        let Some(index) = info.parameter_index(name.get_ref()) else {
+            return at.error(
+                name.span(),
+                &field,
+                format!(
+                    "model `{}` has no parameter `{}` (it has: {})",
+                    info.name,
+                    name.get_ref(),
+                    known_parameters(info)
+                ),
+            );
+        };
+        let v = *value.get_ref();
+        let (lo, hi) = info.bounds_at(index);
+        if !v.is_finite() || v < lo || v > hi {
+            return at.error(
+                value.span(),
+                &field,
+                format!("value {v} is outside the admissible range [{lo}, {hi}]"),
+            );
+        }
+        base[index] = v;
+        fixed.push(index);
+    }
+    Ok((base, fixed))
+}
+
+/// Free parameters, then free effects, each set to its nominal value in `base`.
+fn resolve_free(
+    parameters: &[Spanned<ParameterEntry>],
+    effects: &[Spanned<ParameterEntry>],
+    fixed: &[usize],
+    base: &mut [f64],
+    info: &ModelInfo,
+    at: &Locator,
+) -> Result<Vec<FreeParameter>, CampaignError> {
+    let mut free: Vec<FreeParameter> = Vec::new();
+    let sections = [("parameters", parameters), ("effects", effects)];
+    for (section, entry, i) in sections.iter().flat_map(|(section, entries)| {
+        entries
+            .iter()
+            .enumerate()
+            .map(move |(i, e)| (*section, e, i))
+    }) {
+        let is_effect = section == "effects";
+        let span = entry.span();
+        let p = entry.get_ref();
+        let name = p.name.get_ref();
+        let field = format!("{section}[{i}] ({name})");
+        if is_effect && info.effect(name).is_none() {
+            let effects: Vec<&str> = info.effects.iter().map(|e| e.name.as_str()).collect();
+            return at.error(
+                p.name.span(),
+                &field,
+                format!(
+                    "model `{}` has no effect `{name}` (it has: {})",
+                    info.name,
+                    effects.join(", ")
+                ),
+            );
+        }
+        let Some(index) = info.parameter_index(name) else {
+            return at.error(
+                p.name.span(),
+                &field,
+                format!(
+                    "model `{}` has no parameter `{name}` (it has: {})",
+                    info.name,
+                    known_parameters(info)
+                ),
+            );
+        };
+        if free.iter().any(|f| f.index == index) {
+            return at.error(span, &field, "is listed twice".into());
+        }
+        if fixed.contains(&index) {
+            return at.error(
+                span,
+                &field,
+                "is both fixed in [model.parameters] and free here".into(),
+            );
+        }
+        if !p.min.is_finite() || !p.max.is_finite() {
+            return at.error(span, &field, "min and max must be finite numbers".into());
+        }
+        if p.min >= p.max {
+            return at.error(
+                span,
+                &field,
+                format!("min ({}) must be below max ({})", p.min, p.max),
+            );
+        }
+        let (lo, hi) = info.bounds_at(index);
+        if p.min < lo || p.max > hi {
+            return at.error(
+                span,
+                &field,
+                format!(
+                    "bounds [{}, {}] exceed the model's admissible range [{lo}, {hi}]",
+                    p.min, p.max
+                ),
+            );
+        }
+        let nominal = p
+            .nominal
+            .unwrap_or(if is_effect { 0.0 } else { base[index] });
+        if !nominal.is_finite() || nominal < p.min || nominal > p.max {
+            return at.error(
+                span,
+                &field,
+                format!(
+                    "nominal {nominal} is outside its bounds [{}, {}]",
+                    p.min, p.max
+                ),
+            );
+        }
+        base[index] = nominal;
+        free.push(FreeParameter {
+            name: name.clone(),
+            index,
+            nominal,
+            min: p.min,
+            max: p.max,
+            effect: is_effect,
+        });
+    }
+    if free.is_empty() {
+        return at.unlocated(
+            "parameters",
+            "nothing to calibrate: add at least one [[parameters]] or [[effects]] entry",
+        );
+    }
+    Ok(free)
+}
+
+fn resolve_outputs(
+    entries: &[Spanned<OutputEntry>],
+    info: &ModelInfo,
+    at: &Locator,
+) -> Result<Vec<OutputMapping>, CampaignError> {
+    if entries.is_empty() {
+        return at.unlocated(
+            "outputs",
+            "no output to compare: add at least one [[outputs]] entry",
+        );
+    }
+    let mut outputs = Vec::new();
+    for (i, entry) in entries.iter().enumerate() {
+        let o = entry.get_ref();
+        let output = o.model.get_ref();
+        let field = format!("outputs[{i}] ({output})");
+        let Some(model_index) = info.output_index(output) else {
+            let known: Vec<_> = info.outputs.iter().map(|o| o.name.as_str()).collect();
+            return at.error(
+                o.model.span(),
+                &field,
+                format!(
+                    "model `{}` has no output `{output}` (it has: {})",
+                    info.name,
+                    known.join(", ")
+                ),
+            );
+        };
+        if !o.weight.is_finite() || o.weight < 0.0 {
+            return at.error(
+                entry.span(),
+                &field,
+                format!("weight {} must be a finite number ≥ 0", o.weight),
+            );
+        }
+        outputs.push(OutputMapping {
+            model: output.clone(),
+            model_index,
+            measured: o.measured.clone(),
+            weight: o.weight,
+        });
+    }
+    Ok(outputs)
+}
+
+fn resolve_window(
+    window: Option<Spanned<WindowSection>>,
+    at: &Locator,
+) -> Result<(f64, f64), CampaignError> {
+    let Some(window) = window else {
+        return at.unlocated(
+            "window",
+            "missing [window] with `start` and `stop` (seconds)",
+        );
+    };
+    let (start, stop) = (window.get_ref().start, window.get_ref().stop);
+    if !start.is_finite() || !stop.is_finite() || start < 0.0 || start >= stop {
+        return at.error(
+            window.span(),
+            "window",
+            format!("start ({start}) must be ≥ 0 and below stop ({stop})"),
+        );
+    }
+    Ok((start, stop))
+}
+
+/// End of the simulated horizon: the model section's `stop_time`, or the window's stop.
+fn resolve_stop_time(
+    section: &ModelSection,
+    model_span: std::ops::Range<usize>,
+    window_stop: f64,
+    at: &Locator,
+) -> Result<f64, CampaignError> {
+    let stop_time = match &section.stop_time {
+        Some(t) => {
+            let v = *t.get_ref();
+            if !v.is_finite() || v < window_stop {
+                return at.error(
+                    t.span(),
+                    "model.stop_time",
+                    format!("{v} must be ≥ the window's stop ({window_stop})"),
+                );
+            }
+            v
+        }
+        None => window_stop,
+    };
+    if stop_time > 1e6 {
+        return at.error(
+            model_span,
+            "model.stop_time",
+            format!("{stop_time} s is beyond what calib simulates (1e6 s)"),
+        );
+    }
+    Ok(stop_time)
+}
+
+fn resolve_search(
+    section: Option<Spanned<SearchSection>>,
+    free: usize,
+    at: &Locator,
+) -> Result<Search, CampaignError> {
+    let Some(s) = section else {
+        return Ok(Search {
+            methods: default_methods(),
+            starts: default_starts(),
+            max_evaluations: default_max_evaluations(),
+            seed: 0,
+            extra_starts: Vec::new(),
+        });
+    };
+    let span = s.span();
+    let s = s.into_inner();
+    if s.methods.is_empty() {
+        return at.error(span, "search.methods", "name at least one method".into());
+    }
+    if s.starts == 0 {
+        return at.error(span, "search.starts", "must be at least 1".into());
+    }
+    if s.max_evaluations < 2 * (free + 1) {
+        return at.error(
+            span,
+            "search.max_evaluations",
+            format!("{} is too few for {free} parameters", s.max_evaluations),
+        );
+    }
+    let mut methods = s.methods;
+    let mut seen = Vec::new();
+    methods.retain(|m| {
+        let first = !seen.contains(m);
+        seen.push(*m);
+        first
+    });
+    Ok(Search {
+        methods,
+        starts: s.starts,
+        max_evaluations: s.max_evaluations,
+        seed: s.seed,
+        extra_starts: Vec::new(),
+    })
+}
+
+/// The model's own solver settings, with the campaign's overrides.
+fn resolve_solver(
+    section: Option<Spanned<SolverSection>>,
+    model: &dyn Model,
+    at: &Locator,
+) -> Result<SolverOptions, CampaignError> {
+    let mut solver = model.default_options();
+    let Some(s) = section else {
+        return Ok(solver);
+    };
+    let span = s.span();
+    let s = s.into_inner();
+    if let Some(rtol) = s.rtol {
+        if !(rtol > 0.0 && rtol < 1.0) {
+            return at.error(span, "solver.rtol", format!("{rtol} must be in (0, 1)"));
+        }
+        solver.rtol = rtol;
+    }
+    if let Some(atol) = s.atol {
+        if !(atol > 0.0 && atol.is_finite()) {
+            return at.error(span, "solver.atol", format!("{atol} must be > 0"));
+        }
+        solver.atol = atol;
+    }
+    if let Some(max_steps) = s.max_steps {
+        if max_steps == 0 {
+            return at.error(span, "solver.max_steps", "must be at least 1".into());
+        }
+        solver.max_steps = max_steps;
+    }
+    Ok(solver)
+}
+
+fn resolve_diagnosis(
+    section: Option<Spanned<DiagnosisSection>>,
+    info: &ModelInfo,
+    at: &Locator,
+) -> Result<DiagnosisSettings, CampaignError> {
+    let mut diagnosis = DiagnosisSettings {
+        holdout: None,
+        refit: 3,
+        candidates: None,
+    };
+    let Some(d) = section else {
+        return Ok(diagnosis);
+    };
+    let span = d.span();
+    let d = d.into_inner();
+    match (d.holdout_start, d.holdout_stop) {
+        (None, None) => {}
+        (Some(a), Some(b)) if a.is_finite() && b.is_finite() && 0.0 <= a && a < b => {
+            diagnosis.holdout = Some((a, b));
+        }
+        (Some(a), Some(b)) => {
+            return at.error(
+                span,
+                "diagnosis.holdout_start",
+                format!("the held-out window [{a}, {b}] must have 0 ≤ start < stop"),
+            );
+        }
+        _ => {
+            return at.error(
+                span,
+                "diagnosis.holdout_start",
+                "give both holdout_start and holdout_stop, or neither".into(),
+            );
+        }
+    }
+    if let Some(refit) = d.refit {
+        if refit == 0 {
+            return at.error(span, "diagnosis.refit", "must be at least 1".into());
+        }
+        diagnosis.refit = refit;
+    }
+    if let Some(candidates) = d.candidates {
+        if let Some(unknown) = candidates.iter().find(|c| info.effect(c).is_none()) {
+            return at.error(
+                span,
+                "diagnosis.candidates",
+                format!("model `{}` has no effect `{unknown}`", info.name),
+            );
+        }
+        diagnosis.candidates = Some(candidates);
+    }
+    Ok(diagnosis)
+}
