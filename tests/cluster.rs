@@ -179,7 +179,7 @@ fn a_dns_name_resolves_to_workers() {
 }
 
 #[test]
-fn an_invalid_request_fails_its_points_and_is_not_retried() {
+fn an_invalid_request_is_a_fault_and_is_not_retried() {
     use calib_coordinator::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
@@ -190,15 +190,14 @@ fn an_invalid_request_fails_its_points_and_is_not_retried() {
     objective.base[g] = f64::NAN;
     let cluster = TestCluster::start(2, 1);
     let remote = cluster.connect();
-    let evaluations = remote
+    let fault = remote
         .evaluator()
-        .evaluate(&objective, &[vec![0.01, 0.002], vec![0.011, 0.002]]);
-    for e in &evaluations {
-        let why = e.failure.as_deref().unwrap();
-        assert!(why.contains("rejected by worker"), "{why}");
-        assert!(why.contains("parameters["), "{why}");
-        assert_eq!(e.objective, calib_coordinator::objective::FAILURE_PENALTY);
-    }
+        .evaluate(&objective, &[vec![0.01, 0.002], vec![0.011, 0.002]])
+        .unwrap_err();
+    // No penalty is made up for the points: the batch fails as a whole, not retryable.
+    assert!(!fault.is_retryable(), "{fault:?}");
+    assert!(fault.message.contains("rejected the request"), "{fault}");
+    assert!(fault.message.contains("parameters["), "{fault}");
     // Nobody simulated, and no worker was taken out for the client's mistake.
     assert!(cluster.workers.iter().all(|w| w.simulations() == 0));
     assert!(remote
@@ -241,7 +240,7 @@ fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
         .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
         .collect();
     let expected: Vec<_> = points.iter().map(|p| objective.evaluate(p)).collect();
-    let answered = remote.evaluator().evaluate(&objective, &points);
+    let answered = remote.evaluator().evaluate(&objective, &points).unwrap();
     assert_eq!(answered, expected);
     assert!(
         hanging.requests() >= 1,

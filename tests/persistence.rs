@@ -5,7 +5,7 @@ mod common;
 
 use calib_coordinator::calibration::{calibrate_with_store, resume_unfinished};
 use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::{Evaluator, LocalEvaluator};
+use calib_coordinator::evaluator::{Evaluator, Fault, LocalEvaluator};
 use calib_coordinator::objective::{Evaluation, Objective};
 use calib_coordinator::optim::problem::Silent;
 use calib_coordinator::store::{CampaignStatus, MemoryStore, SledStore, Store};
@@ -248,7 +248,11 @@ struct CrashesAfter {
 }
 
 impl Evaluator for CrashesAfter {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
         if self.done.fetch_add(points.len(), Ordering::SeqCst) >= self.limit {
             panic!("simulated crash");
         }

@@ -3,7 +3,7 @@
 
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
-use crate::evaluator::{CacheStats, Evaluator};
+use crate::evaluator::{CacheStats, Evaluator, Fault};
 use crate::measurement::Measurement;
 use crate::objective::{Evaluation, Objective};
 use crate::optim::multistart::{self, Cluster, RunContext, RunOutcome};
@@ -113,6 +113,10 @@ pub fn resume_unfinished_each<E: Evaluator>(
         match resume(store, &id, &record, evaluator, progress) {
             Ok(calibration) => finished(calibration),
             Err(Error::Store(e)) => return Err(Error::Store(e)),
+            // No result without workers: it stays marked running for a later resume.
+            Err(Error::Fault(fault)) => {
+                tracing::warn!(campaign = %record.name, error = %fault, "campaign interrupted");
+            }
             Err(e) => {
                 tracing::warn!(campaign = %record.name, error = %e, "cannot resume campaign");
                 mark_failed(store, &id, record, e.to_string())?;
@@ -195,6 +199,12 @@ fn calibrate_measured<E: Evaluator>(
     }
     let (nominal, runs, clusters, best, best_evaluation) = match outcome {
         Ok(found) => found,
+        // No result exists for some points: the campaign stays marked running, so that a
+        // rerun or a coordinator on this store resumes it once workers are back.
+        Err(Error::Fault(fault)) => {
+            tracing::error!(campaign = %campaign.name, error = %fault, "campaign interrupted");
+            return Err(Error::Fault(fault));
+        }
         Err(e) => {
             mark_failed(store, &id, record, e.to_string())?;
             return Err(e);
@@ -240,7 +250,7 @@ fn search(
 ) -> Result<Found> {
     let nominal_point = campaign.nominal();
     let nominal = evaluator
-        .evaluate(objective, std::slice::from_ref(&nominal_point))
+        .evaluate(objective, std::slice::from_ref(&nominal_point))?
         .remove(0);
     progress.evaluated(1, nominal.objective);
     tracing::info!(
@@ -274,7 +284,7 @@ fn search(
         max_evaluations: campaign.search.max_evaluations,
         progress,
     };
-    let runs = multistart::run_all(&context, &plan).map_err(|e| Error::Optimiser(e.to_string()))?;
+    let runs = multistart::run_all(&context, &plan).map_err(optimiser_error)?;
     let clusters = multistart::cluster(&runs, &space, CLUSTER_RADIUS);
     let best = clusters
         .first()
@@ -292,7 +302,15 @@ fn search(
         );
     }
     let best_evaluation = evaluator
-        .evaluate(objective, std::slice::from_ref(&runs[best].point))
+        .evaluate(objective, std::slice::from_ref(&runs[best].point))?
         .remove(0);
     Ok((nominal, runs, clusters, best, best_evaluation))
+}
+
+/// An optimiser's error: the evaluator's fault when that is what stopped it.
+pub fn optimiser_error(e: argmin::core::Error) -> Error {
+    match e.downcast::<Fault>() {
+        Ok(fault) => Error::Fault(fault),
+        Err(e) => Error::Optimiser(e.to_string()),
+    }
 }

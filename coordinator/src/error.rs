@@ -1,6 +1,7 @@
 //! The coordinator's error type.
 
 use crate::campaign::CampaignError;
+use crate::evaluator::Fault;
 use crate::measurement::MeasurementError;
 use crate::store::StoreError;
 use std::path::PathBuf;
@@ -29,6 +30,10 @@ pub enum Error {
     /// The cluster machinery (runtime, server, workers) failed.
     #[error("dispatch: {0}")]
     Dispatch(String),
+    /// Evaluations could not run (no worker, a refused request, a cancellation): the
+    /// campaign stopped without a result; its store resumes it.
+    #[error("evaluations stopped: {0}")]
+    Fault(#[from] Fault),
 }
 
 impl Error {

@@ -4,34 +4,99 @@
 //! were simulated: on this machine's cores ([`LocalEvaluator`]), on remote workers, or
 //! nowhere at all because the evaluation store already holds the point
 //! ([`crate::store::StoredEvaluator`]).
+//!
+//! Two kinds of trouble are kept apart. A simulation that ran and failed (the solver
+//! diverged, ran out of steps) is a result: an [`Evaluation`] carrying its reason, scored
+//! with a penalty, stored and replayed like any other. A [`Fault`] (no worker reachable, a
+//! request refused, the campaign cancelled) means no result exists for the batch: it is
+//! never stored and never scored; the campaign stops and can be resumed later.
 
 use crate::objective::{Evaluation, Objective};
 use rayon::prelude::*;
 
+/// Why a batch has no results at all: nothing was simulated, or nothing came back. Unlike a
+/// failed simulation, a fault says nothing about the points, so it is never stored.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{message}")]
+pub struct Fault {
+    pub kind: FaultKind,
+    pub message: String,
+}
+
+/// What kind of [`Fault`] stopped a batch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultKind {
+    /// No worker could do the work in time (none up, connections lost, deadlines missed,
+    /// queues full): the same batch may succeed later, once workers are back.
+    Unavailable,
+    /// A worker refused the request as invalid: asking again gives the same answer.
+    Rejected,
+    /// The campaign was cancelled while the batch waited.
+    Cancelled,
+}
+
+impl Fault {
+    pub fn unavailable(message: impl Into<String>) -> Self {
+        Self {
+            kind: FaultKind::Unavailable,
+            message: message.into(),
+        }
+    }
+
+    pub fn rejected(message: impl Into<String>) -> Self {
+        Self {
+            kind: FaultKind::Rejected,
+            message: message.into(),
+        }
+    }
+
+    pub fn cancelled(message: impl Into<String>) -> Self {
+        Self {
+            kind: FaultKind::Cancelled,
+            message: message.into(),
+        }
+    }
+
+    /// True when the same batch may succeed later (on workers that came back).
+    pub fn is_retryable(&self) -> bool {
+        self.kind == FaultKind::Unavailable
+    }
+}
+
 /// Evaluates batches of points of an objective.
 pub trait Evaluator: Send + Sync {
-    /// Evaluate `objective` at each point (values of its free parameters), answers in order.
-    /// The points of a batch are independent: implementations run them in parallel.
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation>;
+    /// Evaluate `objective` at each point (values of its free parameters), answers in order,
+    /// or the fault that kept the batch from being evaluated. The points of a batch are
+    /// independent: implementations run them in parallel.
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault>;
 }
 
 impl<E: Evaluator + ?Sized> Evaluator for &E {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
         (**self).evaluate(objective, points)
     }
 }
 
-/// Simulated outputs of one point (one series per mapped output), or why there are none.
+/// Simulated outputs of one point (one series per mapped output), or why the simulation
+/// failed.
 pub type Outputs = Result<Vec<Vec<f64>>, String>;
 
 /// Simulates batches of points and returns the mapped outputs themselves, for sensitivities,
 /// residuals and plots.
 pub trait Simulator: Send + Sync {
-    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs>;
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Result<Vec<Outputs>, Fault>;
 }
 
 impl<S: Simulator + ?Sized> Simulator for &S {
-    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Result<Vec<Outputs>, Fault> {
         (**self).simulate(objective, points)
     }
 }
@@ -41,17 +106,21 @@ impl<S: Simulator + ?Sized> Simulator for &S {
 pub struct LocalEvaluator;
 
 impl Evaluator for LocalEvaluator {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
-        points.par_iter().map(|p| objective.evaluate(p)).collect()
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        Ok(points.par_iter().map(|p| objective.evaluate(p)).collect())
     }
 }
 
 impl Simulator for LocalEvaluator {
-    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
-        points
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Result<Vec<Outputs>, Fault> {
+        Ok(points
             .par_iter()
             .map(|p| objective.simulate(p).map_err(|e| e.to_string()))
-            .collect()
+            .collect())
     }
 }
 

@@ -90,7 +90,9 @@ fn time_batch(
     let mut samples: Vec<Duration> = (0..repeat.max(1))
         .map(|_| {
             let start = Instant::now();
-            let evaluations = evaluator.evaluate(objective, points);
+            let evaluations = evaluator
+                .evaluate(objective, points)
+                .unwrap_or_else(|fault| panic!("the bench's workers failed: {fault}"));
             let elapsed = start.elapsed();
             assert!(
                 evaluations.iter().all(|e| e.failure.is_none()),

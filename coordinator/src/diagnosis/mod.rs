@@ -480,7 +480,7 @@ fn polish_singles_from_pairs<E: Evaluator + Simulator>(
         if starts.is_empty() {
             continue;
         }
-        let scores = engine.evaluate(&objective, &starts);
+        let scores = engine.evaluate(&objective, &starts)?;
         let Some((k, best)) = scores
             .iter()
             .enumerate()
@@ -634,7 +634,7 @@ fn fit_of<E: Simulator>(
     let best = calibration.best_run();
     let point = best.point.clone();
     let simulated = engine
-        .simulate(objective, std::slice::from_ref(&point))
+        .simulate(objective, std::slice::from_ref(&point))?
         .remove(0)
         .map_err(|e| Error::Optimiser(format!("simulation at the optimum failed: {e}")))?;
     let residual_series: Vec<Vec<f64>> = objective
@@ -650,7 +650,7 @@ fn fit_of<E: Simulator>(
 
     // The held-out window, with the same free parameters.
     let held = holdout.fixed_at(objective.full_parameters(&point));
-    let held_out = engine.simulate(&held, &[Vec::new()]).remove(0);
+    let held_out = engine.simulate(&held, &[Vec::new()])?.remove(0);
     let (held_out_objective, held_out_rms) = match held_out {
         Ok(values) => {
             let e = held.score(&values);
@@ -674,8 +674,7 @@ fn fit_of<E: Simulator>(
     let k = point.len() as f64;
     let sse = best.objective.max(f64::MIN_POSITIVE);
     let log_likelihood_term = n_eff * (sse / total_samples as f64).ln();
-    let jacobian = sensitivity::parameter_jacobian(engine, objective, &campaign.free, &point)
-        .map_err(|e| Error::Optimiser(format!("Jacobian failed: {e}")))?;
+    let jacobian = sensitivity::parameter_jacobian(engine, objective, &campaign.free, &point)?;
     let (parameters, correlation) = uncertainty::intervals(
         &campaign.free,
         &point,

@@ -61,8 +61,7 @@ pub fn rank<E: Evaluator + Simulator>(
         .map(|s| initial_step(s, residual_rms, dt))
         .collect();
     let jacobian =
-        sensitivity::parameter_jacobian(engine, &base_objective, &campaign.free, &baseline.point)
-            .map_err(|e| Error::Optimiser(format!("sensitivities failed: {e}")))?;
+        sensitivity::parameter_jacobian(engine, &base_objective, &campaign.free, &baseline.point)?;
     let sens = sensitivity::candidate_sensitivities(
         engine,
         &objective,
@@ -70,8 +69,7 @@ pub fn rank<E: Evaluator + Simulator>(
         &baseline.point,
         &steps,
         residual_rms,
-    )
-    .map_err(|e| Error::Optimiser(format!("sensitivities failed: {e}")))?;
+    )?;
     let mut basis = Basis::default();
     for column in &jacobian.columns {
         basis.push(column);
@@ -133,7 +131,7 @@ pub fn rank<E: Evaluator + Simulator>(
                 p
             })
             .collect();
-        let scores = engine.evaluate(&objective, &scan);
+        let scores = engine.evaluate(&objective, &scan)?;
         let best_scan = scores
             .iter()
             .enumerate()
@@ -147,7 +145,7 @@ pub fn rank<E: Evaluator + Simulator>(
                 scan[k].clone(),
                 None,
                 e.objective,
-            ),
+            )?,
             None if candidate.linear_score > 0.0 => {
                 let mut first = jacobian.columns.clone();
                 first.push(sens.columns[j].clone());
@@ -160,7 +158,7 @@ pub fn rank<E: Evaluator + Simulator>(
                     start,
                     Some((first, residual.clone())),
                     before,
-                )
+                )?
             }
             None => (before, Vec::new()),
         };
@@ -176,7 +174,7 @@ pub fn rank<E: Evaluator + Simulator>(
 /// Gauss–Newton steps from `start` (free parameters, then the candidate), the first with the
 /// given sensitivity columns and residual when there are some; each step tries shrinking
 /// fractions of the full step and keeps the best if it improves. The best objective and
-/// point reached.
+/// point reached. Failed simulations end the descent; a fault of the evaluator is returned.
 fn descend<E: Evaluator + Simulator>(
     engine: &E,
     objective: &Objective,
@@ -184,7 +182,7 @@ fn descend<E: Evaluator + Simulator>(
     start: Vec<f64>,
     first: Option<(Vec<Vec<f64>>, Vec<f64>)>,
     start_objective: f64,
-) -> (f64, Vec<f64>) {
+) -> Result<(f64, Vec<f64>)> {
     let mut point = start;
     let mut best = start_objective;
     let (mut columns, mut residual, given) = match first {
@@ -193,11 +191,13 @@ fn descend<E: Evaluator + Simulator>(
     };
     for iteration in 0..GAUSS_NEWTON_STEPS {
         if iteration > 0 || !given {
-            let Ok(j) = sensitivity::parameter_jacobian(engine, objective, free, &point) else {
-                break;
+            let j = match sensitivity::parameter_jacobian(engine, objective, free, &point) {
+                Ok(j) => j,
+                Err(Error::Fault(fault)) => return Err(fault.into()),
+                Err(_) => break,
             };
             let Some(Ok(series)) = engine
-                .simulate(objective, std::slice::from_ref(&point))
+                .simulate(objective, std::slice::from_ref(&point))?
                 .pop()
             else {
                 break;
@@ -222,7 +222,7 @@ fn descend<E: Evaluator + Simulator>(
                     .collect()
             })
             .collect();
-        let scores = engine.evaluate(objective, &trials);
+        let scores = engine.evaluate(objective, &trials)?;
         let (k, e) = scores
             .iter()
             .enumerate()
@@ -238,7 +238,7 @@ fn descend<E: Evaluator + Simulator>(
             break;
         }
     }
-    (best, point)
+    Ok((best, point))
 }
 
 fn median_step(grid: &[f64]) -> f64 {

@@ -8,8 +8,14 @@
 //! joint stick) describes far better than the tangent what freeing the effect could do.
 
 use crate::campaign::FreeParameter;
+use crate::error::{Error, Result};
 use crate::evaluator::Simulator;
 use crate::objective::Objective;
+
+/// A simulation the sensitivities need failed (a fault of the evaluator passes through).
+fn failed(reason: &str) -> Error {
+    Error::Optimiser(format!("sensitivities failed: {reason}"))
+}
 
 /// A weighted, stacked column: every sample of every output, output `i` scaled by `√k_i`.
 pub type Column = Vec<f64>;
@@ -44,7 +50,7 @@ pub fn parameter_jacobian(
     objective: &Objective,
     free: &[FreeParameter],
     point: &[f64],
-) -> Result<Sensitivities, String> {
+) -> Result<Sensitivities> {
     let mut points = Vec::new();
     let mut steps = Vec::new();
     for (i, p) in free.iter().enumerate() {
@@ -59,11 +65,11 @@ pub fn parameter_jacobian(
         points.push(b);
         steps.push(up - down);
     }
-    let results = simulator.simulate(objective, &points);
+    let results = simulator.simulate(objective, &points)?;
     let mut columns = Vec::new();
     for (i, pair) in results.chunks(2).enumerate() {
-        let up = stack(pair[0].as_ref().map_err(Clone::clone)?, &objective.weights);
-        let down = stack(pair[1].as_ref().map_err(Clone::clone)?, &objective.weights);
+        let up = stack(pair[0].as_ref().map_err(|e| failed(e))?, &objective.weights);
+        let down = stack(pair[1].as_ref().map_err(|e| failed(e))?, &objective.weights);
         columns.push(
             up.iter()
                 .zip(&down)
@@ -84,16 +90,16 @@ pub fn candidate_sensitivities(
     base: &[f64],
     initial_steps: &[f64],
     residual_rms: f64,
-) -> Result<Sensitivities, String> {
+) -> Result<Sensitivities> {
     let n = base.len();
     let mut at_base = base.to_vec();
     at_base.extend(std::iter::repeat_n(0.0, candidates.len()));
-    let reference = simulator.simulate(objective, std::slice::from_ref(&at_base));
+    let reference = simulator.simulate(objective, std::slice::from_ref(&at_base))?;
     let y0 = stack(
-        reference[0].as_ref().map_err(Clone::clone)?,
+        reference[0].as_ref().map_err(|e| failed(e))?,
         &objective.weights,
     );
-    let probe = |steps: &[f64]| -> Vec<Option<Column>> {
+    let probe = |steps: &[f64]| -> Result<Vec<Option<Column>>> {
         let points: Vec<Vec<f64>> = steps
             .iter()
             .enumerate()
@@ -103,8 +109,8 @@ pub fn candidate_sensitivities(
                 p
             })
             .collect();
-        simulator
-            .simulate(objective, &points)
+        Ok(simulator
+            .simulate(objective, &points)?
             .into_iter()
             .zip(steps)
             .map(|(r, s)| {
@@ -116,7 +122,7 @@ pub fn candidate_sensitivities(
                         .collect()
                 })
             })
-            .collect()
+            .collect())
     };
     let clamp = |j: usize, s: f64| {
         let c = &candidates[j];
@@ -131,7 +137,7 @@ pub fn candidate_sensitivities(
         .enumerate()
         .map(|(j, s)| clamp(j, *s))
         .collect();
-    let mut columns = probe(&steps);
+    let mut columns = probe(&steps)?;
     // Rescale the steps whose effect was far from the residual's size, once.
     let mut rescaled = steps.clone();
     let mut again = Vec::new();
@@ -149,7 +155,7 @@ pub fn candidate_sensitivities(
         }
     }
     if !again.is_empty() {
-        let second = probe(&rescaled);
+        let second = probe(&rescaled)?;
         for j in again {
             if second[j].is_some() {
                 columns[j] = second[j].clone();

@@ -18,7 +18,7 @@
 use super::client::{WireObjective, WireSimulation, WorkerClient};
 use super::error::WorkerError;
 use super::pool::{Lease, WorkerPool};
-use crate::evaluator::{Evaluator, Outputs, Simulator};
+use crate::evaluator::{Evaluator, Fault, Outputs, Simulator};
 use crate::objective::{Evaluation, Objective};
 use std::collections::{HashMap, VecDeque};
 use std::future::Future;
@@ -57,9 +57,13 @@ impl GrpcEvaluator {
 }
 
 impl Evaluator for GrpcEvaluator {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
         if points.is_empty() {
-            return Vec::new();
+            return Ok(Vec::new());
         }
         let wire = self.wire(objective);
         self.runtime
@@ -68,9 +72,9 @@ impl Evaluator for GrpcEvaluator {
 }
 
 impl Simulator for GrpcEvaluator {
-    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Outputs> {
+    fn simulate(&self, objective: &Objective, points: &[Vec<f64>]) -> Result<Vec<Outputs>, Fault> {
         if points.is_empty() {
-            return Vec::new();
+            return Ok(Vec::new());
         }
         let wire = Arc::new(WireSimulation::new(objective));
         self.runtime
@@ -90,9 +94,6 @@ pub trait Work: Send + Sync + 'static {
         points: Vec<Vec<f64>>,
         deadline: Duration,
     ) -> impl Future<Output = Result<Vec<Self::Answer>, WorkerError>> + Send;
-
-    /// The answer of a point given up for `reason`.
-    fn failed(&self, reason: String) -> Self::Answer;
 }
 
 impl Work for WireObjective {
@@ -105,10 +106,6 @@ impl Work for WireObjective {
         deadline: Duration,
     ) -> Result<Vec<Evaluation>, WorkerError> {
         client.evaluate(&self, points, deadline).await
-    }
-
-    fn failed(&self, reason: String) -> Evaluation {
-        Evaluation::failed(self.outputs, reason)
     }
 }
 
@@ -140,10 +137,6 @@ impl Work for WireSimulation {
             .map(|a| a.expect("every point answered"))
             .collect())
     }
-
-    fn failed(&self, reason: String) -> Outputs {
-        Err(reason)
-    }
 }
 
 /// What one chunk came back with.
@@ -153,12 +146,15 @@ struct ChunkOutcome<A> {
     result: Result<Vec<A>, WorkerError>,
 }
 
-/// Do `work` at `points` on the pool's workers, retrying what failed elsewhere.
+/// Do `work` at `points` on the pool's workers, retrying what failed elsewhere. A batch
+/// that cannot be done (no worker for `wait_for_workers`, a point that failed on
+/// `max_attempts` workers, a request refused as invalid) ends in a [`Fault`]: no answer is
+/// made up for its points.
 pub async fn dispatch<W: Work>(
     pool: Arc<WorkerPool>,
     work: Arc<W>,
     points: Vec<Vec<f64>>,
-) -> Vec<W::Answer> {
+) -> Result<Vec<W::Answer>, Fault> {
     let config = pool.config().clone();
     let mut answers: Vec<Option<W::Answer>> = (0..points.len()).map(|_| None).collect();
     let mut attempts = vec![0u32; points.len()];
@@ -166,6 +162,9 @@ pub async fn dispatch<W: Work>(
     let mut pending: VecDeque<usize> = (0..points.len()).collect();
     let mut in_flight: JoinSet<ChunkOutcome<W::Answer>> = JoinSet::new();
     let mut idle_since: Option<Instant> = None;
+    // Once set, nothing more is leased; the chunks in flight are waited for (to give
+    // their slots back) and their answers dropped.
+    let mut fault: Option<Fault> = None;
     let points = Arc::new(points);
 
     while !pending.is_empty() || !in_flight.is_empty() {
@@ -196,11 +195,11 @@ pub async fn dispatch<W: Work>(
                     since.elapsed().as_secs_f64()
                 );
                 tracing::error!(points = pending.len(), "{why}");
-                for i in pending.drain(..) {
-                    let reason = last_error[i].clone().unwrap_or_else(|| why.clone());
-                    answers[i] = Some(work.failed(reason));
-                }
-                break;
+                let last = pending.iter().find_map(|&i| last_error[i].clone());
+                return Err(Fault::unavailable(match last {
+                    Some(last) => format!("{why}; last failure: {last}"),
+                    None => why,
+                }));
             }
             let _ = tokio::time::timeout(config.probe_interval, changed).await;
             continue;
@@ -230,12 +229,11 @@ pub async fn dispatch<W: Work>(
             Err(WorkerError::Rejected(reason)) => {
                 pool.release(&lease, 0);
                 tracing::warn!(worker = %lease.client.url(), %reason, "worker rejected a request");
-                for i in indices {
-                    answers[i] = Some(work.failed(format!(
-                        "rejected by worker {}: {reason}",
-                        lease.client.url()
-                    )));
-                }
+                fault.get_or_insert(Fault::rejected(format!(
+                    "worker {} rejected the request: {reason}",
+                    lease.client.url()
+                )));
+                pending.clear();
             }
             Err(error) => {
                 pool.release(&lease, 0);
@@ -250,20 +248,26 @@ pub async fn dispatch<W: Work>(
                     attempts[i] += 1;
                     last_error[i] = Some(format!("{}: {error}", lease.client.url()));
                     if attempts[i] >= config.max_attempts {
-                        answers[i] = Some(work.failed(format!(
+                        fault.get_or_insert(Fault::unavailable(format!(
                             "gave up after {} attempts, last: {}",
                             attempts[i],
                             last_error[i].as_deref().unwrap_or_default()
                         )));
-                    } else {
+                    } else if fault.is_none() {
                         pending.push_front(i);
                     }
+                }
+                if fault.is_some() {
+                    pending.clear();
                 }
             }
         }
     }
-    answers
+    if let Some(fault) = fault {
+        return Err(fault);
+    }
+    Ok(answers
         .into_iter()
         .map(|a| a.expect("every point answered"))
-        .collect()
+        .collect())
 }

@@ -32,6 +32,6 @@ pub fn initial_simplex(start: &[f64]) -> Vec<Vec<f64>> {
 /// A Nelder–Mead solver starting from `start`, its simplex already evaluated in one batch.
 pub fn solver(problem: &RunProblem, start: &[f64]) -> Result<NelderMead<Vec<f64>, f64>, Error> {
     let vertices = initial_simplex(start);
-    problem.prefetch(&vertices);
+    problem.prefetch(&vertices)?;
     NelderMead::new(vertices).with_sd_tolerance(SD_TOLERANCE)
 }

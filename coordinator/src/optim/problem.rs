@@ -1,7 +1,7 @@
 //! One run's view of the objective: the unit box, the evaluator, and a log of what it saw.
 
 use super::space::UnitBox;
-use crate::evaluator::Evaluator;
+use crate::evaluator::{Evaluator, Fault};
 use crate::objective::Objective;
 use argmin::core::{CostFunction, Error, SyncAlias};
 use std::borrow::Borrow;
@@ -62,10 +62,11 @@ impl<'a> RunProblem<'a> {
         }
     }
 
-    /// Evaluate unit-box points, returning the scaled objectives.
-    pub fn batch(&self, units: &[&Vec<f64>]) -> Vec<f64> {
+    /// Evaluate unit-box points, returning the scaled objectives, or the fault that kept
+    /// them from being evaluated (the run then stops with it).
+    pub fn batch(&self, units: &[&Vec<f64>]) -> Result<Vec<f64>, Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
-        let evaluations = self.evaluator.evaluate(self.objective, &points);
+        let evaluations = self.evaluator.evaluate(self.objective, &points)?;
         let mut log = self.log.lock().expect("run log lock");
         log.evaluations += points.len();
         for (point, e) in points.iter().zip(&evaluations) {
@@ -75,7 +76,7 @@ impl<'a> RunProblem<'a> {
             }
         }
         self.progress.evaluated(points.len(), log.best_objective);
-        evaluations
+        Ok(evaluations
             .iter()
             .map(|e| {
                 if e.objective.is_nan() {
@@ -84,14 +85,14 @@ impl<'a> RunProblem<'a> {
                     e.objective / self.scale
                 }
             })
-            .collect()
+            .collect())
     }
 
     /// Evaluate points ahead of the solver asking for them one by one (they are then
     /// answered from the cache); not counted as the run's evaluations until asked for.
-    pub fn prefetch(&self, units: &[Vec<f64>]) {
+    pub fn prefetch(&self, units: &[Vec<f64>]) -> Result<(), Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
-        self.evaluator.evaluate(self.objective, &points);
+        self.evaluator.evaluate(self.objective, &points).map(|_| ())
     }
 
     pub fn take_log(&self) -> RunLog {
@@ -104,7 +105,7 @@ impl CostFunction for RunProblem<'_> {
     type Output = f64;
 
     fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
-        Ok(self.batch(&[u])[0])
+        Ok(self.batch(&[u])?[0])
     }
 
     fn bulk_cost<P>(&self, params: &[P]) -> Result<Vec<f64>, Error>
@@ -114,6 +115,6 @@ impl CostFunction for RunProblem<'_> {
         Self: SyncAlias,
     {
         let units: Vec<&Vec<f64>> = params.iter().map(|p| p.borrow()).collect();
-        Ok(self.batch(&units))
+        Ok(self.batch(&units)?)
     }
 }

@@ -1,7 +1,7 @@
 //! The evaluator the optimisers talk to: the store first, the simulator for the misses.
 
 use super::{evaluation_key, EvaluationKey, Store, StoreError};
-use crate::evaluator::{CacheStats, Evaluator};
+use crate::evaluator::{CacheStats, Evaluator, Fault};
 use crate::objective::{Evaluation, Objective};
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -110,13 +110,15 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
         }
     }
 
-    /// Evaluate distinct keys absent from the store at the last look.
+    /// Evaluate distinct keys absent from the store at the last look. A fault of the inner
+    /// evaluator stores nothing: the claimed keys are abandoned (whoever waits on them tries
+    /// for itself) and the fault returned.
     fn resolve_missing(
         &self,
         objective: &Objective,
         keys: &[EvaluationKey],
         points: &[&Vec<f64>],
-    ) -> (Vec<Evaluation>, u64) {
+    ) -> Result<(Vec<Evaluation>, u64), Fault> {
         let mut simulated_here = 0;
         let mut answers: Vec<Option<Evaluation>> = vec![None; keys.len()];
         let mut open: Vec<usize> = (0..keys.len()).collect();
@@ -144,7 +146,8 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                         .iter()
                         .map(|&j| points[mine[j]].clone())
                         .collect();
-                    let fresh = self.inner.evaluate(objective, &batch);
+                    // On a fault, `guard` abandons the claimed keys as it drops.
+                    let fresh = self.inner.evaluate(objective, &batch)?;
                     self.simulated
                         .fetch_add(to_simulate.len() as u64, Ordering::Relaxed);
                     simulated_here += to_simulate.len() as u64;
@@ -186,12 +189,12 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
             .into_iter()
             .map(|a| a.expect("every point answered"))
             .collect();
-        (answers, simulated_here)
+        Ok((answers, simulated_here))
     }
 }
 
-/// Marks claimed keys abandoned if the thread unwinds before publishing them, so that no
-/// other run waits forever.
+/// Marks claimed keys abandoned if the thread unwinds or returns a fault before publishing
+/// them, so that no other run waits forever.
 struct ReleaseOnPanic<'a, 's, E: Evaluator> {
     evaluator: &'a StoredEvaluator<'s, E>,
     keys: &'a [EvaluationKey],
@@ -213,7 +216,11 @@ impl<E: Evaluator> Drop for ReleaseOnPanic<'_, '_, E> {
 }
 
 impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
         self.requested
             .fetch_add(points.len() as u64, Ordering::Relaxed);
         let keys: Vec<EvaluationKey> = points
@@ -233,7 +240,7 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
         let mut simulated = 0;
         if !missing.is_empty() {
             let (resolved, simulated_here) =
-                self.resolve_missing(objective, &missing, &missing_points);
+                self.resolve_missing(objective, &missing, &missing_points)?;
             simulated = simulated_here;
             let by_key: HashMap<EvaluationKey, Evaluation> =
                 missing.into_iter().zip(resolved).collect();
@@ -245,9 +252,9 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
         }
         self.store
             .count_lookups(points.len() as u64 - simulated, simulated);
-        answers
+        Ok(answers
             .into_iter()
             .map(|a| a.expect("every point answered"))
-            .collect()
+            .collect())
     }
 }

@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::campaign::Campaign;
-use crate::evaluator::Evaluator;
+use crate::evaluator::{Evaluator, Fault};
 use crate::measurement::Measurement;
 use std::path::Path;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -213,17 +213,17 @@ struct Counting {
 }
 
 impl Evaluator for Counting {
-    fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Result<Vec<Evaluation>, Fault> {
         std::thread::sleep(Duration::from_millis(20));
         self.simulated.fetch_add(points.len(), Ordering::SeqCst);
-        points
+        Ok(points
             .iter()
             .map(|p| Evaluation {
                 objective: p.iter().sum(),
                 sse: vec![p.iter().sum()],
                 failure: None,
             })
-            .collect()
+            .collect())
     }
 }
 
@@ -274,7 +274,7 @@ fn concurrent_requests_for_one_point_simulate_it_once() {
                 // Each thread asks for an overlapping window, one point twice.
                 let mut batch = points[t..t + 3].to_vec();
                 batch.push(points[t].clone());
-                let answers = evaluator.evaluate(objective, &batch);
+                let answers = evaluator.evaluate(objective, &batch).unwrap();
                 for (p, a) in batch.iter().zip(answers) {
                     assert_eq!(a.objective, p[0]);
                 }
@@ -298,17 +298,19 @@ fn a_second_evaluator_on_the_same_store_simulates_nothing() {
     let objective = objective(false);
     let points: Vec<Vec<f64>> = (0..5).map(|i| vec![i as f64 * 0.2]).collect();
     let first = Counting::default();
-    StoredEvaluator::new(&first, &store).evaluate(&objective, &points);
+    StoredEvaluator::new(&first, &store)
+        .evaluate(&objective, &points)
+        .unwrap();
     let second = Counting::default();
     let again = StoredEvaluator::new(&second, &store);
-    let answers = again.evaluate(&objective, &points);
+    let answers = again.evaluate(&objective, &points).unwrap();
     assert_eq!(second.simulated.load(Ordering::SeqCst), 0);
     assert_eq!(again.stats().cached, 5);
     assert_eq!(answers[4].objective, 0.8);
 
     // Other data, other objective: nothing is reused.
     let other = objective_with_other_data();
-    again.evaluate(&other, &points);
+    again.evaluate(&other, &points).unwrap();
     assert_eq!(second.simulated.load(Ordering::SeqCst), 5);
 }
 
@@ -323,7 +325,11 @@ struct PanicsOnce {
 }
 
 impl Evaluator for PanicsOnce {
-    fn evaluate(&self, objective: &Objective, points: &[Vec<f64>]) -> Vec<Evaluation> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
         if self.armed.swap(false, Ordering::SeqCst) {
             std::thread::sleep(Duration::from_millis(50));
             panic!("simulator crashed");
@@ -346,9 +352,47 @@ fn a_crashed_simulation_does_not_leave_waiters_hanging() {
         let first = scope.spawn(|| evaluator.evaluate(&objective, &point));
         std::thread::sleep(Duration::from_millis(10));
         let second = scope.spawn(|| evaluator.evaluate(&objective, &point));
-        let answer = second.join().unwrap();
+        let answer = second.join().unwrap().unwrap();
         assert_eq!(answer[0].objective, 0.5);
         first.join().is_err()
     });
     assert!(crashed);
+}
+
+/// Has no worker for its first batch, then behaves.
+struct UnavailableOnce {
+    armed: std::sync::atomic::AtomicBool,
+    inner: Counting,
+}
+
+impl Evaluator for UnavailableOnce {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        if self.armed.swap(false, Ordering::SeqCst) {
+            return Err(Fault::unavailable("no worker available for 300 s"));
+        }
+        self.inner.evaluate(objective, points)
+    }
+}
+
+#[test]
+fn a_fault_stores_nothing_and_the_points_are_simulated_once_workers_are_back() {
+    let store = MemoryStore::new();
+    let inner = UnavailableOnce {
+        armed: true.into(),
+        inner: Counting::default(),
+    };
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..3).map(|i| vec![i as f64 * 0.1]).collect();
+    let fault = evaluator.evaluate(&objective, &points).unwrap_err();
+    assert!(fault.is_retryable(), "{fault:?}");
+    assert_eq!(store.stats().unwrap().evaluations, 0);
+    let answers = evaluator.evaluate(&objective, &points).unwrap();
+    assert_eq!(answers[2].objective, 0.2);
+    assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 3);
+    assert_eq!(store.stats().unwrap().evaluations, 3);
 }
