@@ -223,9 +223,7 @@ fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
     let (hanging_url, hanging) = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let url = format!("http://{}", listener.local_addr().unwrap());
-        let napper =
-            calib_worker::service::napping::serve_napping(listener, Duration::from_secs(3600), 1)
-                .await;
+        let napper = calib_sandbox::serve_napping(listener, Duration::from_secs(3600), 1).await;
         (url, napper)
     });
     let mut config = DispatchConfig::new(vec![
@@ -331,4 +329,265 @@ fn a_diagnosis_on_the_cluster_equals_the_local_one() {
         remote_result.selected, remote_result.baseline.objective, remote_result.final_fit.objective
     );
     assert!(simulations.iter().all(|&s| s > 0), "{simulations:?}");
+}
+
+/// A resolver the test sets: the addresses a name resolves to, or a failure.
+#[derive(Default)]
+struct SetResolver {
+    answer: std::sync::Mutex<Option<Vec<std::net::SocketAddr>>>,
+    calls: std::sync::atomic::AtomicU64,
+}
+
+impl SetResolver {
+    fn set(&self, answer: Option<Vec<std::net::SocketAddr>>) {
+        *self.answer.lock().unwrap() = answer;
+    }
+
+    fn calls(&self) -> u64 {
+        self.calls.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+impl calib_coordinator::dispatch::Resolve for SetResolver {
+    fn resolve(&self, _name: &str) -> calib_coordinator::dispatch::discovery::Resolution {
+        self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        let answer = self.answer.lock().unwrap().clone();
+        Box::pin(
+            async move { answer.ok_or_else(|| std::io::Error::other("name server unreachable")) },
+        )
+    }
+}
+
+/// URLs of the pool's workers that are up, sorted.
+fn up_urls(remote: &RemoteWorkers) -> Vec<String> {
+    let mut urls: Vec<String> = remote
+        .pool()
+        .workers()
+        .into_iter()
+        .filter(|w| w.health == Health::Up)
+        .map(|w| w.url)
+        .collect();
+    urls.sort();
+    urls
+}
+
+#[test]
+fn a_dns_name_resolved_again_adds_and_drops_workers() {
+    use calib_coordinator::evaluator::Evaluator;
+    let cluster = TestCluster::start(2, 1);
+    let (a, b) = (cluster.workers[0].address(), cluster.workers[1].address());
+    let resolver = std::sync::Arc::new(SetResolver::default());
+    resolver.set(Some(vec![a]));
+    let mut config = DispatchConfig::new(vec![WorkerAddress::Dns {
+        host: "calib-workers.test".into(),
+        port: 50051,
+    }]);
+    config.probe_interval = Duration::from_millis(100);
+    config.resolve_interval = Duration::from_millis(100);
+    config.resolver = calib_coordinator::dispatch::Resolver(resolver.clone());
+    let remote = RemoteWorkers::connect(config).unwrap();
+    let wait_for = |what: &str, urls: Vec<String>| {
+        await_condition(what, Duration::from_secs(10), || {
+            up_urls(&remote) == urls && remote.pool().workers().len() == urls.len()
+        })
+    };
+    wait_for("the first address to be up", vec![format!("http://{a}")]);
+
+    resolver.set(Some(vec![b, a]));
+    let mut both = vec![format!("http://{a}"), format!("http://{b}")];
+    both.sort();
+    wait_for("the added address to join", both);
+
+    resolver.set(Some(vec![b]));
+    wait_for("the vanished address to leave", vec![format!("http://{b}")]);
+
+    // A failed resolution keeps the workers there are.
+    resolver.set(None);
+    let calls = resolver.calls();
+    await_condition("two failed resolutions", Duration::from_secs(10), || {
+        resolver.calls() >= calls + 2
+    });
+    assert_eq!(up_urls(&remote), vec![format!("http://{b}")]);
+
+    // Work goes to the worker the name resolves to now, and only there.
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let points: Vec<Vec<f64>> = (0..4)
+        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
+        .collect();
+    let expected: Vec<_> = points.iter().map(|p| objective.evaluate(p)).collect();
+    assert_eq!(
+        remote.evaluator().evaluate(&objective, &points).unwrap(),
+        expected
+    );
+    assert_eq!(cluster.workers[0].simulations(), 0);
+    assert_eq!(cluster.workers[1].simulations(), 4);
+}
+
+#[test]
+fn a_failed_worker_is_probed_back_in() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let mut first = TestWorker::start(1, 64);
+    let address = first.address();
+    let mut config = DispatchConfig::new(vec![WorkerAddress::Url(first.url())]);
+    config.probe_interval = Duration::from_millis(100);
+    config.wait_for_workers = Duration::from_secs(60);
+    let remote = RemoteWorkers::connect(config).unwrap();
+    assert!(remote.wait_until_up(1, Duration::from_secs(10)));
+    first.kill();
+
+    let points: Vec<Vec<f64>> = vec![vec![0.01, 0.002], vec![0.012, 0.002]];
+    let expected: Vec<_> = points.iter().map(|p| objective.evaluate(p)).collect();
+    let evaluator = remote.evaluator();
+    let (answered, second) = std::thread::scope(|scope| {
+        let batch = scope.spawn(|| evaluator.evaluate(&objective, &points));
+        // The batch finds the worker gone and takes it out...
+        await_condition(
+            "the dead worker to be taken out",
+            Duration::from_secs(20),
+            || matches!(remote.pool().workers()[0].health, Health::Down { .. }),
+        );
+        assert!(!batch.is_finished(), "the batch waits for a worker");
+        // ...until it is back at its address, where a probe finds it.
+        let second = TestWorker::start_at(address, 1);
+        (batch.join().unwrap(), second)
+    });
+    assert_eq!(answered.unwrap(), expected);
+    assert_eq!(second.simulations(), 2);
+    assert_eq!(remote.pool().workers()[0].health, Health::Up);
+}
+
+#[test]
+fn a_registration_lapses_after_missed_renewals() {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    let coordinator = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let mut dispatch = DispatchConfig::new(Vec::new());
+        dispatch.probe_interval = Duration::from_millis(100);
+        // Renewals every second; three missed and the worker is dropped.
+        dispatch.heartbeat = Duration::from_secs(1);
+        calib_coordinator::server::serve_coordinator(
+            listener,
+            calib_coordinator::server::CoordinatorConfig::new(
+                "127.0.0.1:0".parse().unwrap(),
+                dispatch,
+            ),
+        )
+        .unwrap()
+    });
+    let registry = format!("http://{}", coordinator.address());
+    let mut leaving = TestWorker::start_registered(1, &registry);
+    let staying = TestWorker::start_registered(1, &registry);
+    let listed = |worker: &TestWorker| {
+        coordinator
+            .pool()
+            .workers()
+            .iter()
+            .any(|w| w.url == worker.url())
+    };
+    await_condition(
+        "both workers to register and come up",
+        Duration::from_secs(20),
+        || {
+            coordinator
+                .pool()
+                .workers()
+                .iter()
+                .filter(|w| w.health == Health::Up)
+                .count()
+                == 2
+        },
+    );
+    leaving.kill();
+    assert!(listed(&leaving), "dropped before its registration lapsed");
+    await_condition(
+        "the silent worker's registration to lapse",
+        Duration::from_secs(15),
+        || !listed(&leaving),
+    );
+    // The worker that kept renewing stays.
+    assert!(listed(&staying));
+    runtime.block_on(coordinator.shutdown());
+}
+
+#[test]
+fn each_worker_has_two_chunks_of_at_most_one_point_per_slot_in_flight() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    // A worker of two slots that takes half a second per chunk.
+    let (url, napper) = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let url = format!("http://{}", listener.local_addr().unwrap());
+        let napper = calib_sandbox::serve_napping(listener, Duration::from_millis(500), 2).await;
+        (url, napper)
+    });
+    let mut config = DispatchConfig::new(vec![WorkerAddress::Url(url)]);
+    config.probe_interval = Duration::from_millis(100);
+    let remote = RemoteWorkers::connect(config).unwrap();
+    assert!(remote.wait_until_up(1, Duration::from_secs(10)));
+    // The worker gets the measurement first.
+    remote
+        .evaluator()
+        .evaluate(&objective, &[vec![0.01, 0.002]])
+        .unwrap();
+    let before = napper.requests();
+    let points: Vec<Vec<f64>> = (0..10)
+        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
+        .collect();
+    let answered = remote.evaluator().evaluate(&objective, &points).unwrap();
+    assert_eq!(answered.len(), 10);
+    assert_eq!(napper.requests() - before, 5, "chunks of two points");
+    assert_eq!(napper.most_points(), 2, "at most one point per slot");
+    assert_eq!(napper.most_in_flight(), 2, "one chunk runs, the next waits");
+}
+
+#[test]
+fn the_measurement_travels_to_each_worker_once() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let nappers = calib_sandbox::NappingCluster::start(2, Duration::from_millis(20), 1).unwrap();
+    let remote = nappers.try_connect().unwrap();
+    let batch = |k: u32| -> Vec<Vec<f64>> {
+        (0..8)
+            .map(|i| vec![0.01 + 1e-4 * f64::from(8 * k + i), 0.002])
+            .collect()
+    };
+    remote.evaluator().evaluate(&objective, &batch(0)).unwrap();
+    let uploads: Vec<u64> = nappers.simulators.iter().map(|n| n.uploads()).collect();
+    // Once per worker, or once per chunk in flight when the first chunks cross.
+    assert!(uploads.iter().all(|&u| (1..=2).contains(&u)), "{uploads:?}");
+    for k in 1..4 {
+        remote.evaluator().evaluate(&objective, &batch(k)).unwrap();
+    }
+    let again: Vec<u64> = nappers.simulators.iter().map(|n| n.uploads()).collect();
+    assert_eq!(
+        again, uploads,
+        "later batches name the measurement by its hash"
+    );
+    let requests: u64 = nappers.simulators.iter().map(|n| n.requests()).sum();
+    assert!(
+        requests >= 32,
+        "{requests} requests for 32 single-point chunks"
+    );
 }

@@ -6,65 +6,24 @@
 //! - scaling: evaluations per second of a ≥ 5 ms model (`hx_highfi`) with one and two
 //!   single-slot workers;
 //! - dispatcher capacity: many workers that only sleep, so that what limits the rate is
-//!   the coordinator's dispatch, not the simulations ([`napping`]).
+//!   the coordinator's dispatch, not the simulations.
+//!
+//! The workers are those of the tests' sandbox (`calib-sandbox`).
 
 use super::{Failure, Outcome};
 use calib_coordinator::calibration;
 use calib_coordinator::campaign::Campaign;
-use calib_coordinator::dispatch::{DispatchConfig, RemoteWorkers, WorkerAddress};
+use calib_coordinator::dispatch::RemoteWorkers;
 use calib_coordinator::evaluator::{Evaluator, LocalEvaluator};
 use calib_coordinator::objective::Objective;
-use calib_worker::service::{napping, serve_worker, RunningWorker, WorkerConfig};
+use calib_sandbox::{NappingCluster, SandboxCluster};
 use calib_worker::{models, SolverOptions};
 use std::path::Path;
 use std::time::{Duration, Instant};
-use tokio::net::TcpListener;
 
-/// Workers serving in this process, on a runtime of their own.
-struct Workers {
-    _runtime: tokio::runtime::Runtime,
-    urls: Vec<String>,
-    _running: Vec<RunningWorker>,
-}
-
-impl Workers {
-    fn start(count: usize, slots: usize) -> Result<Self, Failure> {
-        let runtime = super::runtime()?;
-        let running = runtime.block_on(async {
-            let mut running = Vec::new();
-            for _ in 0..count {
-                let listener = TcpListener::bind("127.0.0.1:0")
-                    .await
-                    .map_err(|e| Failure::internal(format!("cannot bind 127.0.0.1:0: {e}")))?;
-                let mut config = WorkerConfig::new(listener.local_addr().expect("bound"));
-                config.slots = slots;
-                running.push(
-                    serve_worker(listener, config)
-                        .map_err(|e| Failure::internal(format!("cannot serve: {e}")))?,
-                );
-            }
-            Ok::<_, Failure>(running)
-        })?;
-        Ok(Self {
-            _runtime: runtime,
-            urls: running
-                .iter()
-                .map(|w| format!("http://{}", w.address()))
-                .collect(),
-            _running: running,
-        })
-    }
-}
-
-/// A pool over `urls`, once every worker is up.
+/// A pool over the sandbox workers at `urls`, once every one is up.
 fn connect(urls: &[String]) -> Result<RemoteWorkers, Failure> {
-    let mut config = DispatchConfig::new(urls.iter().cloned().map(WorkerAddress::Url).collect());
-    config.probe_interval = Duration::from_millis(50);
-    let remote = RemoteWorkers::connect(config)?;
-    if !remote.wait_until_up(urls.len(), Duration::from_secs(30)) {
-        return Err(Failure::internal("workers did not come up within 30 s"));
-    }
-    Ok(remote)
+    calib_sandbox::connect(urls).map_err(Failure::internal)
 }
 
 /// `n` distinct points around the nominal point.
@@ -176,8 +135,8 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
     let furuta = objective_of(campaign)?;
     let batch = points(&furuta, 256);
     let local = time_batch(&LocalEvaluator, &furuta, &batch, repeat);
-    let workers = Workers::start(1, cores)?;
-    let remote = connect(&workers.urls)?;
+    let workers = SandboxCluster::start(1, cores);
+    let remote = connect(&workers.urls())?;
     let evaluator = remote.evaluator();
     let cluster = time_batch(&evaluator, &furuta, &batch, repeat);
     let per = |d: Duration| d.as_secs_f64() * 1e6 / batch.len() as f64;
@@ -209,8 +168,8 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
     }
     let mut rates = Vec::new();
     for count in 1..=2usize {
-        let workers = Workers::start(count, 1)?;
-        let remote = connect(&workers.urls)?;
+        let workers = SandboxCluster::start(count, 1);
+        let remote = connect(&workers.urls())?;
         let took = time_batch(&remote.evaluator(), &hx, &batch, hx_repeat);
         rates.push(batch.len() as f64 / took.as_secs_f64());
     }
@@ -237,8 +196,9 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
     let nap = Duration::from_millis(5);
     let mut single = 0.0;
     for count in [1usize, 10, 100] {
-        let workers = NappingWorkers::start(count, nap)?;
-        let remote = connect(&workers.urls)?;
+        let workers = NappingCluster::start(count, nap, 1)
+            .map_err(|e| Failure::internal(format!("cannot start napping workers: {e}")))?;
+        let remote = connect(workers.urls())?;
         let batch = points(&furuta, 40 * count);
         let took = time_batch(&remote.evaluator(), &furuta, &batch, 3);
         let rate = batch.len() as f64 / took.as_secs_f64();
@@ -256,31 +216,4 @@ pub fn run(repeat: usize, campaign: &Path) -> Outcome {
         }
     }
     Ok(())
-}
-
-/// Workers that answer every evaluation after a nap, simulating nothing.
-struct NappingWorkers {
-    _runtime: tokio::runtime::Runtime,
-    urls: Vec<String>,
-}
-
-impl NappingWorkers {
-    fn start(count: usize, nap: Duration) -> Result<Self, Failure> {
-        let runtime = super::runtime()?;
-        let urls = runtime.block_on(async {
-            let mut urls = Vec::new();
-            for _ in 0..count {
-                let listener = TcpListener::bind("127.0.0.1:0")
-                    .await
-                    .map_err(|e| Failure::internal(format!("cannot bind 127.0.0.1:0: {e}")))?;
-                urls.push(format!("http://{}", listener.local_addr().expect("bound")));
-                napping::serve_napping(listener, nap, 1).await;
-            }
-            Ok::<_, Failure>(urls)
-        })?;
-        Ok(Self {
-            _runtime: runtime,
-            urls,
-        })
-    }
 }

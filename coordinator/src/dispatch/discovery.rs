@@ -3,13 +3,51 @@
 //! workers that register themselves (see [`super::registry`]).
 
 use super::pool::{Origin, WorkerPool};
+use std::future::Future;
+use std::net::SocketAddr;
+use std::pin::Pin;
 use std::sync::{Arc, Weak};
 use std::time::Duration;
+
+/// Addresses a name resolves to, or why it does not.
+pub type Resolution = Pin<Box<dyn Future<Output = std::io::Result<Vec<SocketAddr>>> + Send>>;
+
+/// Turns `name:port` into socket addresses: the system's resolver, or one a test controls.
+pub trait Resolve: Send + Sync + 'static {
+    fn resolve(&self, name: &str) -> Resolution;
+}
+
+/// The operating system's resolver (`getaddrinfo`, as `tokio::net::lookup_host`).
+#[derive(Debug, Default, Clone, Copy)]
+pub struct SystemResolver;
+
+impl Resolve for SystemResolver {
+    fn resolve(&self, name: &str) -> Resolution {
+        let name = name.to_string();
+        Box::pin(async move { Ok(tokio::net::lookup_host(name).await?.collect()) })
+    }
+}
+
+/// The resolver a pool uses for `dns:///` workers.
+#[derive(Clone)]
+pub struct Resolver(pub Arc<dyn Resolve>);
+
+impl Default for Resolver {
+    fn default() -> Self {
+        Self(Arc::new(SystemResolver))
+    }
+}
+
+impl std::fmt::Debug for Resolver {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Resolver")
+    }
+}
 
 /// One entry of a `--workers` list.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum WorkerAddress {
-    /// `http://host:port` (or `https://`): one worker.
+    /// `http://host:port`: one worker (`https://` is refused: no TLS is built in).
     Url(String),
     /// `dns:///name:port`: every address `name` resolves to, re-resolved periodically.
     Dns { host: String, port: u16 },
@@ -37,10 +75,13 @@ impl std::str::FromStr for WorkerAddress {
                 port,
             });
         }
-        if let Some(rest) = text
-            .strip_prefix("http://")
-            .or_else(|| text.strip_prefix("https://"))
-        {
+        if text.starts_with("https://") {
+            return Err(format!(
+                "`{text}`: TLS is not built in; reach workers over http:// on a trusted \
+                 network (or through a TLS-terminating proxy)"
+            ));
+        }
+        if let Some(rest) = text.strip_prefix("http://") {
             let authority = rest.split('/').next().unwrap_or_default();
             let has_port = authority
                 .rsplit_once(':')
@@ -51,7 +92,7 @@ impl std::str::FromStr for WorkerAddress {
             return Ok(WorkerAddress::Url(text.trim_end_matches('/').to_string()));
         }
         Err(format!(
-            "`{text}`: a worker is http://HOST:PORT, https://HOST:PORT or dns:///NAME:PORT"
+            "`{text}`: a worker is http://HOST:PORT or dns:///NAME:PORT"
         ))
     }
 }
@@ -72,8 +113,8 @@ pub fn discover(pool: &Arc<WorkerPool>, addresses: &[WorkerAddress]) -> Result<(
             WorkerAddress::Dns { host, port } => {
                 tokio::spawn(resolve_forever(
                     Arc::downgrade(pool),
-                    host.clone(),
-                    *port,
+                    pool.config().resolver.clone(),
+                    format!("{host}:{port}"),
                     pool.config().resolve_interval,
                 ));
             }
@@ -82,14 +123,19 @@ pub fn discover(pool: &Arc<WorkerPool>, addresses: &[WorkerAddress]) -> Result<(
     Ok(())
 }
 
-/// Keep the pool's workers from `host` equal to what it resolves to.
-async fn resolve_forever(pool: Weak<WorkerPool>, host: String, port: u16, every: Duration) {
-    let name = format!("{host}:{port}");
+/// Keep the pool's workers from `name` (`host:port`) equal to what it resolves to: new
+/// addresses join, vanished ones leave; a failed resolution changes nothing.
+async fn resolve_forever(
+    pool: Weak<WorkerPool>,
+    resolver: Resolver,
+    name: String,
+    every: Duration,
+) {
     let mut ticker = tokio::time::interval(every);
     ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         ticker.tick().await;
-        let resolved = tokio::net::lookup_host(name.as_str()).await;
+        let resolved = resolver.0.resolve(&name).await;
         let Some(pool) = pool.upgrade() else { return };
         let addresses = match resolved {
             Ok(addresses) => addresses,
@@ -99,7 +145,10 @@ async fn resolve_forever(pool: Weak<WorkerPool>, host: String, port: u16, every:
                 continue;
             }
         };
-        let mut urls: Vec<String> = addresses.map(|a| format!("http://{a}")).collect();
+        let mut urls: Vec<String> = addresses
+            .into_iter()
+            .map(|a| format!("http://{a}"))
+            .collect();
         urls.sort();
         urls.dedup();
         for stale in pool.urls_from(&name) {
@@ -122,10 +171,10 @@ mod tests {
     #[test]
     fn parses_every_form() {
         assert_eq!(
-            parse_list("http://a:1, https://b:2/,dns:///w.default.svc:50051").unwrap(),
+            parse_list("http://a:1, http://b:2/,dns:///w.default.svc:50051").unwrap(),
             vec![
                 WorkerAddress::Url("http://a:1".into()),
-                WorkerAddress::Url("https://b:2".into()),
+                WorkerAddress::Url("http://b:2".into()),
                 WorkerAddress::Dns {
                     host: "w.default.svc".into(),
                     port: 50051
@@ -150,6 +199,7 @@ mod tests {
             "dns:///:5",
             "http://:5",
             "tcp://a:1",
+            "https://a:1",
         ] {
             assert!(bad.parse::<WorkerAddress>().is_err(), "{bad}");
         }

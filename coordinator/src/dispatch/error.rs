@@ -16,6 +16,9 @@ pub enum WorkerError {
     /// The worker speaks another protocol version (`FAILED_PRECONDITION`).
     #[error("incompatible worker: {0}")]
     Incompatible(String),
+    /// Nothing listens at the worker's address: the connection was refused.
+    #[error("connection refused: {0}")]
+    Refused(String),
     /// Unreachable, timed out, crashed or shutting down: the request may succeed elsewhere.
     #[error("worker unavailable: {0}")]
     Unavailable(String),
@@ -25,7 +28,9 @@ pub enum WorkerError {
 }
 
 impl WorkerError {
-    /// True when the same request may succeed on another worker or later.
+    /// True when the same request may succeed on another worker or later: the dispatcher
+    /// retries the chunk elsewhere (and takes the worker out) or stops the batch with a
+    /// [`Fault`](crate::evaluator::Fault) of kind `Rejected`. The one place that decides.
     pub fn is_retryable(&self) -> bool {
         !matches!(self, WorkerError::Rejected(_))
     }
@@ -35,6 +40,9 @@ impl From<tonic::Status> for WorkerError {
     fn from(status: tonic::Status) -> Self {
         use tonic::Code;
         let message = status.message().to_string();
+        if refused(&status) {
+            return WorkerError::Refused(message);
+        }
         match status.code() {
             Code::InvalidArgument => WorkerError::Rejected(message),
             Code::NotFound => WorkerError::MeasurementMissing,
@@ -42,5 +50,46 @@ impl From<tonic::Status> for WorkerError {
             Code::FailedPrecondition | Code::Unimplemented => WorkerError::Incompatible(message),
             code => WorkerError::Unavailable(format!("{code:?}: {message}")),
         }
+    }
+}
+
+/// True when the call failed because nothing listens at the address.
+fn refused(status: &tonic::Status) -> bool {
+    let mut source: Option<&(dyn std::error::Error + 'static)> = std::error::Error::source(status);
+    while let Some(error) = source {
+        if let Some(io) = error.downcast_ref::<std::io::Error>() {
+            if io.kind() == std::io::ErrorKind::ConnectionRefused {
+                return true;
+            }
+        }
+        source = error.source();
+    }
+    false
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tonic::Status;
+
+    #[test]
+    fn only_an_invalid_request_is_not_worth_retrying() {
+        let cases = [
+            (Status::invalid_argument("points[0]: NaN"), false),
+            (Status::resource_exhausted("queue full"), true),
+            (Status::unavailable("shutting down"), true),
+            (Status::internal("lost"), true),
+            (Status::deadline_exceeded("late"), true),
+            (Status::failed_precondition("protocol_version"), true),
+            (Status::not_found("measurement_hash"), true),
+        ];
+        for (status, retryable) in cases {
+            let error = WorkerError::from(status.clone());
+            assert_eq!(error.is_retryable(), retryable, "{status:?} -> {error:?}");
+        }
+        assert_eq!(
+            WorkerError::from(Status::invalid_argument("points[0]: NaN")),
+            WorkerError::Rejected("points[0]: NaN".into())
+        );
     }
 }

@@ -226,9 +226,14 @@ pub async fn dispatch<W: Work>(
                     answers[i] = Some(e);
                 }
             }
-            Err(WorkerError::Rejected(reason)) => {
+            // Asking again, here or elsewhere, gives the same answer: the batch stops.
+            Err(error) if !error.is_retryable() => {
                 pool.release(&lease, 0);
-                tracing::warn!(worker = %lease.client.url(), %reason, "worker rejected a request");
+                tracing::warn!(worker = %lease.client.url(), %error, "worker refused a request for good");
+                let reason = match error {
+                    WorkerError::Rejected(reason) => reason,
+                    other => other.to_string(),
+                };
                 fault.get_or_insert(Fault::rejected(format!(
                     "worker {} rejected the request: {reason}",
                     lease.client.url()

@@ -11,7 +11,7 @@ pub mod grpc;
 pub mod pool;
 pub mod registry;
 
-pub use discovery::{parse_list, WorkerAddress};
+pub use discovery::{parse_list, Resolve, Resolver, WorkerAddress};
 pub use error::WorkerError;
 pub use grpc::{GrpcEvaluator, Work};
 pub use pool::{Health, WorkerPool, WorkerView};
@@ -35,6 +35,8 @@ pub struct DispatchConfig {
     pub probe_timeout: Duration,
     /// How often DNS names are resolved again.
     pub resolve_interval: Duration,
+    /// What resolves DNS names (the system's resolver unless a test brings its own).
+    pub resolver: Resolver,
     /// Attempts at one point (on different workers, as they fail) before it is given up.
     pub max_attempts: u32,
     /// How long a batch waits for any worker to be up before its points fail.
@@ -52,6 +54,7 @@ impl DispatchConfig {
             probe_interval: Duration::from_secs(1),
             probe_timeout: Duration::from_secs(3),
             resolve_interval: Duration::from_secs(10),
+            resolver: Resolver::default(),
             max_attempts: 5,
             wait_for_workers: Duration::from_secs(300),
             heartbeat: Duration::from_secs(5),
@@ -72,6 +75,8 @@ pub fn start_pool(config: DispatchConfig) -> Result<Arc<WorkerPool>> {
 pub struct RemoteWorkers {
     runtime: tokio::runtime::Runtime,
     pool: Arc<WorkerPool>,
+    /// Every worker is a fixed URL (no DNS name that may resolve to more later).
+    fixed: bool,
 }
 
 impl RemoteWorkers {
@@ -82,8 +87,16 @@ impl RemoteWorkers {
             .enable_all()
             .build()
             .map_err(|e| Error::Dispatch(format!("cannot start the dispatch runtime: {e}")))?;
+        let fixed = config
+            .workers
+            .iter()
+            .all(|w| matches!(w, WorkerAddress::Url(_)));
         let pool = runtime.block_on(async { start_pool(config) })?;
-        Ok(Self { runtime, pool })
+        Ok(Self {
+            runtime,
+            pool,
+            fixed,
+        })
     }
 
     pub fn pool(&self) -> &Arc<WorkerPool> {
@@ -93,6 +106,43 @@ impl RemoteWorkers {
     /// An evaluator over these workers.
     pub fn evaluator(&self) -> GrpcEvaluator {
         GrpcEvaluator::new(self.pool.clone(), self.runtime.handle().clone())
+    }
+
+    /// Wait until a worker is up, telling `changed` what is awaited whenever that changes.
+    /// Fails at once when every worker is a fixed URL where nothing listens and none was ever
+    /// up (workers not started, or a wrong port), and once `timeout` has passed otherwise.
+    pub fn wait_for_worker(
+        &self,
+        timeout: Duration,
+        mut changed: impl FnMut(&str),
+    ) -> std::result::Result<(), String> {
+        let until = Instant::now() + timeout;
+        let mut last = String::new();
+        loop {
+            let workers = self.pool.workers();
+            if workers.iter().any(|w| w.health == Health::Up) {
+                return Ok(());
+            }
+            let state = describe(&workers);
+            if state != last {
+                changed(&format!(
+                    "waiting up to {:.0} s for a worker: {state}",
+                    timeout.as_secs_f64()
+                ));
+                last = state.clone();
+            }
+            if self.fixed && !workers.is_empty() && workers.iter().all(|w| w.refused && !w.ever_up)
+            {
+                return Err(format!("no worker is listening: {state}"));
+            }
+            if Instant::now() > until {
+                return Err(format!(
+                    "no worker up after {:.0} s: {state}",
+                    timeout.as_secs_f64()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
     }
 
     /// Wait until at least `count` workers are up; false when `timeout` passes first.
@@ -114,4 +164,17 @@ impl RemoteWorkers {
             std::thread::sleep(Duration::from_millis(20));
         }
     }
+}
+
+/// The workers of a pool in a few words: how many are up, and each that is not.
+pub fn describe(workers: &[WorkerView]) -> String {
+    if workers.is_empty() {
+        return "none known yet".into();
+    }
+    let up = workers.iter().filter(|w| w.health == Health::Up).count();
+    let mut text = format!("{up} of {} up", workers.len());
+    for w in workers.iter().filter(|w| w.health != Health::Up) {
+        text.push_str(&format!("; {} {}", w.url, w.health));
+    }
+    text
 }

@@ -47,6 +47,17 @@ pub enum Health {
     },
 }
 
+impl std::fmt::Display for Health {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Health::Joining => write!(f, "joining"),
+            Health::Up => write!(f, "up"),
+            Health::Down { reason } => write!(f, "down: {reason}"),
+            Health::Incompatible { reason } => write!(f, "incompatible: {reason}"),
+        }
+    }
+}
+
 struct Worker {
     id: u64,
     client: WorkerClient,
@@ -56,6 +67,10 @@ struct Worker {
     busy: usize,
     evaluated: u64,
     probing: bool,
+    /// Has been up at least once.
+    ever_up: bool,
+    /// Its last probe found nothing listening at its address.
+    refused: bool,
     /// Failures since the worker last answered: each doubles the wait before the next probe,
     /// so that a worker that passes health checks but fails its work is rarely sent work.
     failures: u32,
@@ -86,6 +101,10 @@ pub struct WorkerView {
     pub busy: usize,
     /// Points this worker answered.
     pub evaluated: u64,
+    /// Has been up at least once.
+    pub ever_up: bool,
+    /// Its last probe found nothing listening at its address.
+    pub refused: bool,
 }
 
 /// Slots of one worker granted to one dispatcher.
@@ -148,6 +167,8 @@ impl WorkerPool {
             busy: 0,
             evaluated: 0,
             probing: false,
+            ever_up: false,
+            refused: false,
             failures: 0,
             next_probe: Instant::now(),
         });
@@ -191,6 +212,8 @@ impl WorkerPool {
                 slots: w.slots,
                 busy: w.busy,
                 evaluated: w.evaluated,
+                ever_up: w.ever_up,
+                refused: w.refused,
             })
             .collect()
     }
@@ -330,12 +353,14 @@ impl WorkerPool {
             return;
         };
         w.probing = false;
+        w.refused = matches!(outcome, Err(super::error::WorkerError::Refused(_)));
         match outcome {
             Ok(status) => {
                 if w.health != Health::Up {
                     tracing::info!(worker = %w.client.url(), slots = status.slots, "worker up");
                 }
                 w.health = Health::Up;
+                w.ever_up = true;
                 w.slots = status.slots;
             }
             Err(super::error::WorkerError::Incompatible(reason)) => {

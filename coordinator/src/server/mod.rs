@@ -1,6 +1,6 @@
 //! The coordinator's gRPC server: health, reflection and the worker Registry, over a pool
 //! of workers kept alive for campaigns. Given an evaluation store, it finishes the campaigns
-//! a previous coordinator left unfinished ([`resume`]).
+//! a previous coordinator left unfinished, again whenever workers come back ([`resume`]).
 
 pub mod resume;
 
@@ -49,6 +49,7 @@ pub struct RunningCoordinator {
     shutdown: Option<oneshot::Sender<()>>,
     server: JoinHandle<std::result::Result<(), tonic::transport::Error>>,
     resume: Option<JoinHandle<Result<usize>>>,
+    control: Arc<resume::ResumeControl>,
 }
 
 impl RunningCoordinator {
@@ -59,6 +60,14 @@ impl RunningCoordinator {
     /// The workers this coordinator dispatches to.
     pub fn pool(&self) -> &Arc<WorkerPool> {
         &self.pool
+    }
+
+    /// Passes made over the store's unfinished campaigns (each after the first waits for a
+    /// worker to be up).
+    pub fn resume_passes(&self) -> usize {
+        self.control
+            .passes
+            .load(std::sync::atomic::Ordering::SeqCst)
     }
 
     /// Wait until the unfinished campaigns of the store are finished; how many there were
@@ -81,6 +90,9 @@ impl RunningCoordinator {
     }
 
     pub async fn shutdown(mut self) {
+        self.control
+            .stop
+            .store(true, std::sync::atomic::Ordering::SeqCst);
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
         }
@@ -136,12 +148,20 @@ pub fn serve_coordinator(
             .await
     });
     tracing::info!(%address, "coordinator serving");
+    let control = Arc::new(resume::ResumeControl::default());
     let resume = store.map(|store| {
         let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
         let results = config.results.clone();
+        let (pool, control) = (pool.clone(), control.clone());
         // Campaigns block for as long as they run: on a thread of their own.
         tokio::task::spawn_blocking(move || {
-            let resumed = resume::resume_campaigns(&store, &evaluator, results.as_deref());
+            let resumed = resume::resume_until_finished(
+                &store,
+                &evaluator,
+                results.as_deref(),
+                &pool,
+                &control,
+            );
             match &resumed {
                 Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
                 Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
@@ -155,5 +175,6 @@ pub fn serve_coordinator(
         shutdown: Some(shutdown_tx),
         server,
         resume,
+        control,
     })
 }

@@ -1,15 +1,23 @@
 //! A coordinator that starts on an evaluation store finishes the campaigns a previous one
 //! left running: each is replayed from the store (no stored evaluation is simulated again),
 //! the missing points are simulated on the workers, and its `result.json` and plots are
-//! written where `calib calibrate` would have put them.
+//! written where `calib calibrate` would have put them. A campaign stopped because no
+//! worker could do its points stays running, and is resumed again once a worker is up
+//! ([`resume_until_finished`]).
 
 use crate::calibration::{self, Calibration};
+use crate::dispatch::{Health, WorkerPool};
 use crate::error::Result;
 use crate::evaluator::Evaluator;
 use crate::optim::problem::Silent;
 use crate::report;
-use crate::store::Store;
+use crate::store::{CampaignStatus, Store};
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+/// Longest pause between two resumes of campaigns that workers keep failing.
+const MAX_PAUSE: Duration = Duration::from_secs(60);
 
 /// Where the results of a resumed campaign go: `<results>/<name>/` when `results` is given,
 /// else `results/<name>/` beside the campaign file, as `calib calibrate` does by default.
@@ -60,4 +68,58 @@ pub fn resume_campaigns<E: Evaluator>(
         }
     })?;
     Ok(finished)
+}
+
+/// How a coordinator's resume loop is watched and stopped.
+#[derive(Debug, Default)]
+pub struct ResumeControl {
+    /// Set to end the loop at its next pause.
+    pub stop: AtomicBool,
+    /// Passes over the store made so far.
+    pub passes: AtomicUsize,
+}
+
+/// [`resume_campaigns`] again and again until the store holds no running campaign: after a
+/// pass that left some running (their workers went away), wait until a worker of `pool` is
+/// up and a pause has passed (doubling from the probe interval to a minute while passes keep
+/// failing), then resume them. Ends early when `control.stop` is set; the number of
+/// campaigns finished.
+pub fn resume_until_finished<E: Evaluator>(
+    store: &dyn Store,
+    evaluator: &E,
+    results: Option<&Path>,
+    pool: &WorkerPool,
+    control: &ResumeControl,
+) -> Result<usize> {
+    let tick = pool.config().probe_interval.max(Duration::from_millis(10));
+    let mut pause = tick;
+    let mut finished = 0;
+    loop {
+        finished += resume_campaigns(store, evaluator, results)?;
+        control.passes.fetch_add(1, Ordering::SeqCst);
+        let running = store
+            .campaigns()?
+            .iter()
+            .filter(|(_, r)| r.status == CampaignStatus::Running)
+            .count();
+        if running == 0 {
+            return Ok(finished);
+        }
+        tracing::warn!(
+            campaigns = running,
+            "campaigns left unfinished: resumed once a worker is up"
+        );
+        let since = Instant::now();
+        loop {
+            if control.stop.load(Ordering::SeqCst) {
+                return Ok(finished);
+            }
+            let up = pool.workers().iter().any(|w| w.health == Health::Up);
+            if up && since.elapsed() >= pause {
+                break;
+            }
+            std::thread::sleep(tick);
+        }
+        pause = (pause * 2).min(MAX_PAUSE);
+    }
 }

@@ -1,6 +1,8 @@
 //! The worker service's error type and its gRPC status.
 
-/// Why a request to the worker was not answered.
+/// Why a request to the worker was not answered. Its gRPC status code is all a client sees;
+/// whether a request is worth retrying elsewhere is decided on the coordinator's side
+/// (`calib_coordinator::dispatch::WorkerError::is_retryable`).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Error {
     /// The request is malformed; `field` names the offending field of the request.
@@ -27,11 +29,6 @@ impl Error {
             field: field.into(),
             message: message.into(),
         }
-    }
-
-    /// True when the same request may succeed later or on another worker.
-    pub fn is_retryable(&self) -> bool {
-        matches!(self, Error::QueueFull { .. } | Error::Internal(_))
     }
 }
 

@@ -9,7 +9,6 @@
 
 pub mod cache;
 pub mod error;
-pub mod napping;
 pub mod pool;
 pub mod registration;
 pub mod request;

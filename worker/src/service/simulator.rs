@@ -179,6 +179,7 @@ fn failure(e: &SimulationError) -> proto::SimulationFailure {
         SimulationError::StepTooSmall { time } => (Kind::StepTooSmall, *time),
         SimulationError::Diverged { time } => (Kind::Diverged, *time),
         SimulationError::InvalidInput(_) => (Kind::Unspecified, f64::NAN),
+        SimulationError::Failed { time, .. } => (Kind::Unspecified, *time),
     };
     proto::SimulationFailure {
         kind: kind.into(),

@@ -2,12 +2,14 @@
 //!
 //! For measuring the coordinator's dispatch without the cost of simulations, and for fault
 //! tests (a nap of `Duration::MAX` is a worker that hangs). It serves the health service
-//! and `Status` like a real worker, and refuses everything else as unimplemented.
+//! and `Status` like a real worker, asks for a measurement it has not seen as a worker
+//! does, and refuses everything else as unimplemented.
 
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_server::{Simulator, SimulatorServer};
+use std::collections::HashSet;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::net::TcpListener;
 use tonic::{Request, Response, Status};
@@ -16,12 +18,33 @@ pub struct NappingSimulator {
     nap: Duration,
     slots: u32,
     requests: AtomicU64,
+    in_flight: AtomicU64,
+    most_in_flight: AtomicU64,
+    most_points: AtomicU64,
+    /// Hashes of the measurements received, as a worker caches them.
+    measurements: Mutex<HashSet<Vec<u8>>>,
+    uploads: AtomicU64,
 }
 
 impl NappingSimulator {
     /// Requests to Evaluate received so far.
     pub fn requests(&self) -> u64 {
         self.requests.load(Ordering::Relaxed)
+    }
+
+    /// Most Evaluate requests that were being answered at once.
+    pub fn most_in_flight(&self) -> u64 {
+        self.most_in_flight.load(Ordering::SeqCst)
+    }
+
+    /// Evaluate requests that carried their measurement.
+    pub fn uploads(&self) -> u64 {
+        self.uploads.load(Ordering::SeqCst)
+    }
+
+    /// Most points one Evaluate request carried.
+    pub fn most_points(&self) -> u64 {
+        self.most_points.load(Ordering::SeqCst)
     }
 }
 
@@ -35,6 +58,11 @@ pub async fn serve_napping(
         nap,
         slots,
         requests: AtomicU64::new(0),
+        in_flight: AtomicU64::new(0),
+        most_in_flight: AtomicU64::new(0),
+        most_points: AtomicU64::new(0),
+        measurements: Mutex::new(HashSet::new()),
+        uploads: AtomicU64::new(0),
     });
     let (reporter, health) = tonic_health::server::health_reporter();
     reporter
@@ -82,9 +110,25 @@ impl Simulator for NappingSimulator {
         request: Request<proto::EvaluateRequest>,
     ) -> Result<Response<proto::EvaluateResponse>, Status> {
         self.requests.fetch_add(1, Ordering::Relaxed);
+        {
+            // Like a worker: a measurement is sent once, then named by its hash.
+            let request = request.get_ref();
+            let mut known = self.measurements.lock().expect("measurements lock");
+            if request.measurement.is_some() {
+                self.uploads.fetch_add(1, Ordering::SeqCst);
+                known.insert(request.measurement_hash.clone());
+            } else if !known.contains(&request.measurement_hash) {
+                return Err(Status::not_found("measurement_hash: not cached here"));
+            }
+        }
+        let now = self.in_flight.fetch_add(1, Ordering::SeqCst) + 1;
+        self.most_in_flight.fetch_max(now, Ordering::SeqCst);
         let request = request.into_inner();
+        self.most_points
+            .fetch_max(request.points.len() as u64, Ordering::SeqCst);
         let rounds = (request.points.len() as u32).div_ceil(self.slots.max(1));
         tokio::time::sleep(self.nap.saturating_mul(rounds)).await;
+        self.in_flight.fetch_sub(1, Ordering::SeqCst);
         let outputs = request.outputs.len();
         Ok(Response::new(proto::EvaluateResponse {
             results: request

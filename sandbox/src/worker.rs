@@ -1,0 +1,95 @@
+//! One real worker on a tokio runtime of its own, so that [`SandboxWorker::kill`] stops it
+//! abruptly: its runtime goes and every connection drops at once, as when a process dies.
+
+use calib_worker::service::{serve_worker, RunningWorker, WorkerConfig};
+use std::net::SocketAddr;
+
+pub struct SandboxWorker {
+    worker: RunningWorker,
+    runtime: Option<tokio::runtime::Runtime>,
+}
+
+impl SandboxWorker {
+    /// A worker with `slots` simulation slots and the given queue bound.
+    pub fn start(slots: usize, queue_bound: usize) -> Self {
+        Self::serve(loopback(), |config| {
+            config.slots = slots;
+            config.queue_bound = queue_bound;
+        })
+    }
+
+    /// A worker of `slots` slots registering with the coordinator at `coordinator`.
+    pub fn start_registered(slots: usize, coordinator: &str) -> Self {
+        Self::serve(loopback(), |config| {
+            config.slots = slots;
+            config.register = Some(coordinator.to_string());
+        })
+    }
+
+    /// A worker of `slots` slots on `address` (that of a worker killed before: it comes
+    /// back where it was).
+    pub fn start_at(address: SocketAddr, slots: usize) -> Self {
+        Self::serve(address, |config| config.slots = slots)
+    }
+
+    fn serve(address: SocketAddr, configure: impl FnOnce(&mut WorkerConfig)) -> Self {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(1)
+            .enable_all()
+            .build()
+            .expect("worker runtime");
+        let worker = runtime.block_on(async {
+            let listener = tokio::net::TcpListener::bind(address)
+                .await
+                .unwrap_or_else(|e| panic!("bind {address}: {e}"));
+            let mut config = WorkerConfig::new(listener.local_addr().expect("bound"));
+            config.queue_bound = 64;
+            configure(&mut config);
+            serve_worker(listener, config).expect("serve worker")
+        });
+        Self {
+            worker,
+            runtime: Some(runtime),
+        }
+    }
+
+    pub fn url(&self) -> String {
+        format!("http://{}", self.worker.address())
+    }
+
+    pub fn address(&self) -> SocketAddr {
+        self.worker.address()
+    }
+
+    /// Simulations this worker has completed.
+    pub fn simulations(&self) -> u64 {
+        self.worker.load().completed
+    }
+
+    /// True when no simulation runs or waits (those of a client that went away included).
+    pub fn is_idle(&self) -> bool {
+        let load = self.worker.load();
+        load.running == 0 && load.queued == 0
+    }
+
+    /// Stop the worker abruptly: its runtime goes, and with it every connection.
+    pub fn kill(&mut self) {
+        if let Some(runtime) = self.runtime.take() {
+            runtime.shutdown_background();
+        }
+    }
+
+    pub fn is_alive(&self) -> bool {
+        self.runtime.is_some()
+    }
+}
+
+impl Drop for SandboxWorker {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn loopback() -> SocketAddr {
+    SocketAddr::from(([127, 0, 0, 1], 0))
+}
