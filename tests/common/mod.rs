@@ -17,16 +17,26 @@ pub fn shared_data() -> PathBuf {
     repo().join("../shared/data")
 }
 
-/// The real Furuta record, or `None` (with the reason printed) where the shared folder is absent.
+/// Skip a test that cannot run here, saying why; under `CI=true` nothing required may skip,
+/// so there the same call fails the test.
+pub fn skip(reason: &str) {
+    if std::env::var("CI").is_ok_and(|v| v == "true" || v == "1") {
+        panic!("required under CI=true, cannot skip: {reason}");
+    }
+    eprintln!("skipped: {reason}");
+}
+
+/// The real Furuta record, or `None` (with the reason printed) where the shared folder is
+/// absent; under `CI=true` its absence fails the test.
 pub fn real_record() -> Option<PathBuf> {
     let path = shared_data().join("real/FurutaData.mat");
     if path.exists() {
         Some(path)
     } else {
-        eprintln!(
-            "skipped: {} is absent (it lives beside the repository, never in it)",
+        skip(&format!(
+            "{} is absent (it lives beside the repository, never in it)",
             path.display()
-        );
+        ));
         None
     }
 }
@@ -172,18 +182,20 @@ pub fn gaussian(rng: &mut rand_chacha::ChaCha8Rng, sigma: f64) -> f64 {
 
 /// Follow the `CALIB_PROGRESS=lines` progress of a `calib calibrate` child: the returned
 /// counter holds the evaluations it last reported (all of them already stored), updated by
-/// the returned reader thread until the child's standard error closes.
+/// the returned reader thread until the child's standard error closes; the thread returns
+/// the other lines of standard error.
 pub fn watch_progress(
     child: &mut std::process::Child,
 ) -> (
     std::sync::Arc<std::sync::atomic::AtomicU64>,
-    std::thread::JoinHandle<()>,
+    std::thread::JoinHandle<Vec<String>>,
 ) {
     use std::io::{BufRead, BufReader};
     let reported = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
     let counter = reported.clone();
     let stderr = child.stderr.take().expect("the child's stderr is piped");
     let reader = std::thread::spawn(move || {
+        let mut others = Vec::new();
         for line in BufReader::new(stderr).lines().map_while(Result::ok) {
             // "progress: N evaluations, best X"
             if let Some(n) = line
@@ -192,8 +204,11 @@ pub fn watch_progress(
                 .and_then(|n| n.parse().ok())
             {
                 counter.store(n, std::sync::atomic::Ordering::SeqCst);
+            } else {
+                others.push(line);
             }
         }
+        others
     });
     (reported, reader)
 }
