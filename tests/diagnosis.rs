@@ -288,3 +288,38 @@ fn a_disturbance_outside_the_library_is_not_claimed_as_explained() {
     );
     assert!(!d.explained());
 }
+
+/// The naive model with the bounds a user types ([0, 0.9] on both viscous coefficients, not
+/// [0, 0.02]): the screened multistart still finds the viscous-only optimum (≈ 64.6) instead
+/// of stopping on the bound, and the diagnosis still leads to Coulomb friction.
+#[test]
+fn the_naive_model_on_wide_bounds_still_leads_back_to_coulomb_friction() {
+    if real_record().is_none() {
+        return;
+    }
+    let source = repo().join("examples/furuta_real_naive.toml");
+    let text = std::fs::read_to_string(&source).unwrap();
+    let wide = text.replace("max = 0.02", "max = 0.9");
+    assert_eq!(wide.matches("max = 0.9").count(), 2);
+    let dir = tempfile::tempdir().unwrap();
+    let data = shared_data().join("real/FurutaData.mat");
+    let wide = wide.replace(
+        "../../shared/data/real/FurutaData.mat",
+        data.to_str().unwrap(),
+    );
+    let d = run(&write(dir.path(), "naive_wide.toml", &wide));
+    assert!(
+        d.baseline.objective < 70.0,
+        "baseline {} (viscous-only optimum ≈ 64.6)",
+        d.baseline.objective
+    );
+    assert!(
+        d.selected
+            .iter()
+            .all(|e| e.starts_with("coulomb_friction."))
+            && d.selected.len() == 2,
+        "{:?}",
+        d.selected
+    );
+    assert!(d.final_fit.objective < 2.729, "{}", d.final_fit.objective);
+}

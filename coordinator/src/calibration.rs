@@ -3,11 +3,12 @@
 
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
-use crate::evaluator::{CacheStats, Evaluator, Fault};
+use crate::evaluator::{CacheStats, Evaluator, Fault, FaultKind};
 use crate::measurement::Measurement;
 use crate::objective::{Evaluation, Objective};
 use crate::optim::multistart::{self, Cluster, RunContext, RunOutcome};
 use crate::optim::problem::Progress;
+use crate::optim::screening;
 use crate::optim::space::UnitBox;
 use crate::report;
 use crate::store::{
@@ -25,6 +26,8 @@ pub struct Calibration {
     pub measurement: Measurement,
     pub objective: Objective,
     pub nominal: Evaluation,
+    /// Points of the screening batch that placed the starts.
+    pub screened: usize,
     pub runs: Vec<RunOutcome>,
     pub clusters: Vec<Cluster>,
     /// Index into `runs` of the best run.
@@ -39,9 +42,10 @@ impl Calibration {
         &self.runs[self.best]
     }
 
-    /// Evaluations the optimisers asked for (the nominal point included).
+    /// Evaluations the optimisers asked for (the nominal point and the screening batch
+    /// included).
     pub fn evaluations(&self) -> usize {
-        1 + self.runs.iter().map(|r| r.evaluations).sum::<usize>()
+        1 + self.screened + self.runs.iter().map(|r| r.evaluations).sum::<usize>()
     }
 }
 
@@ -85,8 +89,9 @@ pub fn calibrate_with_store<E: Evaluator>(
 
 /// Re-run every campaign of `store` marked running (the coordinator calls this when it
 /// starts). A campaign that cannot be resumed (its file no longer resolves, its data is
-/// gone, the optimiser fails) is marked failed, logged, and skipped; only a failure of the
-/// store itself is returned.
+/// gone, the optimiser fails, a worker rejects its requests) is marked failed, logged, and
+/// skipped; one stopped by a retryable fault (no worker) stays running for a later call;
+/// only a failure of the store itself is returned.
 pub fn resume_unfinished<E: Evaluator>(
     store: &dyn Store,
     evaluator: &E,
@@ -114,7 +119,7 @@ pub fn resume_unfinished_each<E: Evaluator>(
             Ok(calibration) => finished(calibration),
             Err(Error::Store(e)) => return Err(Error::Store(e)),
             // No result without workers: it stays marked running for a later resume.
-            Err(Error::Fault(fault)) => {
+            Err(Error::Fault(fault)) if fault.kind != FaultKind::Rejected => {
                 tracing::warn!(campaign = %record.name, error = %fault, "campaign interrupted");
             }
             Err(e) => {
@@ -197,7 +202,7 @@ fn calibrate_measured<E: Evaluator>(
     if let Some(e) = evaluator.error() {
         return Err(e.into());
     }
-    let (nominal, runs, clusters, best, best_evaluation) = match outcome {
+    let (nominal, screened, runs, clusters, best, best_evaluation) = match outcome {
         Ok(found) => found,
         // No result exists for some points: the campaign stays marked running, so that a
         // rerun or a coordinator on this store resumes it once workers are back.
@@ -215,6 +220,7 @@ fn calibrate_measured<E: Evaluator>(
         measurement,
         objective,
         nominal,
+        screened,
         runs,
         clusters,
         best,
@@ -239,7 +245,14 @@ fn calibrate_measured<E: Evaluator>(
     Ok(calibration)
 }
 
-type Found = (Evaluation, Vec<RunOutcome>, Vec<Cluster>, usize, Evaluation);
+type Found = (
+    Evaluation,
+    usize,
+    Vec<RunOutcome>,
+    Vec<Cluster>,
+    usize,
+    Evaluation,
+);
 
 /// Score the nominal point, run every method from every start, cluster, score the best.
 fn search(
@@ -260,15 +273,26 @@ fn search(
     );
 
     let space = UnitBox::new(&campaign.free);
-    let mut starts = multistart::start_points(
-        &space.to_unit(&nominal_point),
-        campaign.search.starts,
-        campaign.search.seed,
+    let nominal_unit = space.to_unit(&nominal_point);
+    let scales = screening::screening_scales(&space, &nominal_unit);
+    // The nominal point, then informed starts (from a diagnosis, say), then the rest.
+    let mut starts = vec![nominal_unit.clone()];
+    starts.extend(
+        campaign
+            .search
+            .extra_starts
+            .iter()
+            .map(|x| space.to_unit(x)),
     );
-    // Informed starts (from a diagnosis, say) go right after the nominal point.
-    for (i, extra) in campaign.search.extra_starts.iter().enumerate() {
-        starts.insert(1 + i, space.to_unit(extra));
-    }
+    let (further, screened) = further_starts(
+        campaign,
+        objective,
+        evaluator,
+        progress,
+        (&space, &scales),
+        &starts,
+    )?;
+    starts.extend(further);
     let plan = multistart::plan(&campaign.search.methods, &starts, campaign.search.seed);
     // Tolerances are relative to the nominal objective; a perfect nominal fit keeps 1.
     let scale = if nominal.objective > 0.0 && nominal.failure.is_none() {
@@ -283,6 +307,7 @@ fn search(
         scale,
         max_evaluations: campaign.search.max_evaluations,
         progress,
+        screening: &scales,
     };
     let runs = multistart::run_all(&context, &plan).map_err(optimiser_error)?;
     let clusters = multistart::cluster(&runs, &space, CLUSTER_RADIUS);
@@ -304,7 +329,71 @@ fn search(
     let best_evaluation = evaluator
         .evaluate(objective, std::slice::from_ref(&runs[best].point))?
         .remove(0);
-    Ok((nominal, runs, clusters, best, best_evaluation))
+    Ok((nominal, screened, runs, clusters, best, best_evaluation))
+}
+
+/// The starts after the nominal and informed ones (`taken`, unit box): the best distinct
+/// points of a screening batch ([`screening`]), or plain quasi-random points when the
+/// campaign asks for no screening; and the number of points screened.
+fn further_starts(
+    campaign: &Campaign,
+    objective: &Objective,
+    evaluator: &dyn Evaluator,
+    progress: &dyn Progress,
+    (space, scales): (&UnitBox, &[Option<f64>]),
+    taken: &[Vec<f64>],
+) -> Result<(Vec<Vec<f64>>, usize)> {
+    let search = &campaign.search;
+    let wanted = search.starts.saturating_sub(1);
+    let dim = space.dim();
+    let count = search
+        .screening
+        .unwrap_or_else(|| screening::default_count(search.starts, dim));
+    if wanted == 0 {
+        return Ok((Vec::new(), 0));
+    }
+    if count == 0 {
+        let plain = multistart::start_points(&taken[0], search.starts, search.seed);
+        return Ok((plain[1..].to_vec(), 0));
+    }
+    let sample = screening::screening_sample(dim, count, search.seed);
+    let units: Vec<Vec<f64>> = sample
+        .iter()
+        .map(|s| screening::to_unit(s, scales))
+        .collect();
+    let points: Vec<Vec<f64>> = units.iter().map(|u| space.to_physical(u)).collect();
+    let evaluations = evaluator.evaluate(objective, &points)?;
+    let best = evaluations
+        .iter()
+        .map(|e| e.objective)
+        .filter(|f| f.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    progress.evaluated(count, best);
+    let screened: Vec<(Vec<f64>, f64)> = sample
+        .into_iter()
+        .zip(&evaluations)
+        .map(|(s, e)| {
+            let failed = e.failure.is_some() || !e.objective.is_finite();
+            (s, if failed { f64::INFINITY } else { e.objective })
+        })
+        .collect();
+    let taken: Vec<Vec<f64>> = taken
+        .iter()
+        .map(|u| screening::to_screening(u, scales))
+        .collect();
+    let radius = screening::critical_distance(count, dim);
+    let chosen = screening::select(&screened, &taken, wanted, radius);
+    tracing::info!(
+        campaign = %campaign.name,
+        screened = count,
+        starts = chosen.len(),
+        best = best,
+        "screening batch scored"
+    );
+    Ok((
+        chosen.into_iter().map(|i| units[i].clone()).collect(),
+        count,
+    ))
 }
 
 /// An optimiser's error: the evaluator's fault when that is what stopped it.

@@ -52,12 +52,13 @@ pub(super) fn default_time_column() -> String {
 pub(super) struct OutputEntry {
     pub(super) model: Spanned<String>,
     pub(super) measured: String,
-    #[serde(default = "one")]
-    pub(super) weight: f64,
-}
-
-pub(super) fn one() -> f64 {
-    1.0
+    /// `k_i`, default 1; not with `sigma`.
+    pub(super) weight: Option<Spanned<f64>>,
+    /// The output's uncertainty `σ_i` in its unit: `k_i = 1/σ_i²`.
+    pub(super) sigma: Option<Spanned<f64>>,
+    /// `"none"` (default) or `"variance"`: `k_i` divided by the measured signal's variance
+    /// over the window.
+    pub(super) scale: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -67,6 +68,8 @@ pub(super) struct ParameterEntry {
     pub(super) nominal: Option<f64>,
     pub(super) min: f64,
     pub(super) max: f64,
+    #[serde(default)]
+    pub(super) scale: super::Scale,
 }
 
 #[derive(Debug, Deserialize)]
@@ -96,6 +99,7 @@ pub(super) struct SearchSection {
     pub(super) max_evaluations: usize,
     #[serde(default)]
     pub(super) seed: u64,
+    pub(super) screening: Option<usize>,
 }
 
 pub(super) fn default_methods() -> Vec<Method> {

@@ -72,6 +72,20 @@ pub struct FreeParameter {
     pub max: f64,
     /// Whether this is one of the model's effects (absent at 0) rather than a base parameter.
     pub effect: bool,
+    /// The scale the optimisers search it on.
+    pub scale: Scale,
+}
+
+/// The scale a parameter is searched on, as PEtab's `parameterScale`: starts, simplices,
+/// populations, clustering and spreads live in the box of the scaled values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Scale {
+    /// The value itself (the default).
+    #[default]
+    Lin,
+    /// Its decimal logarithm; needs a lower bound above 0.
+    Log10,
 }
 
 /// A model output compared with a measured column.
@@ -80,7 +94,33 @@ pub struct OutputMapping {
     pub model: String,
     pub model_index: usize,
     pub measured: String,
+    /// `k_i` as written: `weight`, or `1/σ²` from `sigma`.
     pub weight: f64,
+    /// How the weight is scaled by the data once the window is known.
+    pub scale: OutputScale,
+}
+
+/// Scaling of an output's weight by its measured data, so that outputs in different units
+/// weigh alike (an NRMSE-type objective).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputScale {
+    /// `k_i` as given.
+    #[default]
+    None,
+    /// `k_i / var(w_i)`, the variance of the measured signal over the window:
+    /// `k_i Σ_t (y − w)² / var(w)` is `k_i N NRMSE²` with the error normalised by the
+    /// signal's standard deviation.
+    Variance,
+}
+
+impl OutputScale {
+    pub fn name(self) -> &'static str {
+        match self {
+            OutputScale::None => "none",
+            OutputScale::Variance => "variance",
+        }
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
@@ -91,6 +131,10 @@ pub struct Search {
     /// Evaluation budget of each run (one method from one start).
     pub max_evaluations: usize,
     pub seed: u64,
+    /// Points of the screening batch that places the starts after the nominal one; `None`
+    /// for the default ([`crate::optim::screening::default_count`]), 0 for plain
+    /// quasi-random starts.
+    pub screening: Option<usize>,
     /// Further start points (physical values of the free parameters), tried after the
     /// nominal point; set by diagnosis, not by campaign files.
     pub extra_starts: Vec<Vec<f64>>,
@@ -221,6 +265,7 @@ impl Campaign {
             count(&mut h, o.model_index);
             text(&mut h, &o.measured);
             f64s(&mut h, &[o.weight]);
+            text(&mut h, o.scale.name());
         }
         count(&mut h, self.search.methods.len());
         for m in &self.search.methods {
@@ -333,5 +378,43 @@ seed = 7
 
         let e = error_for("start = 0.0\nstop = 40.0", "start = 10.0\nstop = 5.0");
         assert_eq!(e.field, "window");
+    }
+
+    #[test]
+    fn output_weights_sigmas_and_scales() {
+        let with = |lines: &str| GOOD.replacen("weight = 1.0", lines, 1);
+        let c = parse(&with("sigma = 0.5")).unwrap();
+        assert_eq!(c.outputs[0].weight, 4.0);
+        assert_eq!(c.outputs[0].scale, OutputScale::None);
+        let c = parse(&with("weight = 2.0\nscale = \"variance\"")).unwrap();
+        assert_eq!(c.outputs[0].weight, 2.0);
+        assert_eq!(c.outputs[0].scale, OutputScale::Variance);
+        let c = parse(&with("")).unwrap();
+        assert_eq!(c.outputs[0].weight, 1.0);
+        assert_ne!(
+            parse(&with("scale = \"variance\""))
+                .unwrap()
+                .identity(&[0; 32]),
+            parse(&with("")).unwrap().identity(&[0; 32])
+        );
+
+        for (lines, message) in [
+            ("sigma = 0.0", "sigma 0 must be a finite number > 0"),
+            ("sigma = -2.0", "sigma -2 must be a finite number > 0"),
+            ("sigma = 1e-200", "must be a finite number > 0"),
+            ("weight = 1.0\nsigma = 2.0", "not both"),
+            (
+                "sigma = 2.0\nscale = \"variance\"",
+                "cannot be combined with `sigma`",
+            ),
+            ("scale = \"range\"", "unknown scale `range`"),
+            ("weight = -1.0", "weight -1 must be"),
+        ] {
+            let e = parse(&with(lines)).unwrap_err();
+            assert!(e.message.contains(message), "{lines}: {e}");
+            assert_eq!(e.field, "outputs[0] (armJoint.phi)", "{lines}");
+            // The offending key is on line 16 or 17 of the file.
+            assert!(matches!(e.line, Some(16 | 17)), "{lines}: {e}");
+        }
     }
 }

@@ -5,7 +5,10 @@ use super::file::{
     default_max_evaluations, default_methods, default_starts, CampaignFile, DiagnosisSection,
     ModelSection, OutputEntry, ParameterEntry, SearchSection, SolverSection, WindowSection,
 };
-use super::{Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, Search};
+use super::{
+    Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, OutputScale, Scale,
+    Search,
+};
 use calib_worker::{models, Model, ModelInfo, SolverOptions};
 use std::path::{Path, PathBuf};
 use toml::Spanned;
@@ -241,6 +244,18 @@ fn resolve_free(
                 ),
             );
         }
+        if p.scale == Scale::Log10 && p.min <= 0.0 {
+            return at.error(
+                span,
+                &field,
+                format!(
+                    "scale = \"log10\" needs min above 0 (it is {}); search a range from 0 \
+                     with scale = \"lin\" (the default), which screens small values \
+                     logarithmically, or set min to the smallest value that matters",
+                    p.min
+                ),
+            );
+        }
         let nominal = p
             .nominal
             .unwrap_or(if is_effect { 0.0 } else { base[index] });
@@ -262,6 +277,7 @@ fn resolve_free(
             min: p.min,
             max: p.max,
             effect: is_effect,
+            scale: p.scale,
         });
     }
     if free.is_empty() {
@@ -301,18 +317,68 @@ fn resolve_outputs(
                 ),
             );
         };
-        if !o.weight.is_finite() || o.weight < 0.0 {
-            return at.error(
-                entry.span(),
-                &field,
-                format!("weight {} must be a finite number ≥ 0", o.weight),
-            );
-        }
+        let weight = match (&o.weight, &o.sigma) {
+            (Some(_), Some(sigma)) => {
+                return at.error(
+                    sigma.span(),
+                    &field,
+                    "give `weight` or `sigma` (weight 1/sigma²), not both".into(),
+                );
+            }
+            (Some(weight), None) => {
+                let k = *weight.get_ref();
+                if !k.is_finite() || k < 0.0 {
+                    return at.error(
+                        weight.span(),
+                        &field,
+                        format!("weight {k} must be a finite number ≥ 0"),
+                    );
+                }
+                k
+            }
+            (None, Some(sigma)) => {
+                let s = *sigma.get_ref();
+                let k = 1.0 / (s * s);
+                if !(s > 0.0 && k.is_finite() && k > 0.0) {
+                    return at.error(
+                        sigma.span(),
+                        &field,
+                        format!("sigma {s} must be a finite number > 0 (the weight is 1/sigma²)"),
+                    );
+                }
+                k
+            }
+            (None, None) => 1.0,
+        };
+        let scale = match &o.scale {
+            None => OutputScale::None,
+            Some(scale) => match scale.get_ref().as_str() {
+                "none" => OutputScale::None,
+                "variance" if o.sigma.is_some() => {
+                    return at.error(
+                        scale.span(),
+                        &field,
+                        "scale = \"variance\" sets the output's scale from the data; it \
+                         cannot be combined with `sigma`"
+                            .into(),
+                    );
+                }
+                "variance" => OutputScale::Variance,
+                other => {
+                    return at.error(
+                        scale.span(),
+                        &field,
+                        format!("unknown scale `{other}` (known: none, variance)"),
+                    );
+                }
+            },
+        };
         outputs.push(OutputMapping {
             model: output.clone(),
             model_index,
             measured: o.measured.clone(),
-            weight: o.weight,
+            weight,
+            scale,
         });
     }
     Ok(outputs)
@@ -381,6 +447,7 @@ fn resolve_search(
             starts: default_starts(),
             max_evaluations: default_max_evaluations(),
             seed: 0,
+            screening: None,
             extra_starts: Vec::new(),
         });
     };
@@ -411,6 +478,7 @@ fn resolve_search(
         starts: s.starts,
         max_evaluations: s.max_evaluations,
         seed: s.seed,
+        screening: s.screening,
         extra_starts: Vec::new(),
     })
 }

@@ -2,6 +2,9 @@
 
 use argmin::core::{Error, Problem, Solver, State, TerminationReason, TerminationStatus, KV};
 
+/// The words of the budget's termination.
+pub const BUDGET_USED: &str = "evaluation budget used";
+
 /// Wraps a solver so that it stops at the first iteration boundary at which the problem has
 /// been evaluated `max_evaluations` times or more.
 pub struct Budgeted<S> {
@@ -38,7 +41,7 @@ where
             .unwrap_or(0);
         if used >= self.max_evaluations {
             return TerminationStatus::Terminated(TerminationReason::SolverExit(
-                "evaluation budget used".into(),
+                BUDGET_USED.into(),
             ));
         }
         TerminationStatus::NotTerminated

@@ -22,6 +22,7 @@ pub mod multistart;
 pub mod nelder_mead;
 pub mod powell;
 pub mod problem;
+pub mod screening;
 pub mod space;
 #[cfg(test)]
 mod test_problems;

@@ -10,13 +10,16 @@
 //! Hash-based Owen Scrambling", JCGT 9(4) (2020).
 
 use super::budget::Budgeted;
+use super::budget::BUDGET_USED;
 use super::problem::{Progress, RunLog, RunProblem};
 use super::space::{self, UnitBox};
 use super::{differential_evolution, nelder_mead, powell};
 use crate::campaign::Method;
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
-use argmin::core::{Executor, IterState, PopulationState, Solver, State, TerminationStatus};
+use argmin::core::{
+    Executor, IterState, PopulationState, Solver, State, TerminationReason, TerminationStatus,
+};
 use serde::Serialize;
 
 /// Hard cap on iterations, far above what any budget allows; argmin needs one.
@@ -58,7 +61,11 @@ pub struct RunOutcome {
     pub objective: f64,
     pub evaluations: usize,
     pub iterations: u64,
+    /// Why the run stopped: `converged: …` (on which tolerance), `budget`, `plateau` (no
+    /// objective spread around any of its starts), `failures` (every simulation failed).
     pub termination: String,
+    /// Times the run left a plateau for a fresh start point.
+    pub restarts: usize,
 }
 
 /// Every method × start of a campaign, in a fixed order.
@@ -88,6 +95,8 @@ pub struct RunContext<'a> {
     pub scale: f64,
     pub max_evaluations: usize,
     pub progress: &'a dyn Progress,
+    /// How fresh points are drawn when a run restarts (see [`super::screening`]).
+    pub screening: &'a [Option<f64>],
 }
 
 /// Most runs in flight at once. Runs spend their time waiting for evaluations (on this
@@ -132,17 +141,25 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
         context.progress,
     );
     let budget = context.max_evaluations as u64;
+    let mut restarts = 0;
     let (log, iterations, termination) = match spec.method {
         Method::NelderMead => {
-            let inner = nelder_mead::solver(&problem, &spec.start_unit)?;
-            execute(
-                problem,
-                Budgeted {
-                    inner,
-                    max_evaluations: budget,
-                },
-                |s| s,
-            )?
+            let departure =
+                nelder_mead::depart(&problem, &spec.start_unit, context.screening, spec.seed)?;
+            restarts = departure.restarts;
+            if departure.flat {
+                (problem.take_log(), 0, Termination::Plateau)
+            } else {
+                let inner = nelder_mead::solver(departure.simplex)?;
+                execute(
+                    problem,
+                    Budgeted {
+                        inner,
+                        max_evaluations: budget,
+                    },
+                    |s| s,
+                )?
+            }
         }
         Method::Powell => {
             let inner = powell::Powell::new(spec.start_unit.clone())
@@ -172,6 +189,11 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             )?
         }
     };
+    let termination = if !log.best_objective.is_finite() || log.best_objective >= f64::MAX {
+        Termination::Failures
+    } else {
+        termination
+    };
     Ok(RunOutcome {
         method: spec.method,
         start: spec.start,
@@ -180,8 +202,54 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
         objective: log.best_objective,
         evaluations: log.evaluations,
         iterations,
-        termination,
+        termination: termination.describe(spec.method),
+        restarts,
     })
+}
+
+/// Why a run stopped.
+enum Termination {
+    /// The method's own convergence test held.
+    Converged,
+    /// The evaluation budget was used up.
+    Budget,
+    /// No objective spread around any start point of the run.
+    Plateau,
+    /// Every simulation of the run failed.
+    Failures,
+    /// Anything else the solver said (its own words).
+    Other(String),
+}
+
+impl Termination {
+    fn from_status(status: &TerminationStatus) -> Self {
+        match status {
+            TerminationStatus::Terminated(TerminationReason::SolverConverged) => Self::Converged,
+            TerminationStatus::Terminated(TerminationReason::SolverExit(why))
+                if why == BUDGET_USED =>
+            {
+                Self::Budget
+            }
+            TerminationStatus::Terminated(reason) => Self::Other(reason.to_string()),
+            TerminationStatus::NotTerminated => Self::Other("not terminated".into()),
+        }
+    }
+
+    /// Short, stable words for tables and `result.json`.
+    fn describe(&self, method: Method) -> String {
+        match self {
+            Self::Converged => match method {
+                Method::NelderMead => "converged: simplex objective spread below tolerance",
+                Method::Powell => "converged: a sweep moved x and f below tolerance",
+                Method::DifferentialEvolution => "converged: population spread below tolerance",
+            }
+            .into(),
+            Self::Budget => "budget: evaluation budget used".into(),
+            Self::Plateau => "plateau: no objective spread around any start".into(),
+            Self::Failures => "failures: every simulation failed".into(),
+            Self::Other(why) => why.clone(),
+        }
+    }
 }
 
 /// Run `solver` on `problem` to termination; the run's log, iterations and why it stopped.
@@ -189,7 +257,7 @@ fn execute<'a, S, I>(
     problem: RunProblem<'a>,
     solver: S,
     configure: impl FnOnce(I) -> I,
-) -> Result<(RunLog, u64, String), argmin::core::Error>
+) -> Result<(RunLog, u64, Termination), argmin::core::Error>
 where
     S: Solver<RunProblem<'a>, I>,
     I: State<Float = f64> + Capped,
@@ -198,7 +266,7 @@ where
         .configure(|state| configure(state.capped(MAX_ITERS)))
         .run()?;
     let iterations = result.state().get_iter();
-    let termination = describe(result.state().get_termination_status());
+    let termination = Termination::from_status(result.state().get_termination_status());
     let log = result
         .problem
         .take_problem()
@@ -222,13 +290,6 @@ impl Capped for IterState<Vec<f64>, (), (), (), (), f64> {
 impl Capped for PopulationState<Vec<f64>, f64> {
     fn capped(self, iters: u64) -> Self {
         self.max_iters(iters).counting(true)
-    }
-}
-
-fn describe(status: &TerminationStatus) -> String {
-    match status {
-        TerminationStatus::Terminated(reason) => reason.to_string(),
-        TerminationStatus::NotTerminated => "not terminated".into(),
     }
 }
 

@@ -65,8 +65,32 @@ impl<'a> RunProblem<'a> {
     /// Evaluate unit-box points, returning the scaled objectives, or the fault that kept
     /// them from being evaluated (the run then stops with it).
     pub fn batch(&self, units: &[&Vec<f64>]) -> Result<Vec<f64>, Fault> {
+        self.evaluate(units, true)
+    }
+
+    /// Evaluate unit-box points the solver will ask for again (it is then answered from the
+    /// cache, and counted then): the scaled objectives.
+    pub fn peek(&self, units: &[Vec<f64>]) -> Result<Vec<f64>, Fault> {
+        let units: Vec<&Vec<f64>> = units.iter().collect();
+        self.evaluate(&units, false)
+    }
+
+    fn evaluate(&self, units: &[&Vec<f64>], count: bool) -> Result<Vec<f64>, Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
         let evaluations = self.evaluator.evaluate(self.objective, &points)?;
+        let scaled = evaluations
+            .iter()
+            .map(|e| {
+                if e.objective.is_nan() {
+                    f64::MAX
+                } else {
+                    e.objective / self.scale
+                }
+            })
+            .collect();
+        if !count {
+            return Ok(scaled);
+        }
         let mut log = self.log.lock().expect("run log lock");
         log.evaluations += points.len();
         for (point, e) in points.iter().zip(&evaluations) {
@@ -76,16 +100,7 @@ impl<'a> RunProblem<'a> {
             }
         }
         self.progress.evaluated(points.len(), log.best_objective);
-        Ok(evaluations
-            .iter()
-            .map(|e| {
-                if e.objective.is_nan() {
-                    f64::MAX
-                } else {
-                    e.objective / self.scale
-                }
-            })
-            .collect())
+        Ok(scaled)
     }
 
     /// Evaluate points ahead of the solver asking for them one by one (they are then

@@ -5,19 +5,32 @@
 //! objective folded back into it: a point `u` outside [0, 1] is mapped to its mirror image,
 //! so the objective stays continuous and a physical parameter never leaves its bounds.
 
-use crate::campaign::FreeParameter;
+use crate::campaign::{FreeParameter, Scale};
 
 #[derive(Debug, Clone, PartialEq)]
 pub struct UnitBox {
+    /// Bounds on each parameter's search scale (the value, or its decimal logarithm).
     lower: Vec<f64>,
     upper: Vec<f64>,
+    log: Vec<bool>,
 }
 
 impl UnitBox {
     pub fn new(free: &[FreeParameter]) -> Self {
+        let log: Vec<bool> = free.iter().map(|p| p.scale == Scale::Log10).collect();
+        let scaled = |x: f64, log: bool| if log { x.log10() } else { x };
         Self {
-            lower: free.iter().map(|p| p.min).collect(),
-            upper: free.iter().map(|p| p.max).collect(),
+            lower: free
+                .iter()
+                .zip(&log)
+                .map(|(p, &l)| scaled(p.min, l))
+                .collect(),
+            upper: free
+                .iter()
+                .zip(&log)
+                .map(|(p, &l)| scaled(p.max, l))
+                .collect(),
+            log,
         }
     }
 
@@ -25,13 +38,36 @@ impl UnitBox {
         self.lower.len()
     }
 
+    /// Whether parameter `i` is searched on the scale of its decimal logarithm.
+    pub fn is_log(&self, i: usize) -> bool {
+        self.log[i]
+    }
+
+    /// Physical bounds of parameter `i`.
+    pub fn bounds(&self, i: usize) -> (f64, f64) {
+        (
+            self.unscale(i, self.lower[i]),
+            self.unscale(i, self.upper[i]),
+        )
+    }
+
+    fn unscale(&self, i: usize, v: f64) -> f64 {
+        if self.log[i] {
+            10f64.powf(v)
+        } else {
+            v
+        }
+    }
+
     /// Physical values of a point of the (unbounded) search space, folded into the box.
     pub fn to_physical(&self, u: &[f64]) -> Vec<f64> {
         u.iter()
-            .zip(self.lower.iter().zip(&self.upper))
-            .map(|(&u, (&lo, &hi))| {
-                let x = lo + (hi - lo) * fold(u);
-                x.clamp(lo, hi)
+            .enumerate()
+            .map(|(i, &u)| {
+                let (lo, hi) = (self.lower[i], self.upper[i]);
+                let v = (lo + (hi - lo) * fold(u)).clamp(lo, hi);
+                let (min, max) = self.bounds(i);
+                self.unscale(i, v).clamp(min, max)
             })
             .collect()
     }
@@ -39,8 +75,16 @@ impl UnitBox {
     /// The point of the unit box that maps to `x`.
     pub fn to_unit(&self, x: &[f64]) -> Vec<f64> {
         x.iter()
-            .zip(self.lower.iter().zip(&self.upper))
-            .map(|(&x, (&lo, &hi))| ((x - lo) / (hi - lo)).clamp(0.0, 1.0))
+            .enumerate()
+            .map(|(i, &x)| {
+                let (lo, hi) = (self.lower[i], self.upper[i]);
+                let v = if self.log[i] {
+                    x.max(f64::MIN_POSITIVE).log10()
+                } else {
+                    x
+                };
+                ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+            })
             .collect()
     }
 }
@@ -96,6 +140,7 @@ mod tests {
             min,
             max,
             effect: false,
+            scale: Scale::Lin,
         }
     }
 
@@ -114,5 +159,24 @@ mod tests {
             assert!((x2 - x).abs() < 1e-8);
         }
         assert_eq!(b.to_unit(&[3.0]), vec![0.5]);
+    }
+
+    #[test]
+    fn a_log10_parameter_is_searched_on_the_scale_of_its_logarithm() {
+        let p = FreeParameter {
+            scale: Scale::Log10,
+            ..free(1e-4, 1.0)
+        };
+        let b = UnitBox::new(&[p]);
+        assert!((b.to_physical(&[0.5])[0] - 1e-2).abs() < 1e-15);
+        assert!((b.to_unit(&[1e-3])[0] - 0.25).abs() < 1e-12);
+        assert_eq!(b.to_physical(&[0.0]), vec![1e-4]);
+        assert_eq!(b.to_physical(&[1.0]), vec![1.0]);
+        assert_eq!(b.bounds(0), (1e-4, 1.0));
+        for i in 0..=100 {
+            let u = i as f64 / 100.0;
+            let back = b.to_unit(&b.to_physical(&[u]))[0];
+            assert!((back - u).abs() < 1e-12, "{u} -> {back}");
+        }
     }
 }
