@@ -328,3 +328,164 @@ fn bad_worker_addresses_are_bad_input() {
         "{stderr}"
     );
 }
+
+/// `calib bench` and `calib bench store` default to a campaign that ships with calib, so both
+/// run on a fresh clone (from its root) without the real record beside it.
+#[test]
+fn benchmarks_default_to_a_campaign_that_ships() {
+    for args in [&["bench", "--help"][..], &["bench", "store", "--help"][..]] {
+        let out = calib(args);
+        assert!(out.status.success(), "{args:?}");
+        let help = String::from_utf8_lossy(&out.stdout);
+        let default = help
+            .split("[default: ")
+            .map(|rest| rest.split(']').next().unwrap_or_default())
+            .find(|value| value.ends_with(".toml"))
+            .unwrap_or_else(|| panic!("no default campaign in `calib {args:?}`:\n{help}"));
+        let campaign = repo().join(default);
+        let loaded = calib_coordinator::campaign::Campaign::load(&campaign);
+        assert!(
+            loaded.is_ok(),
+            "`calib {args:?}` defaults to {default}: {:?}",
+            loaded.err()
+        );
+        assert!(!default.contains("real"), "{default} needs the real record");
+    }
+}
+
+#[test]
+fn calibrate_shows_the_runs_at_the_best_and_the_bounds_that_bind() {
+    // The true arm friction (0.0101) lies above this range: the fit must end on its bound.
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\"]\nstarts = 3\nmax_evaluations = 200\nseed = 3";
+    let text = clean_campaign(search).replacen(
+        "nominal = 0.012\nmin = 0.0\nmax = 0.9",
+        "nominal = 0.006\nmin = 0.0\nmax = 0.008",
+        1,
+    );
+    let campaign = write(dir.path(), "bound.toml", &text);
+    let out_dir = dir.path().join("out");
+    let out = calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--db",
+        dir.path().join("db").to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let result: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(out_dir.join("bound").join("result.json")).unwrap(),
+    )
+    .unwrap();
+
+    let best = &result["best"];
+    let arm = best["parameters"]["armFriction"].as_f64().unwrap();
+    assert!(arm >= 0.008 * 0.99, "{arm}");
+    assert_eq!(best["at_bound"]["armFriction"], "max");
+    assert!(best["at_bound"]["pendulumFriction"].is_null());
+    assert!(stdout.contains("at upper bound"), "{stdout}");
+    assert!(stdout.contains("sits on its upper bound 0.008"), "{stdout}");
+
+    // The count agrees with the runs listed, and every run shows why it stopped.
+    let runs = result["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 3);
+    let objectives: Vec<f64> = runs
+        .iter()
+        .map(|r| r["objective"].as_f64().unwrap())
+        .collect();
+    let lowest = objectives.iter().copied().fold(f64::INFINITY, f64::min);
+    let within = objectives.iter().filter(|&&f| f <= lowest * 1.01).count();
+    let at_best = &result["runs_at_best"];
+    assert_eq!(at_best["of"], 3);
+    assert_eq!(at_best["count"].as_u64().unwrap() as usize, within);
+    assert_eq!(at_best["tolerance"], 0.01);
+    assert!(
+        stdout.contains(&format!(
+            "{within} of 3 runs reached the best objective within 1%"
+        )),
+        "{stdout}"
+    );
+    assert!(stdout.contains("termination"), "{stdout}");
+    for r in runs {
+        let why = r["termination"].as_str().unwrap();
+        assert!(!why.is_empty() && stdout.contains(why), "{why}: {stdout}");
+    }
+
+    let waterfall = std::fs::read_to_string(out_dir.join("bound").join("waterfall.svg")).unwrap();
+    assert!(
+        waterfall.contains(&format!("within 1% of the best ({within} of 3)")),
+        "{waterfall}"
+    );
+}
+
+#[test]
+fn a_repeated_diagnosis_is_served_from_the_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = std::fs::read_to_string(repo().join("examples/furuta_viscous_arm.toml"))
+        .unwrap()
+        .replace(
+            "data/furuta_viscous_arm.csv",
+            repo()
+                .join("examples/data/furuta_viscous_arm.csv")
+                .to_str()
+                .unwrap(),
+        )
+        .replace(
+            "methods = [\"nelder-mead\", \"powell\"]\nstarts = 4",
+            "methods = [\"nelder-mead\"]\nstarts = 2",
+        )
+        + "refit = 2\ncandidates = [\"viscous_friction.arm\", \"offset(armJoint.phi)\"]\n";
+    let campaign = write(dir.path(), "viscous.toml", &campaign);
+    let db = dir.path().join("db");
+    let diagnose = |out: &str| {
+        json_of(&calib(&[
+            "diagnose",
+            campaign.to_str().unwrap(),
+            "--db",
+            db.to_str().unwrap(),
+            "--out",
+            dir.path().join(out).to_str().unwrap(),
+            "--json",
+        ]))
+    };
+    let misses = || {
+        json_of(&calib(&[
+            "store",
+            "stats",
+            "--db",
+            db.to_str().unwrap(),
+            "--json",
+        ]))["misses"]
+            .as_u64()
+            .unwrap()
+    };
+    let first = diagnose("out1");
+    assert_eq!(
+        first["selected"],
+        serde_json::json!(["viscous_friction.arm"])
+    );
+    let at_best = &first["baseline"]["runs_at_best"];
+    assert_eq!(at_best["of"], 2);
+    assert!(
+        (1..=2).contains(&at_best["count"].as_u64().unwrap()),
+        "{at_best}"
+    );
+    assert!(first["final"]["parameters"]["viscous_friction.arm"]["at_bound"].is_null());
+    let simulated = first["simulated"].as_u64().unwrap();
+    assert!(simulated > 100, "{simulated}");
+    assert_eq!(misses(), simulated);
+
+    let second = diagnose("out2");
+    assert_eq!(second["simulated"], 0);
+    assert_eq!(second["cached"], second["evaluations"]);
+    assert_eq!(misses(), simulated, "the second diagnosis missed the store");
+    for key in ["selected", "verdict", "candidates", "final", "baseline"] {
+        assert_eq!(first[key], second[key], "{key}");
+    }
+}

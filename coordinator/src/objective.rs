@@ -2,10 +2,14 @@
 //!
 //! `f(p) = Σ_i k_i Σ_t (y_i(p, t) − w_i(t))²` with `y_i` the model output read at the
 //! measurement times `t` inside the window and `w_i` the measured column mapped to it.
+//! `k_i` is the campaign's weight (`weight`, or `1/σ_i²` from `sigma`), divided by the
+//! variance of `w_i` over the window for outputs with `scale = "variance"`. The scaling is
+//! folded into [`Objective::weights`] here, once, so the worker's scoring (local or remote)
+//! and every consumer of the weights (diagnosis, reports) see the same `k_i`.
 //! A simulation that fails (diverged, step limit) is not an error here: it evaluates to a
 //! large finite penalty, so optimisers move away from it and never stop on it.
 
-use crate::campaign::{Campaign, CampaignError};
+use crate::campaign::{Campaign, CampaignError, OutputScale};
 use crate::measurement::Measurement;
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
@@ -68,7 +72,7 @@ impl Objective {
             ));
         }
         let grid: Vec<f64> = rows.iter().map(|&i| time[i]).collect();
-        let measured = campaign
+        let measured: Vec<Vec<f64>> = campaign
             .outputs
             .iter()
             .map(|o| {
@@ -78,13 +82,36 @@ impl Objective {
                 rows.iter().map(|&i| column[i]).collect()
             })
             .collect();
+        let mut weights = Vec::with_capacity(measured.len());
+        for (i, (o, w)) in campaign.outputs.iter().zip(&measured).enumerate() {
+            weights.push(match o.scale {
+                OutputScale::None => o.weight,
+                OutputScale::Variance => {
+                    let var = variance(w);
+                    if !(var > 0.0 && (o.weight / var).is_finite()) {
+                        return Err(CampaignError {
+                            file: campaign.source.clone().unwrap_or_default(),
+                            line: None,
+                            field: format!("outputs[{i}] ({})", o.model),
+                            message: format!(
+                                "scale = \"variance\": column `{}` of {} has variance {var:e} \
+                                 over the window [{start}, {stop}] s, nothing to scale by",
+                                o.measured,
+                                measurement.source.display()
+                            ),
+                        });
+                    }
+                    o.weight / var
+                }
+            });
+        }
         let mut objective = Self {
             model: campaign.model,
             base: campaign.base.clone(),
             free: campaign.free.iter().map(|p| p.index).collect(),
             grid,
             outputs: campaign.outputs.iter().map(|o| o.model_index).collect(),
-            weights: campaign.outputs.iter().map(|o| o.weight).collect(),
+            weights,
             measured,
             solver: campaign.solver,
             measurement_hash: measurement.content_hash(),
@@ -185,5 +212,85 @@ impl Objective {
     /// Score simulated series (one per output, on the grid).
     pub fn score(&self, simulated: &[Vec<f64>]) -> Evaluation {
         scoring::score(simulated, &self.measured, &self.weights)
+    }
+}
+
+/// Population variance of a series.
+fn variance(w: &[f64]) -> f64 {
+    let n = w.len() as f64;
+    let mean = w.iter().sum::<f64>() / n;
+    w.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::{Path, PathBuf};
+
+    fn campaign(output_lines: &str) -> Campaign {
+        let text = format!(
+            r#"
+[model]
+name = "furuta"
+[measurement]
+file = "m.csv"
+time_column = "t"
+[[outputs]]
+model = "armJoint.phi"
+measured = "phi"
+{output_lines}
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "theta"
+[[parameters]]
+name = "armFriction"
+min = 0.0
+max = 0.9
+[window]
+start = 1.0
+stop = 3.0
+"#
+        );
+        Campaign::parse(&text, Path::new("/c/c.toml")).unwrap()
+    }
+
+    fn measurement(phi: Vec<f64>) -> Measurement {
+        Measurement {
+            source: PathBuf::from("/c/m.csv"),
+            time: vec![0.0, 1.0, 2.0, 3.0, 4.0],
+            columns: vec![
+                ("phi".into(), phi),
+                ("theta".into(), vec![0.0, 1.0, 2.0, 3.0, 4.0]),
+            ],
+        }
+    }
+
+    #[test]
+    fn variance_scaling_is_folded_into_the_weights() {
+        // Window rows 1..=3: phi 2, 4, 9 (mean 5, variance (9 + 1 + 16)/3).
+        let m = measurement(vec![100.0, 2.0, 4.0, 9.0, -50.0]);
+        let o = Objective::new(&campaign("weight = 3.0\nscale = \"variance\""), &m).unwrap();
+        assert!(
+            (o.weights[0] - 3.0 / (26.0 / 3.0)).abs() < 1e-15,
+            "{:?}",
+            o.weights
+        );
+        assert_eq!(o.weights[1], 1.0);
+        let plain = Objective::new(&campaign("sigma = 0.25"), &m).unwrap();
+        assert_eq!(plain.weights, vec![16.0, 1.0]);
+        assert_ne!(o.fingerprint(), plain.fingerprint());
+        // The score uses exactly these weights.
+        let e = o.score(&[vec![3.0, 4.0, 9.0], vec![1.0, 2.0, 3.0]]);
+        assert_eq!(e.objective, o.weights[0] * 1.0);
+    }
+
+    #[test]
+    fn a_constant_signal_cannot_be_variance_scaled() {
+        let m = measurement(vec![0.0, 2.0, 2.0, 2.0, 5.0]);
+        let Err(e) = Objective::new(&campaign("scale = \"variance\""), &m) else {
+            panic!("a constant column was scaled");
+        };
+        assert_eq!(e.field, "outputs[0] (armJoint.phi)");
+        assert!(e.message.contains("column `phi`"), "{e}");
     }
 }

@@ -29,8 +29,9 @@ pub struct Args {
     /// Repetitions of each measurement (the median is reported).
     #[arg(long, default_value_t = 21)]
     repeat: usize,
-    /// Campaign of the calibration benchmarks.
-    #[arg(long, default_value = "examples/furuta_real.toml")]
+    /// Campaign of the calibration benchmarks. The default ships with calib; README's figures
+    /// use `examples/furuta_real.toml`, the real record beside the repository.
+    #[arg(long, default_value = "examples/furuta.toml")]
     campaign: PathBuf,
     /// Measure dispatch over gRPC instead: overhead per evaluation, scaling with workers,
     /// and the dispatcher's capacity (workers serve in this process, on loopback).

@@ -17,8 +17,9 @@ pub struct Args {
     #[arg(long, default_value_t = 20_000)]
     evaluations: usize,
     /// Campaign of the resume measurement (run as differential evolution from 5 starts
-    /// with a budget of 2,500 each: about 10,000 evaluations on the real record).
-    #[arg(long, default_value = "examples/furuta_real.toml")]
+    /// with a budget of 2,500 each: about 10,000 evaluations). The default ships with calib;
+    /// README's figures use `examples/furuta_real.toml`, the real record beside the repository.
+    #[arg(long, default_value = "examples/furuta.toml")]
     campaign: PathBuf,
 }
 

@@ -6,7 +6,9 @@ use calib_coordinator::optim::problem::Progress;
 use calib_coordinator::report;
 use calib_coordinator::store::SledStore;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -14,9 +16,9 @@ use std::time::{Duration, Instant};
 pub struct Args {
     /// Campaign file (TOML): model, measurement, outputs, parameters, window, search.
     campaign: PathBuf,
-    /// Folder for result.json and the plots [default: results/<campaign name>/ beside the
-    /// campaign file].
-    #[arg(long)]
+    /// Results folder: result.json and the plots go to DIR/<campaign name>/ [default:
+    /// results/ beside the campaign file], as `calib coordinator --out` puts them.
+    #[arg(long, value_name = "DIR")]
     out: Option<PathBuf>,
     /// Print result.json to standard output instead of the summary table.
     #[arg(long)]
@@ -43,18 +45,41 @@ pub fn default_db(campaign: &Path) -> PathBuf {
         .join(".calib-db")
 }
 
-/// A progress bar on standard error, drawn only when it is a terminal.
+/// A progress bar on standard error, drawn only when it is a terminal: the best objective
+/// so far, and what the workers are waited for while none is up.
 struct Bar {
     bar: ProgressBar,
-    best: Mutex<f64>,
+    /// Best objective, workers status.
+    message: Mutex<(f64, String)>,
+}
+
+impl Bar {
+    fn show(&self, message: &(f64, String)) {
+        let (best, status) = message;
+        let mut text = if best.is_finite() {
+            format!("best {best:.6e}")
+        } else {
+            String::new()
+        };
+        if !status.is_empty() {
+            text.push_str(&format!("  [{status}]"));
+        }
+        self.bar.set_message(text);
+    }
+
+    fn set_status(&self, status: &str) {
+        let mut message = self.message.lock().expect("progress lock");
+        message.1 = status.to_string();
+        self.show(&message);
+    }
 }
 
 impl Progress for Bar {
     fn evaluated(&self, count: usize, best_objective: f64) {
-        let mut best = self.best.lock().expect("progress lock");
-        if best_objective < *best {
-            *best = best_objective;
-            self.bar.set_message(format!("best {best_objective:.6e}"));
+        let mut message = self.message.lock().expect("progress lock");
+        if best_objective < message.0 {
+            message.0 = best_objective;
+            self.show(&message);
         }
         self.bar.inc(count as u64);
     }
@@ -106,17 +131,38 @@ pub fn run(args: Args) -> Outcome {
     );
     let bar = Bar {
         bar,
-        best: Mutex::new(f64::INFINITY),
+        message: Mutex::new((f64::INFINITY, String::new())),
     };
     let line_progress = Lines {
         state: Mutex::new((0, f64::INFINITY, None)),
     };
     let progress: &dyn Progress = if lines { &line_progress } else { &bar };
+    // What the workers are waited for: on the bar when it is drawn, else as lines.
+    let drawn = !lines && std::io::stderr().is_terminal();
+    let status = |line: &str| {
+        if drawn {
+            bar.set_status(line);
+        } else if !line.is_empty() {
+            eprintln!("workers: {line}");
+        }
+    };
     let result = match &args.workers.workers {
         None => calibration::calibrate_with_store(&campaign, LocalEvaluator, &store, progress),
-        Some(list) => match args.workers.connect(list) {
+        Some(list) => match args.workers.connect_reporting(list, &status) {
             Ok(workers) => {
-                calibration::calibrate_with_store(&campaign, workers.evaluator(), &store, progress)
+                status("");
+                let stop = AtomicBool::new(false);
+                std::thread::scope(|scope| {
+                    scope.spawn(|| super::workers::watch(workers.pool(), &stop, &status));
+                    let result = calibration::calibrate_with_store(
+                        &campaign,
+                        workers.evaluator(),
+                        &store,
+                        progress,
+                    );
+                    stop.store(true, Ordering::SeqCst);
+                    result
+                })
             }
             Err(failure) => {
                 bar.bar.finish_and_clear();
@@ -128,18 +174,23 @@ pub fn run(args: Args) -> Outcome {
     report_result(&args, &campaign, &result?)
 }
 
+/// The folder holding one `<name>/` per campaign: `--out`, else `results/` beside the
+/// campaign file.
+fn results_root(args: &Args) -> PathBuf {
+    args.out.clone().unwrap_or_else(|| {
+        args.campaign
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("results")
+    })
+}
+
 fn report_result(
     args: &Args,
     campaign: &Campaign,
     calibration: &calibration::Calibration,
 ) -> Outcome {
-    let out = args.out.clone().unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join("results")
-            .join(&campaign.name)
-    });
+    let out = results_root(args).join(&campaign.name);
     let written = report::write(calibration, &out)?;
     if args.json {
         println!(

@@ -3,6 +3,7 @@ use calib_coordinator::campaign::Campaign;
 use calib_coordinator::diagnosis::{self, report};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
+use calib_coordinator::store::SledStore;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
 
@@ -11,8 +12,8 @@ pub struct Args {
     /// Campaign file (TOML), as for `calib calibrate`, optionally with a [diagnosis] section
     /// (holdout_start, holdout_stop, refit, candidates).
     campaign: PathBuf,
-    /// Folder for diagnosis.json, diagnosis.md and the plots [default:
-    /// results/<campaign name>/diagnosis/ beside the campaign file].
+    /// Results folder: diagnosis.json, diagnosis.md and the plots go to
+    /// DIR/<campaign name>/diagnosis/ [default: results/ beside the campaign file].
     #[arg(long)]
     out: Option<PathBuf>,
     /// Print diagnosis.json to standard output instead of the summary.
@@ -21,6 +22,11 @@ pub struct Args {
     /// Spread the calibrations and the simulations of the diagnosis over workers.
     #[command(flatten)]
     workers: super::WorkersArgs,
+    /// Evaluation store (a folder, created when absent), shared with `calib calibrate`:
+    /// every evaluated point is kept there, so a repeated or interrupted diagnosis simulates
+    /// only the points it lacks [default: results/.calib-db beside the campaign file].
+    #[arg(long, value_name = "DIR")]
+    db: Option<PathBuf>,
 }
 
 /// A spinner counting evaluations, drawn only on a terminal.
@@ -34,6 +40,11 @@ impl Progress for Spinner {
 
 pub fn run(args: Args) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let db = args
+        .db
+        .clone()
+        .unwrap_or_else(|| super::calibrate::default_db(&args.campaign));
+    let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
     let workers = match &args.workers.workers {
         Some(list) => Some(args.workers.connect(list)?),
         None => None,
@@ -47,19 +58,24 @@ pub fn run(args: Args) -> Outcome {
     bar.enable_steady_tick(std::time::Duration::from_millis(200));
     let spinner = Spinner(bar);
     let result = match &workers {
-        Some(workers) => diagnosis::diagnose(&campaign, &workers.evaluator(), &spinner),
-        None => diagnosis::diagnose(&campaign, &LocalEvaluator, &spinner),
+        Some(workers) => {
+            diagnosis::diagnose_with_store(&campaign, &workers.evaluator(), &store, &spinner)
+        }
+        None => diagnosis::diagnose_with_store(&campaign, &LocalEvaluator, &store, &spinner),
     };
     spinner.0.finish_and_clear();
     let d = result?;
-    let out = args.out.unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(std::path::Path::new("."))
-            .join("results")
-            .join(&campaign.name)
-            .join("diagnosis")
-    });
+    // `--out` is a results root, as for `calib calibrate`: one `<name>/` per campaign.
+    let out = args
+        .out
+        .unwrap_or_else(|| {
+            args.campaign
+                .parent()
+                .unwrap_or(std::path::Path::new("."))
+                .join("results")
+        })
+        .join(&campaign.name)
+        .join("diagnosis");
     let written = report::write(&d, &out)?;
     if args.json {
         println!(
@@ -69,8 +85,12 @@ pub fn run(args: Args) -> Outcome {
         return Ok(());
     }
     println!(
-        "baseline: objective {:.4e} (held out {:.4e}), noise floor {:.4e}",
-        d.baseline.objective, d.baseline.held_out_objective, d.noise_floor
+        "baseline: objective {:.4e} (held out {:.4e}), noise floor {:.4e}; {} of {} runs reached it",
+        d.baseline.objective,
+        d.baseline.held_out_objective,
+        d.noise_floor,
+        d.baseline.runs_at_best.count,
+        d.baseline.runs_at_best.of
     );
     for (o, r) in d.campaign.outputs.iter().zip(&d.baseline.residual) {
         println!(
@@ -99,6 +119,9 @@ pub fn run(args: Args) -> Outcome {
             p.name, p.value, p.ci_low, p.ci_high
         );
     }
+    for note in report::bound_notes(&d.final_fit) {
+        println!("  note: {note}");
+    }
     println!(
         "\nobjective {:.4e} -> {:.4e}, held out {:.4e} -> {:.4e}",
         d.baseline.objective,
@@ -107,7 +130,15 @@ pub fn run(args: Args) -> Outcome {
         d.final_fit.held_out_objective
     );
     println!("\n{}", report::verdict_text(&d));
-    println!("{:.2} s", d.elapsed.as_secs_f64());
+    println!(
+        "{} evaluations, {} simulated, {} from the store ({}); {} trajectories simulated; {:.2} s",
+        d.stats.evaluations.requested,
+        d.stats.evaluations.simulated,
+        d.stats.evaluations.cached,
+        db.display(),
+        d.stats.trajectories,
+        d.elapsed.as_secs_f64()
+    );
     for path in written {
         println!("wrote {}", path.display());
     }

@@ -2,8 +2,9 @@
 //! (residual before and after, measured against the model before and after, residual
 //! autocorrelation before and after).
 
-use super::{Diagnosis, Fit, Verdict, NOISE_FACTOR};
+use super::{verdict, Diagnosis, Fit, Verdict};
 use crate::error::{Error, Result};
+use crate::report::evidence::{self, bound_hits, bound_sentence};
 use crate::report::plot::{line_plot, sanitize, time_plot, Series};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
@@ -25,18 +26,45 @@ fn per_output(d: &Diagnosis, values: &[f64]) -> Value {
     )
 }
 
+/// The bound each fitted parameter sits on (`min`, `max` or none), in the order of
+/// `fit.parameters`.
+fn bounds(fit: &Fit) -> Vec<Option<evidence::Bound>> {
+    fit.free
+        .iter()
+        .zip(&fit.point)
+        .map(|(p, &v)| evidence::at_bound(v, p.nominal, p.min, p.max))
+        .collect()
+}
+
 fn parameters(fit: &Fit) -> Value {
+    let bounds = bounds(fit);
     Value::Object(
         fit.parameters
             .iter()
-            .map(|p| {
+            .enumerate()
+            .map(|(i, p)| {
                 (
                     p.name.clone(),
-                    json!({ "value": p.value, "ci_low": p.ci_low, "ci_high": p.ci_high, "std": p.std, "effect": p.effect }),
+                    json!({
+                        "value": p.value,
+                        "ci_low": p.ci_low,
+                        "ci_high": p.ci_high,
+                        "std": p.std,
+                        "effect": p.effect,
+                        "at_bound": bounds.get(i).copied().flatten(),
+                    }),
                 )
             })
             .collect::<Map<_, _>>(),
     )
+}
+
+/// One sentence per parameter of `fit` that sits on a bound.
+pub fn bound_notes(fit: &Fit) -> Vec<String> {
+    bound_hits(&fit.free, &fit.point)
+        .iter()
+        .map(bound_sentence)
+        .collect()
 }
 
 fn fit_json(d: &Diagnosis, fit: &Fit) -> Value {
@@ -54,6 +82,7 @@ fn fit_json(d: &Diagnosis, fit: &Fit) -> Value {
         "aic": fit.aic,
         "bic": fit.bic,
         "evaluations": fit.evaluations,
+        "runs_at_best": fit.runs_at_best,
     })
 }
 
@@ -81,56 +110,51 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "explained": d.explained(),
         "partial": d.verdict == Verdict::Partial,
         "explained_fraction": d.explained_fraction,
+        "bound_notes": bound_notes(&d.final_fit),
+        "evaluations": d.stats.evaluations.requested,
+        "simulated": d.stats.evaluations.simulated,
+        "cached": d.stats.evaluations.cached,
+        "trajectories": d.stats.trajectories,
         "elapsed_seconds": d.elapsed.as_secs_f64(),
     })
 }
 
 /// One sentence a person can act on.
 pub fn verdict_text(d: &Diagnosis) -> String {
-    let ratio = d.final_fit.objective / d.noise_floor;
-    match d.verdict {
-        Verdict::Noise => format!(
-            "The residual is consistent with sensor noise: the objective {:.4e} is {:.2}x the noise floor {:.4e} estimated from the data. Nothing is missing from the model; nothing was added.",
-            d.baseline.objective, d.baseline.objective / d.noise_floor, d.noise_floor
-        ),
-        Verdict::Explained => format!(
-            "Missing physics found: {}. Adding it brings the objective from {:.4e} to {:.4e} ({:.1}x lower, {:.2}x the noise floor) and the held-out objective from {:.4e} to {:.4e}.",
-            d.selected.join(" + "),
-            d.baseline.objective,
-            d.final_fit.objective,
-            d.baseline.objective / d.final_fit.objective,
-            ratio,
-            d.baseline.held_out_objective,
-            d.final_fit.held_out_objective
-        ),
-        Verdict::Partial => format!(
-            "Partly explained: {} removes {:.0}% of the residual above the noise floor (objective {:.4e} -> {:.4e}, still {:.2}x the noise floor, above the {NOISE_FACTOR}x that noise would leave). Something the candidates do not describe is missing too.",
-            d.selected.join(" + "),
-            100.0 * d.explained_fraction,
-            d.baseline.objective,
-            d.final_fit.objective,
-            ratio
-        ),
-        Verdict::Unexplained => format!(
-            "No candidate explains the residual: the objective {:.4e} is {:.2}x the noise floor, and no effect (alone or in pairs) lowers the information criterion decisively while also lowering the held-out error. The best attempt is listed below; the missing piece lies outside the candidate library.",
-            d.baseline.objective,
-            d.baseline.objective / d.noise_floor
-        ),
-    }
+    verdict::sentence(&verdict::Outcome {
+        verdict: d.verdict,
+        selected: &d.selected,
+        baseline: &d.baseline,
+        final_fit: &d.final_fit,
+        noise_floor: d.noise_floor,
+        explained_fraction: d.explained_fraction,
+    })
 }
 
 fn fit_table(s: &mut String, fit: &Fit) {
-    let _ = writeln!(s, "| parameter | value | 95% interval |");
-    let _ = writeln!(s, "|---|---|---|");
-    for p in &fit.parameters {
+    let _ = writeln!(s, "| parameter | value | 95% interval | bound |");
+    let _ = writeln!(s, "|---|---|---|---|");
+    let bounds = bounds(fit);
+    for (i, p) in fit.parameters.iter().enumerate() {
         let mark = if p.effect { " (effect)" } else { "" };
+        let bound = match bounds.get(i).copied().flatten() {
+            Some(b) => format!("**at {} bound**", b.word()),
+            None => String::new(),
+        };
         let _ = writeln!(
             s,
-            "| `{}`{mark} | {:.6e} | [{:.6e}, {:.6e}] |",
+            "| `{}`{mark} | {:.6e} | [{:.6e}, {:.6e}] | {bound} |",
             p.name, p.value, p.ci_low, p.ci_high
         );
     }
     let _ = writeln!(s);
+    let notes = bound_notes(fit);
+    for note in &notes {
+        let _ = writeln!(s, "- {note}");
+    }
+    if !notes.is_empty() {
+        let _ = writeln!(s);
+    }
     let n = fit.parameters.len();
     let strong: Vec<String> = (0..n)
         .flat_map(|i| (i + 1..n).map(move |j| (i, j)))
@@ -239,23 +263,31 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
         let _ = writeln!(s, "\n## Refits\n");
         let _ = writeln!(
             s,
-            "| effects | objective | held-out | AIC | BIC | evaluations |"
+            "| effects | objective | held-out | AIC | BIC | evaluations | runs at the best |"
         );
-        let _ = writeln!(s, "|---|---|---|---|---|---|");
+        let _ = writeln!(s, "|---|---|---|---|---|---|---|");
         for f in &d.refits {
             let _ = writeln!(
                 s,
-                "| {} | {:.4e} | {:.4e} | {:.1} | {:.1} | {} |",
+                "| {} | {:.4e} | {:.4e} | {:.1} | {:.1} | {} | {} of {} |",
                 f.effects.join(" + "),
                 f.objective,
                 f.held_out_objective,
                 f.aic,
                 f.bic,
-                f.evaluations
+                f.evaluations,
+                f.runs_at_best.count,
+                f.runs_at_best.of
             );
         }
     }
-    let _ = writeln!(s, "\n## Baseline parameters\n");
+    let _ = writeln!(
+        s,
+        "\n## Baseline parameters\n\n{} of {} runs of the baseline calibration reached its best objective within {:.0}%.\n",
+        d.baseline.runs_at_best.count,
+        d.baseline.runs_at_best.of,
+        100.0 * d.baseline.runs_at_best.tolerance
+    );
     fit_table(&mut s, &d.baseline);
     if !d.selected.is_empty() {
         let _ = writeln!(s, "## Final parameters (with {})\n", d.selected.join(" + "));
@@ -441,4 +473,41 @@ fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
     )?;
     written.push(path);
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnosis::testing::fit;
+
+    #[test]
+    fn parameters_on_a_bound_are_flagged_with_a_sentence() {
+        let f = fit(&[
+            ("CF_RefHT", 1.0, 0.1, 5.0, 5.0, false),
+            ("CF_Refdp", 1.0, 0.1, 5.0, 0.33, false),
+            ("viscous_friction.arm", 0.0, 0.0, 0.01, 0.0, true),
+            ("lag(y)", 0.0, 0.0, 2.0, 2.0, true),
+        ]);
+        let json = parameters(&f);
+        assert_eq!(json["CF_RefHT"]["at_bound"], "max");
+        assert!(json["CF_Refdp"]["at_bound"].is_null());
+        assert_eq!(json["viscous_friction.arm"]["at_bound"], "min");
+        assert_eq!(json["lag(y)"]["at_bound"], "max");
+        let notes = bound_notes(&f);
+        assert_eq!(notes.len(), 3, "{notes:?}");
+        assert!(notes[0].starts_with("`CF_RefHT`") && notes[0].contains("upper bound 5"));
+        assert!(notes[1].contains("none of it"), "{}", notes[1]);
+        assert!(notes[2].contains("[[effects]]"), "{}", notes[2]);
+        let mut table = String::new();
+        fit_table(&mut table, &f);
+        assert_eq!(table.matches("**at upper bound**").count(), 2, "{table}");
+        assert_eq!(table.matches("**at lower bound**").count(), 1, "{table}");
+    }
+
+    #[test]
+    fn a_fit_inside_its_bounds_has_no_notes() {
+        let f = fit(&[("armFriction", 0.012, 0.0, 0.9, 0.0101, false)]);
+        assert!(bound_notes(&f).is_empty());
+        assert!(parameters(&f)["armFriction"]["at_bound"].is_null());
+    }
 }

@@ -1,5 +1,6 @@
 //! What a calibration leaves behind: `result.json`, a table for the terminal, SVG plots.
 
+pub mod evidence;
 pub mod plot;
 pub mod table;
 
@@ -9,7 +10,7 @@ use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 
 /// Relative distance to the best objective within which a run counts as having found it.
-pub const SPREAD_TOLERANCE: f64 = 0.01;
+pub const SPREAD_TOLERANCE: f64 = evidence::BEST_TOLERANCE;
 
 fn named(names: &[String], values: &[f64]) -> Value {
     Value::Object(
@@ -70,7 +71,7 @@ pub fn result_json(c: &Calibration) -> Value {
         })
         .collect();
     // Spread of the parameters over the runs that reached the best objective.
-    let threshold = best.objective * (1.0 + SPREAD_TOLERANCE) + f64::MIN_POSITIVE;
+    let threshold = evidence::best_threshold(best.objective);
     let agreeing: Vec<_> = c.runs.iter().filter(|r| r.objective <= threshold).collect();
     let spread: Map<String, Value> = names
         .iter()
@@ -80,6 +81,20 @@ pub fn result_json(c: &Calibration) -> Value {
             let min = values.clone().fold(f64::INFINITY, f64::min);
             let max = values.fold(f64::NEG_INFINITY, f64::max);
             (n.clone(), json!({ "min": min, "max": max }))
+        })
+        .collect();
+    let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
+    let at_best = evidence::runs_at_best(&objectives);
+    let at_bound: Map<String, Value> = c
+        .campaign
+        .free
+        .iter()
+        .zip(&best.point)
+        .map(|(p, &v)| {
+            (
+                p.name.clone(),
+                json!(evidence::at_bound(v, p.nominal, p.min, p.max)),
+            )
         })
         .collect();
     let evaluations = c.evaluations() as u64;
@@ -98,12 +113,14 @@ pub fn result_json(c: &Calibration) -> Value {
             "start": best.start,
             "sse": per_output(&c.best_evaluation.sse),
             "rms": per_output(&rms),
+            "at_bound": at_bound,
         },
         "evaluations": evaluations,
         "simulated": c.stats.simulated,
         "cached": c.stats.cached,
         "runs": runs,
         "clusters": clusters,
+        "runs_at_best": at_best,
         "spread": { "runs_within_1_percent": agreeing.len(), "parameters": spread },
         "elapsed_seconds": c.elapsed.as_secs_f64(),
     })
@@ -124,5 +141,6 @@ pub fn write(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     })?;
     written.push(path);
     written.extend(plot::write_fit_plots(c, dir)?);
+    written.push(plot::write_waterfall(c, dir)?);
     Ok(written)
 }

@@ -1,6 +1,7 @@
 //! SVG plots: measured, nominal and calibrated over time, one file per output, as the
 //! seed's figures show them. The fitted window is shaded.
 
+use super::evidence::{best_threshold, BEST_TOLERANCE};
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use plotters::prelude::*;
@@ -194,6 +195,120 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(written)
 }
 
+/// The waterfall plot of a calibration (`waterfall.svg`): every run's final objective.
+pub fn write_waterfall(c: &Calibration, dir: &Path) -> Result<PathBuf> {
+    let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
+    let path = dir.join("waterfall.svg");
+    waterfall_plot(
+        &path,
+        &format!(
+            "{}: final objective of each run, best first",
+            c.campaign.name
+        ),
+        &objectives,
+    )?;
+    Ok(path)
+}
+
+/// The objectives sorted ascending, as drawn on a log scale: a value that is not positive
+/// (an exact fit) is drawn a decade below the smallest positive one.
+pub fn waterfall_values(objectives: &[f64]) -> Vec<f64> {
+    let mut sorted = objectives.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let smallest = sorted
+        .iter()
+        .copied()
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let floor = if smallest.is_finite() {
+        smallest / 10.0
+    } else {
+        1e-12
+    };
+    sorted
+        .into_iter()
+        .map(|v| if v > 0.0 && v.is_finite() { v } else { floor })
+        .collect()
+}
+
+/// A waterfall plot, as pyPESTO draws one: the runs' final objectives sorted ascending on a
+/// log scale, those within [`BEST_TOLERANCE`] of the best highlighted. Many runs on the
+/// first step are the evidence that the best was found; one alone is a warning.
+pub fn waterfall_plot(path: &Path, title: &str, objectives: &[f64]) -> Result<()> {
+    let values = waterfall_values(objectives);
+    let best = objectives.iter().copied().fold(f64::INFINITY, f64::min);
+    let threshold = best_threshold(best);
+    let mut sorted = objectives.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let at_best: Vec<bool> = sorted.iter().map(|v| *v <= threshold).collect();
+    let count = at_best.iter().filter(|b| **b).count();
+    let n = values.len();
+    let lowest = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let highest = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let (y0, y1) = if lowest.is_finite() {
+        (lowest / 2.0, highest * 2.0)
+    } else {
+        (0.1, 10.0)
+    };
+    let highlight = RGBColor(38, 139, 210);
+    let other = RGBColor(150, 150, 150);
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = SVGBackend::new(path, (800, 450)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(0.5..(n.max(1) as f64 + 0.5), (y0..y1).log_scale())?;
+        chart
+            .configure_mesh()
+            .x_desc("run, sorted by final objective")
+            .y_desc("final objective")
+            .x_labels(n.clamp(1, 20))
+            .x_label_formatter(&|x| format!("{x:.0}"))
+            .y_label_formatter(&|y| format!("{y:.2e}"))
+            .light_line_style(WHITE.mix(0.0))
+            .draw()?;
+        chart.draw_series(LineSeries::new(
+            values.iter().enumerate().map(|(i, &v)| (i as f64 + 1.0, v)),
+            other.stroke_width(1),
+        ))?;
+        let label = format!(
+            "within {:.0}% of the best ({count} of {n})",
+            100.0 * BEST_TOLERANCE
+        );
+        for (mark, color, label) in [
+            (true, highlight, label),
+            (false, other, "other runs".into()),
+        ] {
+            chart
+                .draw_series(
+                    values
+                        .iter()
+                        .zip(&at_best)
+                        .enumerate()
+                        .filter(|(_, (_, b))| **b == mark)
+                        .map(|(i, (&v, _))| Circle::new((i as f64 + 1.0, v), 5, color.filled())),
+                )?
+                .label(label)
+                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| Error::Write {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e.to_string()),
+    })
+}
+
 /// A file name from an output name (`armJoint.phi` → `armJoint.phi`, `a/b` → `a_b`).
 pub fn sanitize(name: &str) -> String {
     name.chars()
@@ -205,4 +320,30 @@ pub fn sanitize(name: &str) -> String {
             }
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waterfall_values_are_sorted_and_positive() {
+        assert_eq!(
+            waterfall_values(&[3.0, 0.0, 1.0, 1e30]),
+            vec![0.1, 1.0, 3.0, 1e30]
+        );
+        assert_eq!(waterfall_values(&[0.0]), vec![1e-12]);
+    }
+
+    #[test]
+    fn a_waterfall_plot_marks_the_runs_at_the_best() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("waterfall.svg");
+        waterfall_plot(&path, "runs", &[1.0, 1.005, 40.0, 2.0e3, 0.9999]).unwrap();
+        let svg = std::fs::read_to_string(&path).unwrap();
+        assert!(svg.contains("within 1% of the best (3 of 5)"), "{svg}");
+        assert!(svg.contains("other runs"));
+        // One circle per run and one per legend entry.
+        assert_eq!(svg.matches("<circle").count(), 5 + 2);
+    }
 }

@@ -1,7 +1,11 @@
 //! The calibration summary printed on the terminal.
 
+use super::evidence::{self, BEST_TOLERANCE};
 use crate::calibration::Calibration;
 use std::fmt::Write;
+
+/// Marks a value within 1% of its range from a bound, in the run table.
+const AT_BOUND: char = '!';
 
 /// Runs, best first, then the best point and the error before and after.
 pub fn summary(c: &Calibration) -> String {
@@ -13,22 +17,36 @@ pub fn summary(c: &Calibration) -> String {
 
     let _ = write!(s, "{:<24} {:>5} ", "method", "start");
     for n in &names {
-        let _ = write!(s, "{n:>width$} ");
+        let _ = write!(s, "{n:>width$}  ");
     }
-    let _ = writeln!(s, "{:>13} {:>6} {:>6}", "objective", "evals", "iters");
+    let _ = writeln!(
+        s,
+        "{:>13} {:>6} {:>6}   termination",
+        "objective", "evals", "iters"
+    );
     for i in order {
         let r = &c.runs[i];
         let _ = write!(s, "{:<24} {:>5} ", r.method.name(), r.start);
-        for v in &r.point {
-            let _ = write!(s, "{:>width$.6e} ", v);
+        for (p, v) in c.campaign.free.iter().zip(&r.point) {
+            let mark = if evidence::at_bound(*v, p.nominal, p.min, p.max).is_some() {
+                AT_BOUND
+            } else {
+                ' '
+            };
+            let _ = write!(s, "{:>width$.6e}{mark} ", v);
         }
-        let mark = if i == c.best { " *" } else { "" };
+        let mark = if i == c.best { "*" } else { " " };
         let _ = writeln!(
             s,
-            "{:>13.6e} {:>6} {:>6}{mark}",
-            r.objective, r.evaluations, r.iterations
+            "{:>13.6e} {:>6} {:>6} {mark} {}",
+            r.objective, r.evaluations, r.iterations, r.termination
         );
     }
+    let _ = writeln!(
+        s,
+        "(* best run; {AT_BOUND} on a bound: within {:.0}% of its range from it)",
+        100.0 * evidence::BOUND_TOLERANCE
+    );
     let best = c.best_run();
     let _ = writeln!(s);
     let _ = writeln!(
@@ -38,11 +56,18 @@ pub fn summary(c: &Calibration) -> String {
         best.start
     );
     for (p, v) in c.campaign.free.iter().zip(&best.point) {
+        let bound = match evidence::at_bound(*v, p.nominal, p.min, p.max) {
+            Some(b) => format!("   at {} bound", b.word()),
+            None => String::new(),
+        };
         let _ = writeln!(
             s,
-            "  {:<width$} = {:.6e}   (nominal {:.6e})",
+            "  {:<width$} = {:.6e}   (nominal {:.6e}){bound}",
             p.name, v, p.nominal
         );
+    }
+    for hit in evidence::bound_hits(&c.campaign.free, &best.point) {
+        let _ = writeln!(s, "  note: {}", evidence::bound_sentence(&hit));
     }
     let _ = writeln!(
         s,
@@ -67,6 +92,20 @@ pub fn summary(c: &Calibration) -> String {
             (after / n).sqrt()
         );
     }
+    let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
+    let at_best = evidence::runs_at_best(&objectives);
+    let _ = writeln!(
+        s,
+        "{} of {} runs reached the best objective within {:.0}%{}",
+        at_best.count,
+        at_best.of,
+        100.0 * BEST_TOLERANCE,
+        if at_best.count < 2 && at_best.of > 1 {
+            " (only one: the best may not be the global minimum; add starts)"
+        } else {
+            ""
+        }
+    );
     let _ = writeln!(
         s,
         "{} minima found by {} runs; {} evaluations, {} simulated, {} from cache, {:.2} s",

@@ -1,0 +1,209 @@
+//! Steps 4 to 7 of a diagnosis: refit the best candidates alone and in pairs with the
+//! multistart, then select and judge ([`super::verdict`]).
+
+use super::candidates::refit_campaign;
+use super::fit::fit_of;
+use super::verdict::{self, Verdict};
+use super::{Candidate, Fit};
+use crate::calibration::calibrate;
+use crate::campaign::{Campaign, FreeParameter, Method};
+use crate::error::Result;
+use crate::evaluator::{Evaluator, Simulator};
+use crate::measurement::Measurement;
+use crate::objective::Objective;
+use crate::optim::problem::Progress;
+
+/// Calibrate each refit campaign concurrently; the fits in the same order.
+fn refit_all<E: Evaluator + Simulator>(
+    campaigns: &[Campaign],
+    sets: &[Vec<&Candidate>],
+    engine: &E,
+    progress: &dyn Progress,
+    holdout: &Objective,
+) -> Result<Vec<Fit>> {
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = campaigns
+            .iter()
+            .zip(sets)
+            .map(|(c, set)| {
+                scope.spawn(move || -> Result<Fit> {
+                    let calibration = calibrate(c, engine, progress)?;
+                    let names: Vec<String> = set.iter().map(|c| c.effect.clone()).collect();
+                    fit_of(&calibration, &names, engine, holdout)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect::<Result<Vec<Fit>>>()
+    })
+}
+
+/// What steps 4 to 7 conclude.
+pub(super) struct Judgement {
+    pub refits: Vec<Fit>,
+    pub selected: Vec<String>,
+    pub final_fit: Fit,
+    pub verdict: Verdict,
+    pub explained_fraction: f64,
+}
+
+/// Steps 4 to 7: refit the best candidates alone and in pairs, select, and judge. The refits,
+/// the selected effects, the final fit, the verdict and the share of the excess explained.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn refit_and_select<E: Evaluator + Simulator>(
+    fit_campaign: &Campaign,
+    measurement: &Measurement,
+    engine: &E,
+    progress: &dyn Progress,
+    baseline: &Fit,
+    candidates: &mut [Candidate],
+    candidate_specs: &[FreeParameter],
+    holdout_objective: &Objective,
+    noise_floor: f64,
+) -> Result<Judgement> {
+    // 4. Refit the best candidates alone and in pairs.
+    let top: Vec<&Candidate> = candidates
+        .iter()
+        .filter(|c| c.score > 0.0)
+        .take(fit_campaign.diagnosis.refit)
+        .collect();
+    let singles: Vec<Vec<&Candidate>> = top.iter().map(|c| vec![*c]).collect();
+    let mut sets = singles.clone();
+    let mut refit_campaigns: Vec<Campaign> = singles
+        .iter()
+        .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
+        .collect();
+    let mut refits = refit_all(
+        &refit_campaigns,
+        &singles,
+        engine,
+        progress,
+        holdout_objective,
+    )?;
+    // Pairs only when no single effect brings the error down to the noise: a pair cannot
+    // beat a single effect that already leaves nothing but noise.
+    let explains = |f: &Fit| verdict::explains(f, baseline, noise_floor);
+    if !refits
+        .iter()
+        .any(|f| verdict::improves(f, baseline) && explains(f))
+    {
+        let mut pairs: Vec<Vec<&Candidate>> = Vec::new();
+        for i in 0..top.len() {
+            for j in i + 1..top.len() {
+                pairs.push(vec![top[i], top[j]]);
+            }
+        }
+        let pair_campaigns: Vec<Campaign> = pairs
+            .iter()
+            .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
+            .collect();
+        refits.extend(refit_all(
+            &pair_campaigns,
+            &pairs,
+            engine,
+            progress,
+            holdout_objective,
+        )?);
+        refit_campaigns.extend(pair_campaigns);
+        sets.extend(pairs);
+        polish_singles_from_pairs(
+            &mut refits,
+            &refit_campaigns,
+            measurement,
+            engine,
+            progress,
+            holdout_objective,
+        )?;
+    }
+    for c in candidates.iter_mut() {
+        c.objective = refits
+            .iter()
+            .find(|f| f.effects.len() == 1 && f.effects[0] == c.effect)
+            .map(|f| f.objective);
+    }
+
+    // 5. Select, 7. judge.
+    let chosen = verdict::select(baseline, &refits);
+    let (verdict, explained_fraction) = verdict::judge(baseline, chosen, noise_floor);
+    let (final_fit, selected) = match chosen {
+        None => (baseline.clone(), Vec::new()),
+        Some(fit) => (fit.clone(), fit.effects.clone()),
+    };
+    Ok(Judgement {
+        refits,
+        selected,
+        final_fit,
+        verdict,
+        explained_fraction,
+    })
+}
+
+/// A pair's refit may find, with one of its effects near 0, a better minimum than the refit
+/// of its other effect alone (the pair had different starts). Restart such singles from the
+/// pair's point with that effect dropped, so that a single effect is never passed over for
+/// a pair that needs only one of its two.
+fn polish_singles_from_pairs<E: Evaluator + Simulator>(
+    refits: &mut [Fit],
+    campaigns: &[Campaign],
+    measurement: &Measurement,
+    engine: &E,
+    progress: &dyn Progress,
+    holdout: &Objective,
+) -> Result<()> {
+    for s in 0..refits.len() {
+        if refits[s].effects.len() != 1 {
+            continue;
+        }
+        let effect = refits[s].effects[0].clone();
+        let single = &campaigns[s];
+        let objective = Objective::new(single, measurement)?;
+        let mut starts = Vec::new();
+        for pair in refits
+            .iter()
+            .filter(|f| f.effects.len() == 2 && f.effects.contains(&effect))
+        {
+            let start: Vec<f64> = single
+                .free
+                .iter()
+                .map(|p| {
+                    pair.free
+                        .iter()
+                        .position(|q| q.name == p.name)
+                        .map_or(p.nominal, |i| pair.point[i])
+                        .clamp(p.min, p.max)
+                })
+                .collect();
+            starts.push(start);
+        }
+        if starts.is_empty() {
+            continue;
+        }
+        let scores = engine.evaluate(&objective, &starts)?;
+        let Some((k, best)) = scores
+            .iter()
+            .enumerate()
+            .min_by(|a, b| a.1.objective.total_cmp(&b.1.objective))
+        else {
+            continue;
+        };
+        if best.objective >= 0.99 * refits[s].objective {
+            continue;
+        }
+        let mut polish = single.clone();
+        for (p, v) in polish.free.iter_mut().zip(&starts[k]) {
+            p.nominal = *v;
+        }
+        polish.search.extra_starts.clear();
+        polish.search.starts = 1;
+        polish.search.methods = vec![Method::NelderMead, Method::Powell];
+        let calibration = calibrate(&polish, engine, progress)?;
+        let fit = fit_of(&calibration, &refits[s].effects, engine, holdout)?;
+        if fit.objective < refits[s].objective {
+            tracing::debug!(effect = %effect, from = refits[s].objective, to = fit.objective, "single refit improved from a pair");
+            refits[s] = fit;
+        }
+    }
+    Ok(())
+}
