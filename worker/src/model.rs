@@ -184,6 +184,10 @@ pub enum SimulationError {
     Diverged { time: f64 },
     #[error("invalid request: {0}")]
     InvalidInput(String),
+    /// The model could not compute its state (no steady state, a state outside the range
+    /// of its property data): the reason names the quantity and its value.
+    #[error("simulation failed at t = {time} s: {reason}")]
+    Failed { time: f64, reason: String },
 }
 
 /// A hosted model.

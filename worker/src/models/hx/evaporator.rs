@@ -3,7 +3,13 @@
 //!
 //! See the module documentation of [`super`] for the equations. This file holds the
 //! march along the refrigerant path for given wall temperatures (used by the
-//! time integration) and the direct steady-state solve (used for the initial state).
+//! time integration) and the direct steady-state solve (used for the initial state and
+//! for the reference density of the low-fidelity pressure drop).
+//!
+//! Every march measures how far its states lie inside the property tables
+//! ([`March::margin`], negative outside): a steady state outside them is an error, and the
+//! time integration stops with a failure at the first accepted instant where the margin
+//! turns negative (see [`super`]). Neither solve returns an unconverged result.
 
 use std::cell::Cell;
 
@@ -13,7 +19,8 @@ use super::correlations::{
 };
 use super::geometry::Geometry;
 use super::pressure_drop;
-use super::refrigerant::{self, saturation, vapour};
+use super::refrigerant::{self, saturation, vapour, Saturation};
+use super::NOMINAL;
 
 /// Which pressure-drop model, and how fine the segmentation.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -74,6 +81,8 @@ struct Segment {
     dp: f64,
     /// Specific volume at the segment's mean enthalpy (low fidelity only, else 0).
     v_mid: f64,
+    /// [`enthalpy_margin`] of the segment's inlet state.
+    margin: f64,
 }
 
 /// Totals of one march along the path.
@@ -86,8 +95,30 @@ pub struct March {
     pub q_air: f64,
     pub q_ambient: f64,
     pub wall_mean: f64,
-    /// Low fidelity: the model's pressure drop for this march.
+    /// Low fidelity: the path-mean density ρ̄ (harmonic mean of the segments' homogeneous
+    /// densities) and the model's pressure drop for this march.
+    pub rho_mean: f64,
     pub dp_model: f64,
+    /// How far the states of the march lie inside the property tables: the smallest
+    /// [`table_margin`] along the path, negative when one lies outside; `worst` is the
+    /// state `(p, h)` where it is smallest.
+    pub margin: f64,
+    pub worst: (f64, f64),
+}
+
+impl March {
+    /// Keep the smaller margin and its state; a NaN margin counts as outside.
+    fn note_margin(&mut self, margin: f64, p: f64, h: f64) {
+        let margin = if margin.is_nan() {
+            f64::NEG_INFINITY
+        } else {
+            margin
+        };
+        if margin < self.margin {
+            self.margin = margin;
+            self.worst = (p, h);
+        }
+    }
 }
 
 /// Wall temperatures: given (time integration) or solved segment by segment (steady state).
@@ -105,10 +136,9 @@ pub struct Evaporator {
     d: f64,
     flow_area: f64,
     louver_group: f64,
-    /// `ρ0` of the low-fidelity model, the density at `(p0, h0)`.
+    /// `ρ0` of the low-fidelity model: the path-mean density of its steady state at the
+    /// nominal point (see [`Evaporator::nominal_density`]); NaN for the high fidelity.
     rho0: f64,
-    /// Set when a march leaves the property tables.
-    out_of_range: Cell<bool>,
     /// The last air side computed, with its air inlet temperature and mass flow: the air
     /// inputs only move during their own ramps.
     air_cache: Cell<Option<(f64, f64, AirSide)>>,
@@ -121,12 +151,12 @@ pub const X_DRYOUT: f64 = 0.9;
 /// Relative tolerance of the inlet-pressure iteration, on the pressure drop.
 const PRESSURE_TOL: f64 = 1e-10;
 const PRESSURE_ITER: usize = 60;
+/// Tolerance (W) and iteration limit of a segment's steady wall balance.
+const WALL_TOL: f64 = 1e-9;
+const WALL_ITER: usize = 200;
 
-fn specific_volume(p: f64, h: f64) -> f64 {
-    specific_volume_at(&saturation(p), p, h)
-}
-
-/// [`specific_volume`] given the saturation state at `p`.
+/// Specific volume (homogeneous in the two-phase region) at `(p, h)`, given the saturation
+/// state at `p`.
 fn specific_volume_at(s: &refrigerant::Saturation, p: f64, h: f64) -> f64 {
     if h < s.h_v {
         let x = s.quality(h).clamp(0.0, 1.0);
@@ -136,11 +166,76 @@ fn specific_volume_at(s: &refrigerant::Saturation, p: f64, h: f64) -> f64 {
     }
 }
 
+/// Relative distance of enthalpy `h` at pressure `p` (saturation state `s`) from the edges
+/// of the property data: the quality while two-phase (the subcooled liquid is not
+/// tabulated), `1 − (h − h_v)/u_max` in the vapour (the vapour table ends at a superheat
+/// of `u_max`). Continuous across the dew line, negative outside.
+fn enthalpy_margin(s: &Saturation, h: f64) -> f64 {
+    if h < s.h_v {
+        s.quality(h)
+    } else {
+        1.0 - (h - s.h_v) / refrigerant::superheat_limit()
+    }
+}
+
+/// Relative distance of pressure `p` from the ends of the tables, negative outside.
+fn pressure_margin(p: f64) -> f64 {
+    let (p_min, p_max) = refrigerant::pressure_range();
+    (p / p_min - 1.0).min(1.0 - p / p_max)
+}
+
+/// The smaller of [`pressure_margin`] and [`enthalpy_margin`] at `(p, h)`.
+pub fn table_margin(p: f64, h: f64) -> f64 {
+    let (p_min, p_max) = refrigerant::pressure_range();
+    let s = saturation(p.clamp(p_min, p_max));
+    pressure_margin(p).min(enthalpy_margin(&s, h))
+}
+
+/// What is wrong with a state `(p, h)` outside the property tables.
+pub fn describe_out_of_range(p: f64, h: f64) -> String {
+    let (p_min, p_max) = refrigerant::pressure_range();
+    if pressure_margin(p) < 0.0 {
+        return format!(
+            "refrigerant pressure {:.4} bar is outside the property tables ({:.2}–{:.2} bar)",
+            p / 1e5,
+            p_min / 1e5,
+            p_max / 1e5
+        );
+    }
+    let s = saturation(p);
+    if h < s.h_l {
+        format!(
+            "refrigerant enthalpy {:.2} kJ/kg at {:.4} bar is subcooled liquid (saturated \
+             liquid {:.2} kJ/kg), which the property tables do not cover",
+            h / 1e3,
+            p / 1e5,
+            s.h_l / 1e3
+        )
+    } else {
+        format!(
+            "refrigerant superheat {:.2} kJ/kg at {:.4} bar is past the vapour table's \
+             {:.0} kJ/kg",
+            (h - s.h_v) / 1e3,
+            p / 1e5,
+            refrigerant::superheat_limit() / 1e3
+        )
+    }
+}
+
 impl Evaporator {
-    pub fn new(settings: Settings) -> Self {
+    /// The evaporator of `settings`; for the low fidelity this solves its nominal steady
+    /// state for `ρ0`, and fails when that has none inside the property tables.
+    pub fn new(settings: Settings) -> Result<Self, String> {
+        let mut evap = Self::without_reference(settings);
+        if settings.fidelity == Fidelity::Low {
+            evap.rho0 = evap.nominal_density()?;
+        }
+        Ok(evap)
+    }
+
+    fn without_reference(settings: Settings) -> Self {
         let g = settings.geometry;
         let n = settings.segments.max(1);
-        let nom = settings.nominal;
         Self {
             settings,
             n,
@@ -158,18 +253,54 @@ impl Evaporator {
                 g.fin_thickness,
                 g.louver_pitch,
             ),
-            rho0: 1.0 / specific_volume(nom.p0, nom.h0),
-            out_of_range: Cell::new(false),
+            rho0: f64::NAN,
             air_cache: Cell::new(None),
         }
     }
 
-    pub fn segments(&self) -> usize {
-        self.n
+    /// `ρ0` of the density-profile pressure drop: the path-mean density `ρ̄` of this
+    /// model's steady march at its nominal point — flow `ṁ0`, inlet enthalpy `h0`, inlet
+    /// pressure `p0`, outlet pressure `p0 − Δp0`, the nominal air ([`NOMINAL`]), every
+    /// calibration factor 1 and no ambient loss. At that point `ρ̄ = ρ0`, so the model
+    /// gives `Δp0` whatever the factors; without it (`ρ0` at the inlet state) the nominal
+    /// pressure drop came out 2.3 times `Δp0`.
+    fn nominal_density(&self) -> Result<f64, String> {
+        let nom = self.settings.nominal;
+        let reference = Self::without_reference(Settings {
+            cf_ref_ht: 1.0,
+            cf_air_ht: 1.0,
+            cf_ref_dp: 1.0,
+            ambient_conductance: 0.0,
+            ..self.settings
+        });
+        let inp = Inputs {
+            mdot_ref: nom.mdot0,
+            h_in: nom.h0,
+            p_out: nom.p0 - nom.dp0,
+            ..NOMINAL
+        };
+        let air = reference.air_side(&inp);
+        let mut tw = vec![0.0; self.n];
+        let mut net = vec![0.0; self.n];
+        let m = reference
+            .march(&inp, &air, nom.p0, Walls::Steady(&mut tw), &mut net)
+            .map_err(|e| format!("nominal point of the pressure drop: {e}"))?;
+        if m.margin < 0.0 {
+            let (p, h) = m.worst;
+            return Err(format!(
+                "nominal point of the pressure drop (p0 {:.4} bar, h0 {:.2} kJ/kg, dp0 {:.0} \
+                 Pa): {}",
+                nom.p0 / 1e5,
+                nom.h0 / 1e3,
+                nom.dp0,
+                describe_out_of_range(p, h)
+            ));
+        }
+        Ok(m.rho_mean)
     }
 
-    pub fn out_of_range(&self) -> bool {
-        self.out_of_range.get()
+    pub fn segments(&self) -> usize {
+        self.n
     }
 
     /// ε-NTU of the finned air side against a wall at uniform temperature, per segment.
@@ -289,6 +420,7 @@ impl Evaporator {
             h_out,
             dp,
             v_mid,
+            margin: enthalpy_margin(&s, h),
         }
     }
 
@@ -302,8 +434,15 @@ impl Evaporator {
     }
 
     /// Steady wall temperature of one segment: `q_air(T_w) = q_ref(T_w) + q_amb(T_w)`, the
-    /// balance being strictly decreasing in `T_w` (Illinois regula falsi on a bracket).
-    fn steady_wall(&self, air: &AirSide, p: f64, h: f64, mdot: f64) -> (f64, Segment) {
+    /// balance being strictly decreasing in `T_w`, solved by [`falsi`] on a bracket between
+    /// the coldest and the warmest temperature around.
+    fn steady_wall(
+        &self,
+        air: &AirSide,
+        p: f64,
+        h: f64,
+        mdot: f64,
+    ) -> Result<(f64, Segment), String> {
         let s = saturation(p);
         let t_ref = if h < s.h_v {
             s.t
@@ -311,48 +450,25 @@ impl Evaporator {
             vapour(p, h, s.h_v).t
         };
         let t_amb = self.settings.t_ambient;
-        let mut lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
-        let mut hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
+        let lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
+        let hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
         let balance = |tw: f64| {
-            let seg = self.segment(p, h, tw, mdot);
             let (q_air, q_amb) = self.air_and_ambient(air, tw);
-            (q_air - seg.q_ref - q_amb, seg)
+            q_air - self.segment(p, h, tw, mdot).q_ref - q_amb
         };
-        let (mut f_lo, _) = balance(lo);
-        let (mut f_hi, _) = balance(hi);
-        let mut side = 0i8;
-        let mut best = (lo, balance(lo).1);
-        for _ in 0..200 {
-            let mut tw = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
-            if !(tw > lo && tw < hi) {
-                tw = 0.5 * (lo + hi);
-            }
-            let (f, seg) = balance(tw);
-            best = (tw, seg);
-            if f.abs() < 1e-9 || hi - lo < 1e-11 {
-                break;
-            }
-            if f > 0.0 {
-                lo = tw;
-                f_lo = f;
-                if side == 1 {
-                    f_hi *= 0.5;
-                }
-                side = 1;
-            } else {
-                hi = tw;
-                f_hi = f;
-                if side == -1 {
-                    f_lo *= 0.5;
-                }
-                side = -1;
-            }
-        }
-        best
+        let tw = falsi(balance, lo, hi, WALL_TOL, WALL_ITER).map_err(|e| {
+            format!(
+                "steady wall temperature at {:.4} bar, {:.2} kJ/kg: {e}",
+                p / 1e5,
+                h / 1e3
+            )
+        })?;
+        Ok((tw, self.segment(p, h, tw, mdot)))
     }
 
     /// March from the inlet at pressure `p_in`, writing the net heat flow into each wall
-    /// (W) into `net`, and return the totals.
+    /// (W) into `net`, and return the totals. Fails only when a steady wall temperature
+    /// cannot be found.
     fn march(
         &self,
         inp: &Inputs,
@@ -360,7 +476,7 @@ impl Evaporator {
         p_in: f64,
         mut walls: Walls,
         net: &mut [f64],
-    ) -> March {
+    ) -> Result<March, String> {
         let n = self.n;
         let high = self.settings.fidelity == Fidelity::High;
         // Low fidelity: linear pressure profile between the inlet and the outlet boundary.
@@ -369,23 +485,25 @@ impl Evaporator {
         let mut h = inp.h_in;
         let mut m = March {
             p_in,
+            margin: f64::INFINITY,
             ..March::default()
         };
         let mut v_sum = 0.0;
         let (p_min, p_max) = refrigerant::pressure_range();
         for i in 0..n {
-            if !(p_min..=p_max).contains(&p) {
-                self.out_of_range.set(true);
-                p = p.clamp(p_min, p_max);
-            }
+            // Outside the tables the march goes on at the nearest tabulated pressure, so
+            // that trial states stay finite; the margin reports it.
+            let p_margin = pressure_margin(p);
+            let p_seg = p.clamp(p_min, p_max);
             let (tw, seg) = match &mut walls {
-                Walls::Given(tw) => (tw[i], self.segment(p, h, tw[i], inp.mdot_ref)),
+                Walls::Given(tw) => (tw[i], self.segment(p_seg, h, tw[i], inp.mdot_ref)),
                 Walls::Steady(tw) => {
-                    let (t, seg) = self.steady_wall(air, p, h, inp.mdot_ref);
+                    let (t, seg) = self.steady_wall(air, p_seg, h, inp.mdot_ref)?;
                     tw[i] = t;
                     (t, seg)
                 }
             };
+            m.note_margin(p_margin.min(seg.margin), p, h);
             let (q_air, q_amb) = self.air_and_ambient(air, tw);
             net[i] = q_air - seg.q_ref - q_amb;
             m.q_ref += seg.q_ref;
@@ -396,21 +514,22 @@ impl Evaporator {
             h = seg.h_out;
             p -= if high { seg.dp } else { dp_lin };
         }
+        m.note_margin(table_margin(p, h), p, h);
         m.p_end = p;
         m.h_out = h;
         if !high {
             let nom = &self.settings.nominal;
-            let rho_mean = n as f64 / v_sum;
+            m.rho_mean = n as f64 / v_sum;
             m.dp_model = pressure_drop::density_profile(
                 self.settings.cf_ref_dp,
                 nom.dp0,
                 inp.mdot_ref,
                 nom.mdot0,
                 self.rho0,
-                rho_mean,
+                m.rho_mean,
             );
         }
-        m
+        Ok(m)
     }
 
     /// Residual of the outlet condition: zero when the march ends at the outlet pressure.
@@ -422,26 +541,36 @@ impl Evaporator {
     }
 
     /// Steady state for the inputs `inp`: the inlet pressure that meets the outlet
-    /// boundary condition, by a secant iteration on `p_in` around the segment-by-segment
-    /// steady wall solve. Writes the wall temperatures into `tw`.
-    fn solve_steady(&self, inp: &Inputs, air: &AirSide, tw: &mut [f64], net: &mut [f64]) -> March {
+    /// boundary condition, by a secant iteration on `p_in` (kept between the outlet
+    /// pressure and the top of the tables) around the segment-by-segment steady wall
+    /// solve. Writes the wall temperatures into `tw`. Fails when the iteration does not
+    /// meet the outlet condition or its state leaves the property tables.
+    fn solve_steady(
+        &self,
+        inp: &Inputs,
+        air: &AirSide,
+        tw: &mut [f64],
+        net: &mut [f64],
+    ) -> Result<March, String> {
         let p_max = refrigerant::pressure_range().1;
-        let mut run = |p_in: f64, net: &mut [f64]| {
-            let m = self.march(inp, air, p_in, Walls::Steady(&mut *tw), net);
-            (self.residual(inp, &m), m)
+        let mut run = |p_in: f64, net: &mut [f64]| -> Result<(f64, March), String> {
+            let m = self.march(inp, air, p_in, Walls::Steady(&mut *tw), net)?;
+            Ok((self.residual(inp, &m), m))
         };
-        let mut x0 = (inp.p_out + 3e4).min(p_max);
-        let (mut r0, mut m) = run(x0, net);
         let scale = |x: f64| PRESSURE_TOL * (x - inp.p_out).abs().max(100.0);
-        if r0.abs() <= scale(x0) {
-            return m;
-        }
+        let mut x0 = (inp.p_out + 3e4).min(p_max);
+        let (mut r0, mut m) = run(x0, net)?;
+        let mut converged = r0.abs() <= scale(x0);
         let mut slope = 1.0;
         let mut x1 = (x0 - r0 / slope).clamp(inp.p_out, p_max);
-        for _ in 0..PRESSURE_ITER {
-            let (r1, m1) = run(x1, net);
+        let mut iterations = 0;
+        while !converged && iterations < PRESSURE_ITER {
+            iterations += 1;
+            let (r1, m1) = run(x1, net)?;
             m = m1;
-            if r1.abs() <= scale(x1) || x1 == x0 {
+            converged = r1.abs() <= scale(x1);
+            if converged || x1 == x0 {
+                r0 = r1;
                 break;
             }
             let s = (r1 - r0) / (x1 - x0);
@@ -453,7 +582,22 @@ impl Evaporator {
             r0 = r1;
             x1 = x2;
         }
-        m
+        if !converged {
+            return Err(format!(
+                "no steady inlet pressure between the outlet's {:.4} bar and {:.2} bar meets \
+                 the outlet condition: residual {:.4e} Pa at {:.4} bar after {iterations} \
+                 iterations",
+                inp.p_out / 1e5,
+                p_max / 1e5,
+                r0,
+                m.p_in / 1e5
+            ));
+        }
+        if m.margin < 0.0 {
+            let (p, h) = m.worst;
+            return Err(format!("steady state: {}", describe_out_of_range(p, h)));
+        }
+        Ok(m)
     }
 
     /// Net heat flow into each wall (W), the outlet-condition residual (Pa) and the march
@@ -467,20 +611,24 @@ impl Evaporator {
     ) -> (Inputs, AirSide, March, f64) {
         let inp = self.settings.ramps.at(t);
         let air = self.air_side(&inp);
-        let m = self.march(&inp, &air, p_in, Walls::Given(tw), net);
+        let m = match self.march(&inp, &air, p_in, Walls::Given(tw), net) {
+            Ok(m) => m,
+            // Given walls: nothing is solved, so the march cannot fail.
+            Err(_) => unreachable!("a march on given walls solves nothing"),
+        };
         let r = self.residual(&inp, &m);
         (inp, air, m, r)
     }
 
     /// Steady state at the inputs of time `t`: wall temperatures, then the inlet pressure.
-    pub fn steady_state(&self, t: f64) -> Vec<f64> {
+    pub fn steady_state(&self, t: f64) -> Result<Vec<f64>, String> {
         let inp = self.settings.ramps.at(t);
         let air = self.air_side(&inp);
         let mut tw = vec![inp.t_air_in; self.n];
         let mut net = vec![0.0; self.n];
-        let m = self.solve_steady(&inp, &air, &mut tw, &mut net);
+        let m = self.solve_steady(&inp, &air, &mut tw, &mut net)?;
         tw.push(m.p_in);
-        tw
+        Ok(tw)
     }
 
     /// Heat capacity of one segment's wall (J/K).
@@ -498,4 +646,60 @@ impl Evaporator {
             (t, t - s.t)
         }
     }
+}
+
+/// Root of a strictly decreasing `f` on `[lo, hi]` by the Illinois variant of regula falsi:
+/// the `x` where `|f(x)| < tol`, or where the bracket has shrunk below 10⁻¹¹. Fails when
+/// `[lo, hi]` does not bracket a root (or `f` is not finite there) or the iterations run out.
+pub fn falsi(
+    f: impl Fn(f64) -> f64,
+    mut lo: f64,
+    mut hi: f64,
+    tol: f64,
+    max_iter: usize,
+) -> Result<f64, String> {
+    let (mut f_lo, mut f_hi) = (f(lo), f(hi));
+    if !(f_lo >= 0.0 && f_hi <= 0.0) {
+        return Err(format!(
+            "no root in [{lo:.6}, {hi:.6}]: the balance is {f_lo:.6e} and {f_hi:.6e} at its ends"
+        ));
+    }
+    let mut side = 0i8;
+    let mut last = (f64::NAN, f64::NAN);
+    for _ in 0..max_iter {
+        let mut x = (lo * f_hi - hi * f_lo) / (f_hi - f_lo);
+        if !(x > lo && x < hi) {
+            x = 0.5 * (lo + hi);
+        }
+        let fx = f(x);
+        if !fx.is_finite() {
+            return Err(format!("the balance is not finite at {x:.6}"));
+        }
+        last = (x, fx);
+        if fx.abs() < tol || hi - lo < 1e-11 {
+            return Ok(x);
+        }
+        if fx > 0.0 {
+            lo = x;
+            f_lo = fx;
+            if side == 1 {
+                f_hi *= 0.5;
+            }
+            side = 1;
+        } else {
+            hi = x;
+            f_hi = fx;
+            if side == -1 {
+                f_lo *= 0.5;
+            }
+            side = -1;
+        }
+    }
+    Err(format!(
+        "not converged after {max_iter} iterations: balance {:.3e} at {:.6}, bracket width \
+         {:.3e}",
+        last.1,
+        last.0,
+        hi - lo
+    ))
 }

@@ -38,10 +38,14 @@
 //!   by Churchill (1977), the momentum term `G² (v_out − v_in)` of homogeneous flow
 //!   ([`pressure_drop`]); `r = p_N − p_out`;
 //! - `hx_lowfi`: the density-profile model
-//!   `Δp = CF_Refdp · Δp0 · (ṁ/ṁ0)² · (ρ0/ρ̄)`, where `ρ0` is the density at the nominal
-//!   point `(p0, h0)` and `ρ̄` the path-mean density of the current state (harmonic mean of
-//!   the segments' homogeneous densities, since homogeneous friction scales with specific
-//!   volume); the pressure falls linearly along the path; `r = p_in − p_out − Δp`.
+//!   `Δp = CF_Refdp · Δp0 · (ṁ/ṁ0)² · (ρ0/ρ̄)`, where `ρ̄` is the path-mean density of the
+//!   current state (harmonic mean of the segments' homogeneous densities, since
+//!   homogeneous friction scales with specific volume) and `ρ0` the same density at the
+//!   nominal point: `ρ̄` of this model's own steady state with inlet `(p0, h0)`, flow
+//!   `ṁ0`, outlet pressure `p0 − Δp0`, the nominal air and every factor 1. So at every
+//!   factor 1 the model gives `Δp0` at its nominal point and, with [`LOWFI_NOMINAL`],
+//!   `hx_highfi`'s nominal steady state (pressure drop within 0.1 %, heat flow within
+//!   1.5 %). The pressure falls linearly along the path; `r = p_in − p_out − Δp`.
 //!
 //! and `τ_p dp_in/dt = −r` with `τ_p` = [`PRESSURE_LAG`] = 1 s, a lumped stand-in for the
 //! refrigerant inventory that the quasi-steady march neglects. Without it the inlet
@@ -77,7 +81,16 @@
 //! given inlet pressure, each segment's wall balance is a scalar equation in `T_w,i`
 //! (strictly decreasing), solved in flow order by regula falsi; a secant iteration on the
 //! inlet pressure meets the outlet condition (to 10⁻¹⁰ of the pressure drop). Outputs are
-//! therefore flat until the first ramp, and the integration starts there.
+//! therefore flat until the first ramp, and the integration starts there. Either solve
+//! that does not converge fails the simulation with its reason (`SimulationError::Failed`
+//! at t = 0).
+//!
+//! **Property range**: R134a properties are tabulated for 0.6–20 bar, two-phase and
+//! vapour up to 160 kJ/kg of superheat (no subcooled liquid). A state outside them is a
+//! failed simulation, never a clamped property: at t = 0 when the steady state (or the
+//! low-fidelity nominal point) lies outside, else at the first accepted instant where a
+//! state of the march leaves them, located by the solver's event search; trial stages of
+//! the solver are not counted.
 //!
 //! **Cost** (300 s at rtol 10⁻⁸, release build, `examples/hx_timing.rs`): measured at
 //! first 150 ms for `hx_highfi` and 16 ms for `hx_lowfi`, two thirds of it in `powf` inside
@@ -134,8 +147,9 @@ use crate::model::{
 };
 use crate::ode::{integrate, HybridSystem};
 use boundary::{Inputs, Ramps};
-use evaporator::{Evaporator, Fidelity, NominalPoint, Settings};
+use evaporator::{describe_out_of_range, Evaporator, Fidelity, NominalPoint, Settings};
 use geometry::Geometry;
+use std::cell::RefCell;
 
 const T0: f64 = 273.15;
 
@@ -153,9 +167,11 @@ pub const NOMINAL: Inputs = Inputs {
 };
 
 /// Nominal point of the low-fidelity pressure-drop model: the high-fidelity model's
-/// steady state at [`NOMINAL`] (inlet pressure, inlet enthalpy, flow, pressure drop).
+/// steady state at [`NOMINAL`] (inlet pressure, inlet enthalpy, flow, pressure drop; the
+/// test `lowfi_nominal_matches_highfi_steady_state` computes it), rounded so that
+/// `p0 − dp0` is [`NOMINAL`]'s outlet pressure.
 pub const LOWFI_NOMINAL: NominalPoint = NominalPoint {
-    p0: 3.08e5,
+    p0: 3.082e5,
     h0: 250e3,
     mdot0: 0.021,
     dp0: 38.2e3,
@@ -445,7 +461,7 @@ impl HxModel {
         Self {
             info: ModelInfo {
                 name: name.into(),
-                version: 3,
+                version: 4,
                 description: description.into(),
                 parameters,
                 outputs,
@@ -508,10 +524,46 @@ pub const PRESSURE_LAG: f64 = 1.0;
 
 /// The ODE: wall temperatures of the segments, then the inlet pressure. Its clock starts
 /// at `t0` of the simulation's.
+///
+/// Its one event function is the property-table margin of the march ([`evaporator::March::margin`]):
+/// it is evaluated on accepted steps only, so a trial stage outside the tables (rejected, or
+/// a stage of a step that ends inside) never counts, and the event is located in time.
+/// Once it fires the simulation has failed: the right-hand side turns NaN, the solver
+/// stops, and [`HxModel::simulate`] reports the recorded time and state.
 struct Dynamics<'a> {
     evap: &'a Evaporator,
     inv_capacity: f64,
     t0: f64,
+    /// The last march's table margin: the event function of an accepted step is
+    /// evaluated where the step's last stage was.
+    last: RefCell<LastMarch>,
+    /// The first accepted instant (simulation time) outside the tables, and the state.
+    left: Option<(f64, (f64, f64))>,
+}
+
+/// Table margin and worst state `(p, h)` of the march at time `t`, state `y`.
+struct LastMarch {
+    t: f64,
+    y: Vec<f64>,
+    margin: f64,
+    worst: (f64, f64),
+}
+
+impl Dynamics<'_> {
+    /// Margin and worst state of the march at `(t, y)`, from the last right-hand side when
+    /// it was evaluated there.
+    fn margin_at(&self, t: f64, y: &[f64]) -> (f64, (f64, f64)) {
+        {
+            let last = self.last.borrow();
+            if last.t == t && last.y == y {
+                return (last.margin, last.worst);
+            }
+        }
+        let n = self.evap.segments();
+        let mut net = vec![0.0; n];
+        let (_, _, m, _) = self.evap.evaluate(self.t0 + t, &y[..n], y[n], &mut net);
+        (m.margin, m.worst)
+    }
 }
 
 impl HybridSystem for Dynamics<'_> {
@@ -520,12 +572,35 @@ impl HybridSystem for Dynamics<'_> {
     }
 
     fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        if self.left.is_some() {
+            dy.fill(f64::NAN);
+            return;
+        }
         let n = self.evap.segments();
-        let (_, _, _, r) = self.evap.evaluate(self.t0 + t, &y[..n], y[n], &mut dy[..n]);
+        let (_, _, m, r) = self.evap.evaluate(self.t0 + t, &y[..n], y[n], &mut dy[..n]);
         for v in dy[..n].iter_mut() {
             *v *= self.inv_capacity;
         }
         dy[n] = -r / PRESSURE_LAG;
+        let mut last = self.last.borrow_mut();
+        last.t = t;
+        last.y.clear();
+        last.y.extend_from_slice(y);
+        last.margin = m.margin;
+        last.worst = m.worst;
+    }
+
+    fn event_count(&self) -> usize {
+        1
+    }
+
+    fn events(&self, t: f64, y: &[f64], g: &mut [f64]) {
+        g[0] = self.margin_at(t, y).0;
+    }
+
+    fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
+        let (_, worst) = self.margin_at(t, y);
+        self.left.get_or_insert((self.t0 + t, worst));
     }
 }
 
@@ -574,13 +649,9 @@ impl Model for HxModel {
     ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
         let settings = self.settings(params)?;
-        let evap = Evaporator::new(settings);
-        let y0 = evap.steady_state(0.0);
-        if evap.out_of_range() || y0.iter().any(|v| !v.is_finite()) {
-            return Err(SimulationError::InvalidInput(
-                "no steady state at the initial inputs inside the property tables".into(),
-            ));
-        }
+        let failed = |time: f64| move |reason: String| SimulationError::Failed { time, reason };
+        let evap = Evaporator::new(settings).map_err(failed(0.0))?;
+        let y0 = evap.steady_state(0.0).map_err(failed(0.0))?;
         // The inputs hold their start values until the first ramp and `y0` is the steady
         // state there, so the exact solution is `y0` up to then: the integration starts at
         // the first ramp.
@@ -589,6 +660,13 @@ impl Model for HxModel {
             evap: &evap,
             inv_capacity: 1.0 / evap.segment_capacity(),
             t0,
+            last: RefCell::new(LastMarch {
+                t: f64::NAN,
+                y: Vec::new(),
+                margin: f64::NAN,
+                worst: (f64::NAN, f64::NAN),
+            }),
+            left: None,
         };
         let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
         let mut scratch = vec![0.0; evap.segments()];
@@ -603,18 +681,16 @@ impl Model for HxModel {
             record(t, &y0);
         }
         let rest: Vec<f64> = grid[flat..].iter().map(|t| t - t0).collect();
-        let stats = integrate(&mut system, &y0, &rest, options, |i, y| {
+        let result = integrate(&mut system, &y0, &rest, options, |i, y| {
             record(grid[flat + i], y)
-        })?;
-        if evap.out_of_range() {
-            return Err(SimulationError::Diverged {
-                time: grid.last().copied().unwrap_or(0.0),
-            });
+        });
+        if let Some((time, (p, h))) = system.left {
+            return Err(failed(time)(describe_out_of_range(p, h)));
         }
-        if values.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(SimulationError::Diverged {
-                time: grid.last().copied().unwrap_or(0.0),
-            });
+        let stats = result?;
+        let recorded = values.iter().map(Vec::len).min().unwrap_or(0);
+        if let Some(k) = (0..recorded).find(|&k| values.iter().any(|v| !v[k].is_finite())) {
+            return Err(SimulationError::Diverged { time: grid[k] });
         }
         Ok(Trajectory {
             time: grid.to_vec(),
