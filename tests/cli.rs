@@ -380,7 +380,7 @@ fn calibrate_shows_the_runs_at_the_best_and_the_bounds_that_bind() {
         String::from_utf8_lossy(&out.stderr)
     );
     let result: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(out_dir.join("bound").join("result.json")).unwrap(),
+        &std::fs::read_to_string(out_dir.join("clean").join("result.json")).unwrap(),
     )
     .unwrap();
 
@@ -417,7 +417,7 @@ fn calibrate_shows_the_runs_at_the_best_and_the_bounds_that_bind() {
         assert!(!why.is_empty() && stdout.contains(why), "{why}: {stdout}");
     }
 
-    let waterfall = std::fs::read_to_string(out_dir.join("bound").join("waterfall.svg")).unwrap();
+    let waterfall = std::fs::read_to_string(out_dir.join("clean").join("waterfall.svg")).unwrap();
     assert!(
         waterfall.contains(&format!("within 1% of the best ({within} of 3)")),
         "{waterfall}"

@@ -6,7 +6,7 @@
 //! Independent evaluations are requested in batches through [`Problem::bulk_cost`], which
 //! [`problem::RunProblem`] overrides to evaluate them in parallel.
 //!
-//! * [`nelder_mead`]: argmin's Nelder–Mead simplex, its initial simplex evaluated as a batch.
+//! * [`nelder_mead`]: the Nelder–Mead simplex; its initial simplex and its shrinks are batches.
 //! * [`Powell`]: Powell's conjugate-direction method, a local method for smooth
 //!   objectives ([`powell`]).
 //! * [`DifferentialEvolution`]: differential evolution after Storn and Price

@@ -150,7 +150,7 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             if departure.flat {
                 (problem.take_log(), 0, Termination::Plateau)
             } else {
-                let inner = nelder_mead::solver(departure.simplex)?;
+                let inner = nelder_mead::NelderMead::new(departure.simplex)?;
                 execute(
                     problem,
                     Budgeted {
@@ -211,6 +211,8 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
 enum Termination {
     /// The method's own convergence test held.
     Converged,
+    /// The simplex shrank to a point before its objectives agreed.
+    Collapsed,
     /// The evaluation budget was used up.
     Budget,
     /// No objective spread around any start point of the run.
@@ -230,6 +232,11 @@ impl Termination {
             {
                 Self::Budget
             }
+            TerminationStatus::Terminated(TerminationReason::SolverExit(why))
+                if why == nelder_mead::SIMPLEX_COLLAPSED =>
+            {
+                Self::Collapsed
+            }
             TerminationStatus::Terminated(reason) => Self::Other(reason.to_string()),
             TerminationStatus::NotTerminated => Self::Other("not terminated".into()),
         }
@@ -244,6 +251,7 @@ impl Termination {
                 Method::DifferentialEvolution => "converged: population spread below tolerance",
             }
             .into(),
+            Self::Collapsed => "converged: simplex diameter below tolerance".into(),
             Self::Budget => "budget: evaluation budget used".into(),
             Self::Plateau => "plateau: no objective spread around any start".into(),
             Self::Failures => "failures: every simulation failed".into(),

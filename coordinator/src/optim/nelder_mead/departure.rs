@@ -1,9 +1,4 @@
-//! Nelder–Mead on the unit box, with argmin's solver.
-//!
-//! J. A. Nelder, R. Mead, "A simplex method for function minimization", The Computer
-//! Journal 7 (1965) 308–313. argmin's implementation evaluates the simplex one vertex at a
-//! time; the initial simplex is therefore evaluated here first, as one parallel batch, so
-//! that argmin's own evaluations of it are answered from the evaluation cache.
+//! Where a Nelder–Mead run starts: an initial simplex with objective spread.
 //!
 //! **Plateaus.** A simplex whose vertices all score the same (a region where a stuck joint
 //! makes the objective flat, or where every simulation fails) would satisfy the spread test
@@ -13,15 +8,10 @@
 //! by its own seed, up to [`RESTARTS`] times, and a run that never leaves the plateau ends
 //! with the termination reason `plateau`, never `converged`.
 
-use super::problem::RunProblem;
-use super::screening;
-use super::space::initial_steps;
 use crate::evaluator::Fault;
-use argmin::core::Error;
-use argmin::solver::neldermead::NelderMead;
-
-/// Convergence: standard deviation of the (scaled) costs over the simplex.
-pub const SD_TOLERANCE: f64 = 1e-12;
+use crate::optim::problem::RunProblem;
+use crate::optim::screening;
+use crate::optim::space::initial_steps;
 
 /// A simplex is flat when its objectives differ by no more than this, relative to the
 /// smallest (or when every vertex failed).
@@ -110,11 +100,6 @@ pub fn depart(
         restarts: RESTARTS,
         flat: true,
     })
-}
-
-/// A Nelder–Mead solver starting from `simplex`, already evaluated in one batch.
-pub fn solver(simplex: Vec<Vec<f64>>) -> Result<NelderMead<Vec<f64>, f64>, Error> {
-    NelderMead::new(simplex).with_sd_tolerance(SD_TOLERANCE)
 }
 
 #[cfg(test)]
