@@ -5,6 +5,7 @@ mod common;
 use calib_coordinator::calibration::calibrate;
 use calib_coordinator::campaign::Campaign;
 use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::multistart::Stop;
 use calib_coordinator::optim::problem::Silent;
 use common::*;
 
@@ -126,12 +127,34 @@ fn nelder_mead_from_200_starts_on_the_seeds_bounds_mostly_reaches_the_optimum() 
     let best = c.best_run().objective;
     let at_best = c.runs.iter().filter(|r| r.objective <= 1.01 * best).count();
     let stalled = c.runs.iter().filter(|r| r.evaluations <= 4).count();
+    let plateau = c.runs.iter().filter(|r| r.stop == Stop::Plateau).count();
+    let minima = c
+        .clusters
+        .iter()
+        .filter(|k| k.kind == Stop::Minimum)
+        .count();
     println!(
         "200 starts: best {best:.4}, {at_best} runs within 1%, {stalled} runs of ≤ 4 evaluations, \
-         {} evaluations ({} screened)",
+         {} evaluations ({} screened), {plateau} runs on plateaus, {minima} distinct minima, \
+         {} clusters",
         c.evaluations(),
-        c.screened
+        c.screened,
+        c.clusters.len()
     );
+    // Runs that stalled on a plateau are one group, not one cluster each, and so are the runs
+    // that ended in one valley (the arm held still by any friction above its breakaway:
+    // one objective, whatever its value); every run is in exactly one cluster.
+    assert!(minima <= 6, "{minima} distinct minima");
+    assert!(
+        c.clusters
+            .iter()
+            .filter(|k| k.kind == Stop::Plateau)
+            .count()
+            <= 1
+    );
+    let mut clustered: Vec<usize> = c.clusters.iter().flat_map(|k| k.runs.clone()).collect();
+    clustered.sort_unstable();
+    assert_eq!(clustered, (0..200).collect::<Vec<_>>());
     assert_eq!(c.runs.len(), 200);
     assert!((best / 0.944 - 1.0).abs() < 0.01, "best {best}");
     assert!(

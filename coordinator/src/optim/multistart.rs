@@ -66,6 +66,20 @@ pub struct RunOutcome {
     pub termination: String,
     /// Times the run left a plateau for a fresh start point.
     pub restarts: usize,
+    /// Whether the run found a minimum or stalled (plateau, failures).
+    pub stop: Stop,
+}
+
+/// Whether a run ended at a minimum it found, or never found one to converge to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stop {
+    /// Converged, or out of budget while descending: its point is a candidate minimum.
+    Minimum,
+    /// No objective spread around any start of the run.
+    Plateau,
+    /// Every simulation of the run failed.
+    Failures,
 }
 
 /// Every method × start of a campaign, in a fixed order.
@@ -202,6 +216,11 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
         objective: log.best_objective,
         evaluations: log.evaluations,
         iterations,
+        stop: match termination {
+            Termination::Plateau => Stop::Plateau,
+            Termination::Failures => Stop::Failures,
+            _ => Stop::Minimum,
+        },
         termination: termination.describe(spec.method),
         restarts,
     })
@@ -301,7 +320,7 @@ impl Capped for PopulationState<Vec<f64>, f64> {
     }
 }
 
-/// Runs whose optima coincide.
+/// Runs whose optima coincide, or the runs that stalled the same way.
 #[derive(Debug, Clone, Serialize)]
 pub struct Cluster {
     /// Index (into the runs) of the cluster's best run.
@@ -310,10 +329,23 @@ pub struct Cluster {
     pub point: Vec<f64>,
     /// Indices of every run in the cluster.
     pub runs: Vec<usize>,
+    /// `Minimum`: runs whose best points coincide. `Plateau` / `Failures`: every run that
+    /// stalled that way, wherever it stopped (their points are not minima).
+    pub kind: Stop,
+    /// Smallest and largest physical value of each parameter over the cluster's runs: a
+    /// wide range at one objective is a valley the data do not pin down.
+    pub extent: Vec<(f64, f64)>,
 }
 
+/// Objectives closer than this (relative) are one minimum wherever their points lie: the
+/// parameters that differ between them do not change the fit (a joint held still by any
+/// friction above its breakaway, say), so the runs found one valley, not many minima.
+pub const EQUAL_OBJECTIVE: f64 = 1e-7;
+
 /// Group runs whose best points lie within `radius` of each other in the unit box
-/// (max-norm), best cluster first.
+/// (max-norm), or whose objectives agree within [`EQUAL_OBJECTIVE`], best cluster first.
+/// Runs that stalled on a plateau form one cluster, and runs whose simulations all failed
+/// another: they found no minimum to tell apart.
 pub fn cluster(outcomes: &[RunOutcome], space: &UnitBox, radius: f64) -> Vec<Cluster> {
     let mut order: Vec<usize> = (0..outcomes.len()).collect();
     order.sort_by(|&a, &b| outcomes[a].objective.total_cmp(&outcomes[b].objective));
@@ -324,11 +356,21 @@ pub fn cluster(outcomes: &[RunOutcome], space: &UnitBox, radius: f64) -> Vec<Clu
             continue;
         }
         let u = space.to_unit(&outcome.point);
-        let home = clusters
-            .iter_mut()
-            .find(|(centre, _)| centre.iter().zip(&u).all(|(a, b)| (a - b).abs() <= radius));
+        let home = clusters.iter_mut().find(|(centre, c)| {
+            c.kind == outcome.stop
+                && (outcome.stop != Stop::Minimum
+                    || centre.iter().zip(&u).all(|(a, b)| (a - b).abs() <= radius)
+                    || (outcome.objective - c.objective).abs()
+                        <= EQUAL_OBJECTIVE * c.objective.abs())
+        });
         match home {
-            Some((_, c)) => c.runs.push(i),
+            Some((_, c)) => {
+                c.runs.push(i);
+                for ((lo, hi), &v) in c.extent.iter_mut().zip(&outcome.point) {
+                    *lo = lo.min(v);
+                    *hi = hi.max(v);
+                }
+            }
             None => clusters.push((
                 u,
                 Cluster {
@@ -336,9 +378,76 @@ pub fn cluster(outcomes: &[RunOutcome], space: &UnitBox, radius: f64) -> Vec<Clu
                     objective: outcome.objective,
                     point: outcome.point.clone(),
                     runs: vec![i],
+                    kind: outcome.stop,
+                    extent: outcome.point.iter().map(|&v| (v, v)).collect(),
                 },
             )),
         }
     }
     clusters.into_iter().map(|(_, c)| c).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::campaign::{FreeParameter, Scale};
+
+    fn run(point: [f64; 2], objective: f64, stop: Stop) -> RunOutcome {
+        RunOutcome {
+            method: Method::NelderMead,
+            start: 0,
+            start_point: vec![0.5, 0.5],
+            point: point.to_vec(),
+            objective,
+            evaluations: 10,
+            iterations: 3,
+            termination: String::new(),
+            restarts: 0,
+            stop,
+        }
+    }
+
+    fn unit_square() -> UnitBox {
+        let free = |index| FreeParameter {
+            index,
+            name: format!("p{index}"),
+            nominal: 0.5,
+            min: 0.0,
+            max: 1.0,
+            effect: false,
+            scale: Scale::Lin,
+        };
+        UnitBox::new(&[free(0), free(1)])
+    }
+
+    #[test]
+    fn runs_stalled_on_a_plateau_form_one_cluster_wherever_they_stopped() {
+        let runs = vec![
+            run([0.30, 0.30], 1.0, Stop::Minimum),
+            run([0.9, 0.1], 50.0, Stop::Plateau),
+            run([0.30, 0.3000001], 1.0 + 1e-9, Stop::Minimum),
+            run([0.1, 0.9], 50.0, Stop::Plateau),
+            run([0.5, 0.5], 50.0, Stop::Plateau),
+            run([0.7, 0.7], 2.0, Stop::Minimum),
+            run([0.2, 0.8], f64::MAX, Stop::Failures),
+            // A valley: one objective along a line of the first parameter.
+            run([0.2, 0.6], 3.0, Stop::Minimum),
+            run([0.8, 0.6], 3.0 * (1.0 + 1e-9), Stop::Minimum),
+        ];
+        let clusters = cluster(&runs, &unit_square(), 1e-3);
+        let summary: Vec<(Stop, Vec<usize>)> =
+            clusters.iter().map(|c| (c.kind, c.runs.clone())).collect();
+        assert_eq!(
+            summary,
+            vec![
+                (Stop::Minimum, vec![0, 2]),
+                (Stop::Minimum, vec![5]),
+                (Stop::Minimum, vec![7, 8]),
+                (Stop::Plateau, vec![1, 3, 4]),
+                (Stop::Failures, vec![6]),
+            ]
+        );
+        assert_eq!(clusters[0].best_run, 0);
+        assert_eq!(clusters[2].extent, vec![(0.2, 0.8), (0.6, 0.6)]);
+    }
 }

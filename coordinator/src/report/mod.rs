@@ -56,6 +56,8 @@ pub fn result_json(c: &Calibration) -> Value {
                 "evaluations": r.evaluations,
                 "iterations": r.iterations,
                 "termination": r.termination,
+                "stop": r.stop,
+                "restarts": r.restarts,
             })
         })
         .collect();
@@ -67,6 +69,8 @@ pub fn result_json(c: &Calibration) -> Value {
                 "objective": k.objective,
                 "parameters": named(&names, &k.point),
                 "runs": k.runs,
+                "kind": k.kind,
+                "extent": names.iter().zip(&k.extent).map(|(n, (lo, hi))| (n.clone(), json!([lo, hi]))).collect::<Map<String, Value>>(),
             })
         })
         .collect();

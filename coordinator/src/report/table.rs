@@ -2,6 +2,7 @@
 
 use super::evidence::{self, BEST_TOLERANCE};
 use crate::calibration::Calibration;
+use crate::optim::multistart::Stop;
 use std::fmt::Write;
 
 /// Marks a value within 1% of its range from a bound, in the run table.
@@ -36,9 +37,14 @@ pub fn summary(c: &Calibration) -> String {
             let _ = write!(s, "{:>width$.6e}{mark} ", v);
         }
         let mark = if i == c.best { "*" } else { " " };
+        let restarts = match r.restarts {
+            0 => String::new(),
+            1 => " (after 1 restart off a plateau)".into(),
+            n => format!(" (after {n} restarts off plateaus)"),
+        };
         let _ = writeln!(
             s,
-            "{:>13.6e} {:>6} {:>6} {mark} {}",
+            "{:>13.6e} {:>6} {:>6} {mark} {}{restarts}",
             r.objective, r.evaluations, r.iterations, r.termination
         );
     }
@@ -106,15 +112,72 @@ pub fn summary(c: &Calibration) -> String {
             ""
         }
     );
+    let minima = c
+        .clusters
+        .iter()
+        .filter(|k| k.kind == Stop::Minimum)
+        .count();
+    let stalled = |kind: Stop| {
+        c.clusters
+            .iter()
+            .filter(|k| k.kind == kind)
+            .map(|k| k.runs.len())
+            .sum::<usize>()
+    };
+    let mut stalls = String::new();
+    for (kind, words) in [
+        (Stop::Plateau, "stalled on a plateau"),
+        (Stop::Failures, "failed every simulation"),
+    ] {
+        let n = stalled(kind);
+        if n > 0 {
+            let _ = write!(stalls, ", {n} {words}");
+        }
+    }
     let _ = writeln!(
         s,
-        "{} minima found by {} runs; {} evaluations, {} simulated, {} from cache, {:.2} s",
-        c.clusters.len(),
+        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} simulated, {} from \
+         cache, {:.2} s",
+        minima,
         c.runs.len(),
         c.evaluations(),
         c.stats.simulated,
         (c.evaluations() as u64).saturating_sub(c.stats.simulated),
         c.elapsed.as_secs_f64()
     );
+    for k in c
+        .clusters
+        .iter()
+        .filter(|k| k.kind == Stop::Minimum)
+        .take(SHOWN_MINIMA)
+    {
+        let loose: Vec<String> = c
+            .campaign
+            .free
+            .iter()
+            .zip(&k.extent)
+            .filter(|(p, (lo, hi))| hi - lo > LOOSE * (p.max - p.min))
+            .map(|(p, (lo, hi))| format!("{} anywhere in [{lo:.4e}, {hi:.4e}]", p.name))
+            .collect();
+        let _ = writeln!(
+            s,
+            "  minimum {:.6e}: {} run{}{}",
+            k.objective,
+            k.runs.len(),
+            if k.runs.len() == 1 { "" } else { "s" },
+            if loose.is_empty() {
+                String::new()
+            } else {
+                format!(", a valley: {}", loose.join(", "))
+            }
+        );
+    }
     s
 }
+
+/// Minima listed under the summary, best first.
+const SHOWN_MINIMA: usize = 5;
+
+/// A cluster whose runs spread over more than this share of a parameter's range at one
+/// objective is a valley in that parameter.
+const LOOSE: f64 = 0.01;
