@@ -9,7 +9,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     tonic_prost_build::configure()
         .file_descriptor_set_path(out.join("calib_descriptor.bin"))
         .compile_protos(
-            &["calib/v1/simulator.proto", "calib/v1/registry.proto"],
+            &[
+                "calib/v1/simulator.proto",
+                "calib/v1/registry.proto",
+                "calib/v1/calibration.proto",
+            ],
             &["."],
         )?;
     println!("cargo:rerun-if-changed=calib");

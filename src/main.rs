@@ -44,6 +44,15 @@ enum Command {
     Bench(commands::bench::Args),
     /// Inspect, export or import an evaluation store (`calib calibrate --db`).
     Store(commands::store::Args),
+    /// Run a campaign on a coordinator: upload its data, submit it, follow it, and write
+    /// result.json and the plots as `calib calibrate` does.
+    Submit(commands::submit::SubmitArgs),
+    /// The state of one campaign of a coordinator, or of all of them.
+    Status(commands::submit::StatusArgs),
+    /// Follow a campaign on a coordinator until it ends.
+    Watch(commands::submit::IdArgs),
+    /// Stop a campaign on a coordinator.
+    Cancel(commands::submit::IdArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +85,10 @@ fn main() -> ExitCode {
         Command::Coordinator(args) => commands::coordinator::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Store(args) => commands::store::run(args),
+        Command::Submit(args) => commands::submit::submit(args),
+        Command::Status(args) => commands::submit::status(args),
+        Command::Watch(args) => commands::submit::watch(args),
+        Command::Cancel(args) => commands::submit::cancel(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -2,8 +2,10 @@
 //! evaluators that run it (in this process or on remote workers), the reports that show
 //! the result, and the coordinator's gRPC server.
 
+pub mod api;
 pub mod calibration;
 pub mod campaign;
+pub mod campaigns;
 pub mod diagnosis;
 pub mod dispatch;
 pub mod error;

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Address to serve on: health, reflection and the Registry workers register with.
+    /// Address to serve on: the Calibration API, the Registry workers register with, health
+    /// and reflection.
     #[arg(long, default_value = "0.0.0.0:50050")]
     listen: SocketAddr,
     #[command(flatten)]
@@ -22,6 +23,12 @@ pub struct Args {
     /// where `calib calibrate` puts them].
     #[arg(long, value_name = "DIR", requires = "db")]
     out: Option<PathBuf>,
+    /// Folder of the Calibration API (`calib submit`, gRPC clients): uploaded datasets in
+    /// DIR/datasets/, the results of submitted campaigns in DIR/results/<id>/ [default:
+    /// calib-api/ beside the --db folder; without --db, a folder in the system's temporary
+    /// directory].
+    #[arg(long, value_name = "DIR")]
+    api_dir: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -37,6 +44,7 @@ pub fn run(args: Args) -> Outcome {
     );
     config.store = args.db;
     config.results = args.out;
+    config.api = args.api_dir;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let coordinator = server::start_coordinator(config).await?;

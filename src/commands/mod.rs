@@ -10,6 +10,7 @@ pub mod diagnose;
 pub mod models;
 pub mod simulate;
 pub mod store;
+pub mod submit;
 pub mod worker;
 pub mod workers;
 

@@ -69,6 +69,28 @@ impl Measurement {
         }
     }
 
+    /// The names of the columns (CSV) or variables (MAT) of `path` besides `time_column`, in
+    /// file order, as the loader finds them: it is asked for a column no file can hold and
+    /// lists the ones there are. The time column is checked on the way.
+    pub fn column_names(path: &Path, time_column: &str) -> Result<Vec<String>, MeasurementError> {
+        const NONE: &str = "\u{0}no such column\u{0}";
+        match Self::load(path, time_column, &[NONE]) {
+            Err(MeasurementError::MissingColumn {
+                available, column, ..
+            })
+            | Err(MeasurementError::MissingVariable {
+                available,
+                variable: column,
+                ..
+            }) if column == NONE => Ok(available
+                .into_iter()
+                .filter(|name| name != time_column)
+                .collect()),
+            Err(e) => Err(e),
+            Ok(_) => Ok(Vec::new()),
+        }
+    }
+
     /// The values of the column called `name`, if it was loaded.
     pub fn column(&self, name: &str) -> Option<&[f64]> {
         self.columns

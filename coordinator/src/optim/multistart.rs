@@ -43,6 +43,8 @@ pub fn start_points(nominal_unit: &[f64], starts: usize, seed: u64) -> Vec<Vec<f
 /// One method from one start point.
 #[derive(Debug, Clone)]
 pub struct RunSpec {
+    /// Position in the plan.
+    pub index: usize,
     pub method: Method,
     pub start: usize,
     pub start_unit: Vec<f64>,
@@ -88,6 +90,7 @@ pub fn plan(methods: &[Method], starts: &[Vec<f64>], seed: u64) -> Vec<RunSpec> 
     for &method in methods {
         for (start, unit) in starts.iter().enumerate() {
             runs.push(RunSpec {
+                index: runs.len(),
                 method,
                 start,
                 start_unit: unit.clone(),
@@ -147,13 +150,14 @@ pub fn run_all(
 
 /// Run one method from one start.
 pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmin::core::Error> {
-    let problem = RunProblem::new(
+    let mut problem = RunProblem::new(
         context.objective,
         context.evaluator,
         context.space,
         context.scale,
         context.progress,
     );
+    problem.run = spec.index;
     let budget = context.max_evaluations as u64;
     let mut restarts = 0;
     let (log, iterations, termination) = match spec.method {

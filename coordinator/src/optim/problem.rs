@@ -10,6 +10,13 @@ use std::sync::Mutex;
 /// Told of every batch a run evaluates, for progress display.
 pub trait Progress: Sync {
     fn evaluated(&self, count: usize, best_objective: f64);
+
+    /// The same, told which run (its index in the campaign's plan) evaluated the batch and
+    /// that run's best objective so far. By default, [`Progress::evaluated`].
+    fn run_evaluated(&self, run: usize, count: usize, run_best_objective: f64) {
+        let _ = run;
+        self.evaluated(count, run_best_objective);
+    }
 }
 
 /// Progress that goes nowhere.
@@ -38,6 +45,8 @@ pub struct RunProblem<'a> {
     pub scale: f64,
     pub progress: &'a dyn Progress,
     pub log: Mutex<RunLog>,
+    /// Index of the run in the campaign's plan, for progress.
+    pub run: usize,
 }
 
 impl<'a> RunProblem<'a> {
@@ -59,6 +68,7 @@ impl<'a> RunProblem<'a> {
                 best_objective: f64::INFINITY,
                 best_point: Vec::new(),
             }),
+            run: 0,
         }
     }
 
@@ -99,7 +109,8 @@ impl<'a> RunProblem<'a> {
                 log.best_point = point.clone();
             }
         }
-        self.progress.evaluated(points.len(), log.best_objective);
+        self.progress
+            .run_evaluated(self.run, points.len(), log.best_objective);
         Ok(scaled)
     }
 

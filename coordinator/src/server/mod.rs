@@ -1,13 +1,18 @@
-//! The coordinator's gRPC server: health, reflection and the worker Registry, over a pool
-//! of workers kept alive for campaigns. Given an evaluation store, it finishes the campaigns
-//! a previous coordinator left unfinished, again whenever workers come back ([`resume`]).
+//! The coordinator's gRPC server: the Calibration API ([`crate::api`]), the worker
+//! Registry, health and reflection, over a pool of workers kept alive for campaigns. Given
+//! an evaluation store, it finishes the campaigns a previous coordinator left unfinished,
+//! again whenever workers come back ([`resume`]).
 
 pub mod resume;
 
+use crate::api::CalibrationApi;
+use crate::campaigns::datasets::Datasets;
+use crate::campaigns::{self, Campaigns};
 use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
 use crate::error::{Error, Result};
-use crate::store::SledStore;
+use crate::store::{MemoryStore, SledStore, Store};
+use calib_proto::v1::calibration_server::CalibrationServer;
 use calib_proto::v1::registry_server::RegistryServer;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -16,6 +21,15 @@ use tokio::net::TcpListener;
 use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 use tonic::transport::server::TcpIncoming;
+
+/// The services a coordinator answers, as reflection lists them.
+pub const SERVED: &[&str] = &[
+    "calib.v1.Calibration",
+    "calib.v1.Registry",
+    "grpc.health.v1.Health",
+    "grpc.reflection.v1.ServerReflection",
+    "grpc.reflection.v1alpha.ServerReflection",
+];
 
 /// How a coordinator runs.
 #[derive(Debug, Clone)]
@@ -28,6 +42,9 @@ pub struct CoordinatorConfig {
     /// Folder for the results of resumed campaigns, one `<name>/` each [default:
     /// `results/<name>/` beside each campaign file].
     pub results: Option<PathBuf>,
+    /// Folder of the Calibration API: uploaded datasets in `datasets/`, results of submitted
+    /// campaigns in `results/<id>/` [default: `calib-api/` beside the store].
+    pub api: Option<PathBuf>,
 }
 
 impl CoordinatorConfig {
@@ -38,6 +55,7 @@ impl CoordinatorConfig {
             dispatch,
             store: None,
             results: None,
+            api: None,
         }
     }
 }
@@ -118,19 +136,50 @@ pub fn serve_coordinator(
         .map_err(|e| Error::Dispatch(e.to_string()))?;
     // Open the store first: one held by another process stops the coordinator at once.
     let store = match &config.store {
-        Some(path) => Some(SledStore::open(path)?),
+        Some(path) => Some(Arc::new(SledStore::open(path)?)),
         None => None,
     };
     let pool = dispatch::start_pool(config.dispatch.clone())?;
+    let api_folder = config
+        .api
+        .clone()
+        .unwrap_or_else(|| campaigns::default_folder(config.store.as_deref()));
+    let api_store: Arc<dyn Store> = match &store {
+        Some(s) => s.clone(),
+        None => Arc::new(MemoryStore::new()),
+    };
+    let campaigns = Arc::new(Campaigns::new(
+        api_store,
+        Arc::new(GrpcEvaluator::new(
+            pool.clone(),
+            tokio::runtime::Handle::current(),
+        )),
+        Datasets::open(&api_folder.join("datasets"))?,
+        api_folder.join("results"),
+    ));
+    let calibration = CalibrationServer::new(CalibrationApi::new(campaigns))
+        .max_decoding_message_size(64 << 20)
+        .max_encoding_message_size(64 << 20);
     let registry = RegistryServer::new(RegistryService::new(
         pool.clone(),
         config.dispatch.heartbeat,
     ));
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    // Reflection lists exactly what this server answers (not the workers' Simulator).
+    let reflection = || {
+        let mut builder = tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET);
+        for name in SERVED {
+            builder = builder.with_service_name(*name);
+        }
+        builder
+    };
+    let reflection_v1 = reflection()
         .build_v1()
+        .map_err(|e| Error::Dispatch(e.to_string()))?;
+    let reflection_v1alpha = reflection()
+        .build_v1alpha()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
     let (shutdown_tx, shutdown_rx) = oneshot::channel::<()>();
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
@@ -138,10 +187,15 @@ pub fn serve_coordinator(
         health_reporter
             .set_serving::<RegistryServer<RegistryService>>()
             .await;
+        health_reporter
+            .set_serving::<CalibrationServer<CalibrationApi>>()
+            .await;
         tonic::transport::Server::builder()
             .add_service(health)
-            .add_service(reflection)
+            .add_service(reflection_v1)
+            .add_service(reflection_v1alpha)
             .add_service(registry)
+            .add_service(calibration)
             .serve_with_incoming_shutdown(incoming, async {
                 let _ = shutdown_rx.await;
             })
@@ -156,7 +210,7 @@ pub fn serve_coordinator(
         // Campaigns block for as long as they run: on a thread of their own.
         tokio::task::spawn_blocking(move || {
             let resumed = resume::resume_until_finished(
-                &store,
+                &*store,
                 &evaluator,
                 results.as_deref(),
                 &pool,

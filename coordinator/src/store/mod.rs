@@ -72,6 +72,8 @@ pub enum CampaignStatus {
     Finished,
     /// Could not be resumed (its spec no longer resolves, its data is gone): never retried.
     Failed,
+    /// Stopped on request: never resumed.
+    Cancelled,
 }
 
 /// The best point one run (one method from one start) reached.

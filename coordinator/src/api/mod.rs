@@ -1,0 +1,275 @@
+//! The `calib.v1.Calibration` gRPC service: campaigns for clients in any language. A thin
+//! layer: messages are checked and converted here, the work is [`crate::campaigns`]'.
+
+pub mod spec;
+
+use crate::campaigns::datasets::MAX_DATASET_BYTES;
+use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
+use crate::error::Error;
+use calib_proto::v1 as pb;
+use calib_proto::v1::calibration_server::Calibration;
+use std::pin::Pin;
+use std::sync::Arc;
+use tokio_stream::wrappers::ReceiverStream;
+use tonic::{Request, Response, Status, Streaming};
+
+/// Largest chunk of an upload.
+pub const MAX_CHUNK_BYTES: usize = 1 << 20;
+
+/// Largest page of `ListCampaigns`.
+pub const MAX_PAGE: usize = 100;
+
+pub struct CalibrationApi {
+    campaigns: Arc<Campaigns>,
+}
+
+impl CalibrationApi {
+    pub fn new(campaigns: Arc<Campaigns>) -> Self {
+        Self { campaigns }
+    }
+}
+
+/// How an error of the domain reads to a client.
+fn status(e: Error) -> Status {
+    match e {
+        Error::Campaign(c) => {
+            let field = if c.field.is_empty() {
+                "campaign".to_string()
+            } else {
+                format!("campaign.{}", c.field)
+            };
+            Status::invalid_argument(format!("{field}: {}", c.message))
+        }
+        Error::Measurement(m) => Status::invalid_argument(format!("data: {m}")),
+        Error::InvalidRequest(m) => Status::invalid_argument(m),
+        other => Status::internal(other.to_string()),
+    }
+}
+
+fn phase(p: Phase) -> pb::CampaignPhase {
+    match p {
+        Phase::Running => pb::CampaignPhase::Running,
+        Phase::Finished => pb::CampaignPhase::Finished,
+        Phase::Failed => pb::CampaignPhase::Failed,
+        Phase::Cancelled => pb::CampaignPhase::Cancelled,
+    }
+}
+
+fn state(s: &Snapshot) -> pb::CampaignState {
+    pb::CampaignState {
+        id: s.id.clone(),
+        name: s.name.clone(),
+        phase: phase(s.phase).into(),
+        evaluations: s.evaluations,
+        run_best: s.run_best.clone(),
+        best_objective: s.best_objective,
+        failure: s.failure.clone().unwrap_or_default(),
+        result_json: s
+            .result
+            .as_ref()
+            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
+            .unwrap_or_default(),
+        plots: s.plots.iter().cloned().collect(),
+    }
+}
+
+fn not_found(id: &str) -> Status {
+    Status::not_found(format!("id: no campaign `{id}` on this coordinator"))
+}
+
+/// Run blocking domain work off the async runtime.
+async fn blocking<T: Send + 'static>(
+    work: impl FnOnce() -> Result<T, Error> + Send + 'static,
+) -> Result<T, Status> {
+    tokio::task::spawn_blocking(work)
+        .await
+        .map_err(|e| Status::internal(format!("task failed: {e}")))?
+        .map_err(status)
+}
+
+type StateStream =
+    Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::CampaignState, Status>> + Send>>;
+
+#[tonic::async_trait]
+impl Calibration for CalibrationApi {
+    async fn upload_dataset(
+        &self,
+        request: Request<Streaming<pb::DatasetChunk>>,
+    ) -> Result<Response<pb::Dataset>, Status> {
+        let mut chunks = request.into_inner();
+        let mut bytes = Vec::new();
+        let (mut file_name, mut time_column) = (String::new(), String::new());
+        let mut first = true;
+        while let Some(chunk) = chunks.message().await? {
+            if first {
+                file_name = chunk.file_name;
+                time_column = chunk.time_column;
+                first = false;
+            }
+            if chunk.data.len() > MAX_CHUNK_BYTES {
+                return Err(Status::invalid_argument(format!(
+                    "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
+                    chunk.data.len()
+                )));
+            }
+            if bytes.len() + chunk.data.len() > MAX_DATASET_BYTES {
+                return Err(Status::invalid_argument(format!(
+                    "data: the file is more than the {MAX_DATASET_BYTES} bytes accepted"
+                )));
+            }
+            bytes.extend_from_slice(&chunk.data);
+        }
+        if file_name.is_empty() {
+            return Err(Status::invalid_argument(
+                "file_name: the first chunk must name the file (its extension picks the parser)",
+            ));
+        }
+        if bytes.is_empty() {
+            return Err(Status::invalid_argument("data: the file is empty"));
+        }
+        if time_column.is_empty() {
+            time_column = "time".into();
+        }
+        let campaigns = self.campaigns.clone();
+        let info =
+            blocking(move || campaigns.datasets().put(&file_name, &time_column, &bytes)).await?;
+        Ok(Response::new(pb::Dataset {
+            id: info.id,
+            columns: info.columns,
+            samples: info.samples as u64,
+            start_time: info.start_time,
+            stop_time: info.stop_time,
+        }))
+    }
+
+    async fn submit_campaign(
+        &self,
+        request: Request<pb::SubmitCampaignRequest>,
+    ) -> Result<Response<pb::SubmitCampaignResponse>, Status> {
+        let request = request.into_inner();
+        let campaign = request
+            .campaign
+            .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
+        if campaign.dataset_id.is_empty() {
+            return Err(Status::invalid_argument(
+                "campaign.dataset_id: missing; upload the data with UploadDataset first",
+            ));
+        }
+        let campaigns = self.campaigns.clone();
+        let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
+        let dataset = {
+            let campaigns = campaigns.clone();
+            let id = campaign.dataset_id.clone();
+            blocking(move || campaigns.datasets().get(&id)).await?
+        };
+        let Some(dataset) = dataset else {
+            return Err(Status::not_found(format!(
+                "campaign.dataset_id: no dataset `{}` on this coordinator; upload it with \
+                 UploadDataset",
+                campaign.dataset_id
+            )));
+        };
+        let file = campaigns.datasets().file(&dataset);
+        let text = spec::campaign_file(&campaign, &file, &dataset.time_column)
+            .map_err(Status::invalid_argument)?;
+        let (id, started) = blocking(move || campaigns.submit(&text, key.as_deref())).await?;
+        Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
+    }
+
+    type WatchCampaignStream = StateStream;
+
+    async fn watch_campaign(
+        &self,
+        request: Request<pb::WatchCampaignRequest>,
+    ) -> Result<Response<Self::WatchCampaignStream>, Status> {
+        let id = request.into_inner().id;
+        let campaigns = self.campaigns.clone();
+        let watched = {
+            let id = id.clone();
+            blocking(move || campaigns.watch(&id)).await?
+        };
+        let (tx, rx) = tokio::sync::mpsc::channel(16);
+        match watched.ok_or_else(|| not_found(&id))? {
+            Watched::Stored(snapshot) => {
+                let _ = tx.send(Ok(state(&snapshot))).await;
+            }
+            Watched::Live(mut receiver) => {
+                tokio::spawn(async move {
+                    loop {
+                        let snapshot = receiver.borrow_and_update().clone();
+                        if tx.send(Ok(state(&snapshot))).await.is_err() || snapshot.phase.ended() {
+                            break;
+                        }
+                        if receiver.changed().await.is_err() {
+                            break;
+                        }
+                    }
+                });
+            }
+        }
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    async fn get_campaign(
+        &self,
+        request: Request<pb::GetCampaignRequest>,
+    ) -> Result<Response<pb::CampaignState>, Status> {
+        let id = request.into_inner().id;
+        let campaigns = self.campaigns.clone();
+        let found = {
+            let id = id.clone();
+            blocking(move || campaigns.get(&id)).await?
+        };
+        found
+            .map(|s| Response::new(state(&s)))
+            .ok_or_else(|| not_found(&id))
+    }
+
+    async fn list_campaigns(
+        &self,
+        request: Request<pb::ListCampaignsRequest>,
+    ) -> Result<Response<pb::ListCampaignsResponse>, Status> {
+        let request = request.into_inner();
+        let size = match request.page_size as usize {
+            0 => MAX_PAGE,
+            n => n.min(MAX_PAGE),
+        };
+        let from: usize = if request.page_token.is_empty() {
+            0
+        } else {
+            request.page_token.parse().map_err(|_| {
+                Status::invalid_argument(format!(
+                    "page_token: `{}` is not a token this coordinator gave",
+                    request.page_token
+                ))
+            })?
+        };
+        let campaigns = self.campaigns.clone();
+        let all = blocking(move || campaigns.list()).await?;
+        let page: Vec<pb::CampaignState> = all.iter().skip(from).take(size).map(state).collect();
+        let next = from + page.len();
+        Ok(Response::new(pb::ListCampaignsResponse {
+            campaigns: page,
+            next_page_token: if next < all.len() {
+                next.to_string()
+            } else {
+                String::new()
+            },
+        }))
+    }
+
+    async fn cancel_campaign(
+        &self,
+        request: Request<pb::CancelCampaignRequest>,
+    ) -> Result<Response<pb::CampaignState>, Status> {
+        let id = request.into_inner().id;
+        let campaigns = self.campaigns.clone();
+        let found = {
+            let id = id.clone();
+            blocking(move || campaigns.cancel(&id)).await?
+        };
+        found
+            .map(|s| Response::new(state(&s)))
+            .ok_or_else(|| not_found(&id))
+    }
+}

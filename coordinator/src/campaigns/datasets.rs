@@ -1,0 +1,167 @@
+//! Measurement files uploaded to a coordinator, kept in a folder by the hash of their bytes.
+//!
+//! `<folder>/<id>.<ext>` holds the file as uploaded, `<folder>/<id>.json` what was learned
+//! parsing it (its name, time column, columns, samples). A campaign names a dataset by id
+//! and reads the file through the same loader as a campaign file's `[measurement]`.
+
+use crate::error::{Error, Result};
+use crate::measurement::Measurement;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// Largest upload accepted.
+pub const MAX_DATASET_BYTES: usize = 256 << 20;
+
+/// What a dataset holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DatasetInfo {
+    /// BLAKE3 of the file's bytes, hex.
+    pub id: String,
+    pub file_name: String,
+    pub time_column: String,
+    /// Columns besides the time column, in file order.
+    pub columns: Vec<String>,
+    pub samples: usize,
+    pub start_time: f64,
+    pub stop_time: f64,
+}
+
+/// The folder of uploaded datasets.
+#[derive(Debug, Clone)]
+pub struct Datasets {
+    folder: PathBuf,
+}
+
+impl Datasets {
+    pub fn open(folder: &Path) -> Result<Self> {
+        std::fs::create_dir_all(folder).map_err(|source| Error::Write {
+            path: folder.to_path_buf(),
+            source,
+        })?;
+        Ok(Self {
+            folder: folder.to_path_buf(),
+        })
+    }
+
+    /// Parse `bytes` as the file `file_name` with its time in `time_column` and keep it.
+    /// The same bytes give the same id; storing them again changes nothing.
+    pub fn put(&self, file_name: &str, time_column: &str, bytes: &[u8]) -> Result<DatasetInfo> {
+        let extension = Path::new(file_name)
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .filter(|e| matches!(e.as_str(), "csv" | "txt" | "mat"))
+            .ok_or_else(|| {
+                Error::InvalidRequest(format!(
+                    "file_name: `{file_name}` must end in .csv, .txt or .mat (the extension \
+                     picks the parser)"
+                ))
+            })?;
+        if bytes.len() > MAX_DATASET_BYTES {
+            return Err(Error::InvalidRequest(format!(
+                "data: {} bytes is more than the {} accepted",
+                bytes.len(),
+                MAX_DATASET_BYTES
+            )));
+        }
+        let id = crate::store::hex(blake3::hash(bytes).as_bytes());
+        if let Some(info) = self.get(&id)? {
+            return Ok(info);
+        }
+        let path = self.folder.join(format!("{id}.{extension}"));
+        write_atomically(&path, bytes)?;
+        let parsed = (|| {
+            let columns = Measurement::column_names(&path, time_column)?;
+            let names: Vec<&str> = columns.iter().map(String::as_str).collect();
+            let m = Measurement::load(&path, time_column, &names)?;
+            Ok::<_, Error>((columns, m))
+        })();
+        let (columns, m) = match parsed {
+            Ok(found) => found,
+            Err(e) => {
+                let _ = std::fs::remove_file(&path);
+                return Err(e);
+            }
+        };
+        let info = DatasetInfo {
+            id: id.clone(),
+            file_name: file_name.to_string(),
+            time_column: time_column.to_string(),
+            columns,
+            samples: m.time.len(),
+            start_time: m.time.first().copied().unwrap_or(0.0),
+            stop_time: m.time.last().copied().unwrap_or(0.0),
+        };
+        let json = serde_json::to_vec_pretty(&info).expect("plain data");
+        write_atomically(&self.folder.join(format!("{id}.json")), &json)?;
+        Ok(info)
+    }
+
+    /// The dataset `id`, if it was uploaded.
+    pub fn get(&self, id: &str) -> Result<Option<DatasetInfo>> {
+        if id.len() != 64 || !id.bytes().all(|b| b.is_ascii_hexdigit()) {
+            return Ok(None);
+        }
+        let path = self.folder.join(format!("{id}.json"));
+        match std::fs::read(&path) {
+            Ok(bytes) => serde_json::from_slice(&bytes).map(Some).map_err(|e| {
+                Error::InvalidRequest(format!("dataset {id}: its record is unreadable: {e}"))
+            }),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+            Err(e) => Err(Error::InvalidRequest(format!("dataset {id}: {e}"))),
+        }
+    }
+
+    /// Where the file of dataset `info` is.
+    pub fn file(&self, info: &DatasetInfo) -> PathBuf {
+        let extension = Path::new(&info.file_name)
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .unwrap_or_default();
+        self.folder.join(format!("{}.{extension}", info.id))
+    }
+
+    pub fn folder(&self) -> &Path {
+        &self.folder
+    }
+}
+
+/// Write `bytes` to a temporary file beside `path`, then rename it into place: a reader
+/// never sees half a file.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let partial = path.with_extension("partial");
+    let write = |p: &Path| std::fs::write(p, bytes);
+    write(&partial)
+        .and_then(|_| std::fs::rename(&partial, path))
+        .map_err(|source| Error::Write {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_same_bytes_are_one_dataset_and_bad_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = Datasets::open(dir.path()).unwrap();
+        let csv = b"time,a,b\n0,1,2\n1,3,4\n2,5,6\n";
+        let one = d.put("rig.csv", "time", csv).unwrap();
+        assert_eq!(one.columns, vec!["a", "b"]);
+        assert_eq!((one.samples, one.start_time, one.stop_time), (3, 0.0, 2.0));
+        let again = d.put("other-name.csv", "time", csv).unwrap();
+        assert_eq!(again, one);
+        assert_eq!(d.get(&one.id).unwrap(), Some(one.clone()));
+        assert!(d.file(&one).exists());
+
+        let err = d.put("rig.csv", "t", csv).unwrap_err().to_string();
+        assert!(err.contains("t"), "{err}");
+        let err = d.put("rig.xlsx", "time", csv).unwrap_err().to_string();
+        assert!(err.starts_with("file_name:"), "{err}");
+        assert_eq!(d.get("not-an-id").unwrap(), None);
+        assert_eq!(d.get(&"0".repeat(64)).unwrap(), None);
+    }
+}

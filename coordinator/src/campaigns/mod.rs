@@ -1,0 +1,427 @@
+//! Campaigns submitted to a long-lived coordinator: started at once on its workers, followed
+//! while they run, cancelled on request, and kept in its evaluation store.
+//!
+//! A submitted campaign is a campaign file like any other (the API writes one from its
+//! message), resolved by the same loader, run by the same [`calibration::calibrate_with_store`]
+//! as `calib calibrate`, so both give the same runs. Its id is the campaign's identity in
+//! the store (a hash of the resolved campaign and its data): submitting the same campaign
+//! twice starts it once.
+//!
+//! **Sharing the workers.** Every campaign runs all its runs at once, each asking the
+//! worker pool for slots batch by batch; a freed slot goes to whichever waiting batch takes
+//! it first, whatever its campaign. A campaign's share is thus the share of the batches it
+//! has waiting: two campaigns of the same size split the workers evenly, and no campaign
+//! waits for another to finish.
+//!
+//! **No workers.** A campaign whose batch no worker could do stays running: it waits, with
+//! growing pauses (at most [`MAX_PAUSE`]), and resumes from the store when workers are back.
+
+pub mod datasets;
+
+use crate::calibration::{self, Calibration};
+use crate::campaign::Campaign;
+use crate::error::{Error, Result};
+use crate::evaluator::{Evaluator, Fault, FaultKind};
+use crate::objective::{Evaluation, Objective};
+use crate::optim::problem::Progress;
+use crate::report;
+use crate::store::{hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, Store};
+use datasets::Datasets;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+use tokio::sync::watch;
+
+/// Longest pause before a campaign without workers tries again.
+pub const MAX_PAUSE: Duration = Duration::from_secs(30);
+
+/// Where a campaign stands.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    Running,
+    Finished,
+    Failed,
+    Cancelled,
+}
+
+impl Phase {
+    pub fn ended(self) -> bool {
+        self != Phase::Running
+    }
+}
+
+/// A campaign's whole state at one moment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Snapshot {
+    pub id: String,
+    pub name: String,
+    pub phase: Phase,
+    /// Evaluations so far (store hits included).
+    pub evaluations: u64,
+    /// Best objective so far per run, in plan order (`+∞` before a run's first point).
+    pub run_best: Vec<f64>,
+    pub best_objective: f64,
+    pub failure: Option<String>,
+    /// `result.json` once finished.
+    pub result: Option<serde_json::Value>,
+    /// The plots `calib calibrate` writes, by file name (SVG text), once finished here.
+    pub plots: Vec<(String, String)>,
+}
+
+impl Snapshot {
+    fn running(id: &str, name: &str) -> Self {
+        Self {
+            id: id.into(),
+            name: name.into(),
+            phase: Phase::Running,
+            evaluations: 0,
+            run_best: Vec::new(),
+            best_objective: f64::INFINITY,
+            failure: None,
+            result: None,
+            plots: Vec::new(),
+        }
+    }
+
+    /// What the store says of a campaign no thread of this coordinator is running.
+    fn from_record(id: &CampaignId, record: &CampaignRecord) -> Self {
+        let mut s = Self::running(&hex(id), &record.name);
+        s.phase = match record.status {
+            CampaignStatus::Running => Phase::Running,
+            CampaignStatus::Finished => Phase::Finished,
+            CampaignStatus::Failed => Phase::Failed,
+            CampaignStatus::Cancelled => Phase::Cancelled,
+        };
+        s.failure = record.failure.clone();
+        s.result = record.result.clone();
+        s.run_best = record.runs.iter().map(|r| r.objective).collect();
+        s.best_objective = s.run_best.iter().copied().fold(f64::INFINITY, f64::min);
+        s.evaluations = record.runs.iter().map(|r| r.evaluations as u64).sum();
+        s
+    }
+}
+
+/// A campaign running in this coordinator.
+struct Live {
+    cancel: AtomicBool,
+    state: watch::Sender<Snapshot>,
+}
+
+/// The campaigns of one coordinator.
+pub struct Campaigns {
+    store: Arc<dyn Store>,
+    evaluator: Arc<dyn Evaluator>,
+    datasets: Datasets,
+    /// `<results>/<id>/` holds each finished campaign's result.json and plots.
+    results: PathBuf,
+    live: Mutex<HashMap<CampaignId, Arc<Live>>>,
+    keys: Mutex<HashMap<String, CampaignId>>,
+}
+
+impl Campaigns {
+    pub fn new(
+        store: Arc<dyn Store>,
+        evaluator: Arc<dyn Evaluator>,
+        datasets: Datasets,
+        results: PathBuf,
+    ) -> Self {
+        Self {
+            store,
+            evaluator,
+            datasets,
+            results,
+            live: Mutex::new(HashMap::new()),
+            keys: Mutex::new(HashMap::new()),
+        }
+    }
+
+    pub fn datasets(&self) -> &Datasets {
+        &self.datasets
+    }
+
+    /// Where campaign files written for submitted campaigns are said to be (errors name it).
+    pub fn source(&self) -> PathBuf {
+        self.datasets.folder().join("submitted-campaign.toml")
+    }
+
+    /// Start the campaign file `spec` (its measurement a dataset of this coordinator),
+    /// unless it is known already; its id, and whether it was started now.
+    pub fn submit(
+        self: &Arc<Self>,
+        spec: &str,
+        idempotency_key: Option<&str>,
+    ) -> Result<(String, bool)> {
+        let mut keys = self.keys.lock().expect("keys lock");
+        if let Some(id) = idempotency_key.and_then(|k| keys.get(k)) {
+            return Ok((hex(id), false));
+        }
+        let campaign = Campaign::parse(spec, &self.source())?;
+        let measurement = calibration::load_measurement(&campaign)?;
+        let id = campaign.identity(&measurement.content_hash());
+        if let Some(k) = idempotency_key {
+            keys.insert(k.to_string(), id);
+        }
+        drop(keys);
+        let mut live = self.live.lock().expect("live lock");
+        if live.contains_key(&id) {
+            return Ok((hex(&id), false));
+        }
+        if let Some(record) = self.store.campaign(&id)? {
+            if record.status != CampaignStatus::Running {
+                return Ok((hex(&id), false));
+            }
+        }
+        let (state, _) = watch::channel(Snapshot::running(&hex(&id), &campaign.name));
+        let entry = Arc::new(Live {
+            cancel: AtomicBool::new(false),
+            state,
+        });
+        live.insert(id, entry.clone());
+        drop(live);
+        let this = self.clone();
+        std::thread::Builder::new()
+            .name(format!("campaign {}", campaign.name))
+            .spawn(move || this.run(id, campaign, entry))
+            .map_err(|e| Error::Dispatch(format!("cannot start a campaign thread: {e}")))?;
+        Ok((hex(&id), true))
+    }
+
+    /// Run a campaign to its end, retrying while no worker can serve it.
+    fn run(&self, id: CampaignId, campaign: Campaign, live: Arc<Live>) {
+        let progress = LiveProgress {
+            live: &live,
+            evaluations: AtomicU64::new(0),
+        };
+        let evaluator = Cancellable {
+            inner: &*self.evaluator,
+            cancel: &live.cancel,
+        };
+        let mut pause = Duration::from_secs(1);
+        let outcome = loop {
+            progress.evaluations.store(0, Ordering::SeqCst);
+            match calibration::calibrate_with_store(&campaign, &evaluator, &*self.store, &progress)
+            {
+                Err(Error::Fault(fault)) if fault.kind == FaultKind::Unavailable => {
+                    tracing::warn!(campaign = %campaign.name, error = %fault, "waiting for workers");
+                    live.state
+                        .send_modify(|s| s.failure = Some(format!("waiting for workers: {fault}")));
+                    let until = std::time::Instant::now() + pause;
+                    while std::time::Instant::now() < until && !live.cancel.load(Ordering::SeqCst) {
+                        std::thread::sleep(Duration::from_millis(50));
+                    }
+                    if live.cancel.load(Ordering::SeqCst) {
+                        break Err(Error::Fault(Fault::cancelled("campaign cancelled")));
+                    }
+                    pause = (pause * 2).min(MAX_PAUSE);
+                }
+                other => break other,
+            }
+        };
+        match outcome {
+            Ok(c) => {
+                let (result, plots) = self.report(&id, &c);
+                live.state.send_modify(|s| {
+                    s.phase = Phase::Finished;
+                    s.failure = None;
+                    s.run_best = c.runs.iter().map(|r| r.objective).collect();
+                    s.best_objective = c.best_run().objective;
+                    s.evaluations = c.evaluations() as u64;
+                    s.result = Some(result);
+                    s.plots = plots;
+                });
+            }
+            Err(Error::Fault(fault)) if fault.kind == FaultKind::Cancelled => {
+                if let Err(e) = self.mark(&id, CampaignStatus::Cancelled, None) {
+                    tracing::error!(error = %e, "cannot record the cancellation");
+                }
+                live.state.send_modify(|s| {
+                    s.phase = Phase::Cancelled;
+                    s.failure = None;
+                });
+                tracing::info!(campaign = %campaign.name, "campaign cancelled");
+            }
+            Err(e) => {
+                tracing::error!(campaign = %campaign.name, error = %e, "campaign failed");
+                let _ = self.mark(&id, CampaignStatus::Failed, Some(e.to_string()));
+                live.state.send_modify(|s| {
+                    s.phase = Phase::Failed;
+                    s.failure = Some(e.to_string());
+                });
+            }
+        }
+    }
+
+    /// Write the finished campaign's result.json and plots to `<results>/<id>/`; the result
+    /// and the plots' text.
+    fn report(
+        &self,
+        id: &CampaignId,
+        c: &Calibration,
+    ) -> (serde_json::Value, Vec<(String, String)>) {
+        let result = report::result_json(c);
+        let folder = self.results.join(hex(id));
+        let mut plots = Vec::new();
+        match report::write(c, &folder) {
+            Ok(paths) => {
+                for path in paths {
+                    let is_svg = path.extension().is_some_and(|e| e == "svg");
+                    if let (true, Ok(text)) = (is_svg, std::fs::read_to_string(&path)) {
+                        let name = path.file_name().unwrap_or_default().to_string_lossy();
+                        plots.push((name.into_owned(), text));
+                    }
+                }
+            }
+            Err(e) => tracing::error!(error = %e, "cannot write the campaign's results"),
+        }
+        (result, plots)
+    }
+
+    fn mark(&self, id: &CampaignId, status: CampaignStatus, failure: Option<String>) -> Result<()> {
+        if let Some(mut record) = self.store.campaign(id)? {
+            record.status = status;
+            record.failure = failure;
+            self.store.put_campaign(id, &record)?;
+        }
+        Ok(())
+    }
+
+    fn parse_id(id: &str) -> Option<CampaignId> {
+        unhex32(id)
+    }
+
+    /// The campaign `id` now, if this coordinator knows it.
+    pub fn get(&self, id: &str) -> Result<Option<Snapshot>> {
+        let Some(key) = Self::parse_id(id) else {
+            return Ok(None);
+        };
+        if let Some(live) = self.live.lock().expect("live lock").get(&key) {
+            return Ok(Some(live.state.borrow().clone()));
+        }
+        Ok(self
+            .store
+            .campaign(&key)?
+            .map(|record| Snapshot::from_record(&key, &record)))
+    }
+
+    /// Follow the campaign `id`: a receiver of its state while this coordinator runs it,
+    /// else its state from the store.
+    pub fn watch(&self, id: &str) -> Result<Option<Watched>> {
+        let Some(key) = Self::parse_id(id) else {
+            return Ok(None);
+        };
+        if let Some(live) = self.live.lock().expect("live lock").get(&key) {
+            return Ok(Some(Watched::Live(live.state.subscribe())));
+        }
+        Ok(self
+            .store
+            .campaign(&key)?
+            .map(|record| Watched::Stored(Snapshot::from_record(&key, &record))))
+    }
+
+    /// Every campaign known, in id order.
+    pub fn list(&self) -> Result<Vec<Snapshot>> {
+        let live = self.live.lock().expect("live lock");
+        let mut all: Vec<(CampaignId, Snapshot)> = self
+            .store
+            .campaigns()?
+            .into_iter()
+            .map(|(id, record)| match live.get(&id) {
+                Some(l) => (id, l.state.borrow().clone()),
+                None => (id, Snapshot::from_record(&id, &record)),
+            })
+            .collect();
+        for (id, l) in live.iter() {
+            if !all.iter().any(|(known, _)| known == id) {
+                all.push((*id, l.state.borrow().clone()));
+            }
+        }
+        all.sort_by_key(|(id, _)| *id);
+        Ok(all.into_iter().map(|(_, s)| s).collect())
+    }
+
+    /// Stop dispatching the campaign `id`; its state, if it is known.
+    pub fn cancel(&self, id: &str) -> Result<Option<Snapshot>> {
+        let Some(key) = Self::parse_id(id) else {
+            return Ok(None);
+        };
+        if let Some(live) = self.live.lock().expect("live lock").get(&key) {
+            live.cancel.store(true, Ordering::SeqCst);
+            return Ok(Some(live.state.borrow().clone()));
+        }
+        let Some(record) = self.store.campaign(&key)? else {
+            return Ok(None);
+        };
+        if record.status == CampaignStatus::Running {
+            // Left running by an earlier coordinator and not resumed here yet.
+            self.mark(&key, CampaignStatus::Cancelled, None)?;
+        }
+        self.get(id)
+    }
+}
+
+/// A campaign followed: live, or as the store holds it.
+pub enum Watched {
+    Live(watch::Receiver<Snapshot>),
+    Stored(Snapshot),
+}
+
+/// Counts a live campaign's evaluations and each run's best into its state.
+struct LiveProgress<'a> {
+    live: &'a Live,
+    evaluations: AtomicU64,
+}
+
+impl Progress for LiveProgress<'_> {
+    fn evaluated(&self, count: usize, best_objective: f64) {
+        let total = self.evaluations.fetch_add(count as u64, Ordering::SeqCst) + count as u64;
+        self.live.state.send_modify(|s| {
+            s.evaluations = total;
+            s.best_objective = s.best_objective.min(best_objective);
+        });
+    }
+
+    fn run_evaluated(&self, run: usize, count: usize, run_best_objective: f64) {
+        let total = self.evaluations.fetch_add(count as u64, Ordering::SeqCst) + count as u64;
+        self.live.state.send_modify(|s| {
+            s.evaluations = total;
+            if s.run_best.len() <= run {
+                s.run_best.resize(run + 1, f64::INFINITY);
+            }
+            s.run_best[run] = s.run_best[run].min(run_best_objective);
+            s.best_objective = s.best_objective.min(run_best_objective);
+        });
+    }
+}
+
+/// An evaluator that refuses every batch once its campaign is cancelled.
+struct Cancellable<'a> {
+    inner: &'a dyn Evaluator,
+    cancel: &'a AtomicBool,
+}
+
+impl Evaluator for Cancellable<'_> {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> std::result::Result<Vec<Evaluation>, Fault> {
+        if self.cancel.load(Ordering::SeqCst) {
+            return Err(Fault::cancelled("campaign cancelled"));
+        }
+        self.inner.evaluate(objective, points)
+    }
+}
+
+/// The folder beside `store` that holds uploaded datasets and results, by default.
+pub fn default_folder(store: Option<&Path>) -> PathBuf {
+    match store {
+        Some(db) => db
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."))
+            .join("calib-api"),
+        None => std::env::temp_dir().join(format!("calib-api-{}", std::process::id())),
+    }
+}

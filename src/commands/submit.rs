@@ -1,0 +1,323 @@
+//! `calib submit`, `calib status`, `calib watch`, `calib cancel`: campaigns on a
+//! coordinator, through its Calibration API.
+
+use super::{Failure, Outcome};
+use calib_coordinator::campaign::Campaign;
+use calib_proto::v1 as pb;
+use calib_proto::v1::calibration_client::CalibrationClient;
+use std::path::{Path, PathBuf};
+use tonic::transport::Channel;
+
+/// Bytes per upload chunk.
+const CHUNK: usize = 1 << 20;
+
+#[derive(clap::Args)]
+pub struct CoordinatorArg {
+    /// The coordinator's address, e.g. http://calib-coordinator:50050.
+    #[arg(long, value_name = "URL", env = "CALIB_COORDINATOR")]
+    coordinator: String,
+}
+
+#[derive(clap::Args)]
+pub struct SubmitArgs {
+    /// Campaign file (TOML), as for `calib calibrate`; its measurement file is uploaded.
+    campaign: PathBuf,
+    #[command(flatten)]
+    coordinator: CoordinatorArg,
+    /// Results folder: result.json and the plots go to DIR/<campaign name>/ [default:
+    /// results/ beside the campaign file].
+    #[arg(long, value_name = "DIR")]
+    out: Option<PathBuf>,
+    /// Print result.json on standard output instead of a summary.
+    #[arg(long)]
+    json: bool,
+    /// Submit and print the campaign's id, without waiting for it to finish.
+    #[arg(long)]
+    detach: bool,
+}
+
+#[derive(clap::Args)]
+pub struct StatusArgs {
+    /// A campaign's id; without it, every campaign of the coordinator.
+    id: Option<String>,
+    #[command(flatten)]
+    coordinator: CoordinatorArg,
+}
+
+#[derive(clap::Args)]
+pub struct IdArgs {
+    /// The campaign's id (from `calib submit` or `calib status`).
+    id: String,
+    #[command(flatten)]
+    coordinator: CoordinatorArg,
+}
+
+async fn connect(url: &str) -> Result<CalibrationClient<Channel>, Failure> {
+    let endpoint = Channel::from_shared(url.to_string())
+        .map_err(|e| Failure::input(format!("--coordinator `{url}`: {e}")))?;
+    let channel = endpoint.connect().await.map_err(|e| {
+        Failure::internal(format!(
+            "cannot reach the coordinator at {url}: {}",
+            source(&e)
+        ))
+    })?;
+    Ok(CalibrationClient::new(channel)
+        .max_decoding_message_size(64 << 20)
+        .max_encoding_message_size(64 << 20))
+}
+
+/// The innermost cause of a transport error, which says what went wrong.
+fn source(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut inner = e;
+    while let Some(next) = inner.source() {
+        inner = next;
+    }
+    inner.to_string()
+}
+
+fn rpc(status: tonic::Status) -> Failure {
+    let message = format!("coordinator: {}", status.message());
+    match status.code() {
+        tonic::Code::InvalidArgument | tonic::Code::NotFound => Failure::input(message),
+        _ => Failure::internal(message),
+    }
+}
+
+pub fn submit(args: SubmitArgs) -> Outcome {
+    let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    let text = std::fs::read_to_string(&args.campaign)
+        .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
+    let bytes = std::fs::read(&campaign.measurement_file)
+        .map_err(|e| Failure::input(format!("{}: {e}", campaign.measurement_file.display())))?;
+    let runtime = super::runtime()?;
+    runtime.block_on(async {
+        let mut client = connect(&args.coordinator.coordinator).await?;
+        let file_name = campaign
+            .measurement_file
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let mut chunks = Vec::new();
+        for (i, data) in bytes.chunks(CHUNK).enumerate() {
+            chunks.push(pb::DatasetChunk {
+                file_name: if i == 0 {
+                    file_name.clone()
+                } else {
+                    String::new()
+                },
+                time_column: if i == 0 {
+                    campaign.time_column.clone()
+                } else {
+                    String::new()
+                },
+                data: data.to_vec(),
+            });
+        }
+        let dataset = client
+            .upload_dataset(tokio_stream::iter(chunks))
+            .await
+            .map_err(rpc)?
+            .into_inner();
+        let message = calib_coordinator::api::spec::campaign_message(&text, &dataset.id)
+            .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
+        let submitted = client
+            .submit_campaign(pb::SubmitCampaignRequest {
+                campaign: Some(message),
+                idempotency_key: String::new(),
+            })
+            .await
+            .map_err(rpc)?
+            .into_inner();
+        if args.detach {
+            println!("{}", submitted.id);
+            return Ok(());
+        }
+        eprintln!(
+            "campaign {} {} ({})",
+            campaign.name,
+            if submitted.started {
+                "submitted"
+            } else {
+                "already known"
+            },
+            submitted.id
+        );
+        let last = follow(&mut client, &submitted.id).await?;
+        finish(&args, &campaign, &last)
+    })
+}
+
+/// Print the campaign's progress until it ends; its last state.
+async fn follow(
+    client: &mut CalibrationClient<Channel>,
+    id: &str,
+) -> Result<pb::CampaignState, Failure> {
+    let mut stream = client
+        .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
+        .await
+        .map_err(rpc)?
+        .into_inner();
+    let mut last = None;
+    let mut shown = std::time::Instant::now() - std::time::Duration::from_secs(1);
+    while let Some(state) = stream.message().await.map_err(rpc)? {
+        if shown.elapsed() >= std::time::Duration::from_millis(200) {
+            eprintln!("{}", line(&state));
+            shown = std::time::Instant::now();
+        }
+        last = Some(state);
+    }
+    let last = last.ok_or_else(|| Failure::internal("coordinator: the watch ended at once"))?;
+    eprintln!("{}", line(&last));
+    Ok(last)
+}
+
+fn phase_word(phase: i32) -> &'static str {
+    match pb::CampaignPhase::try_from(phase).unwrap_or(pb::CampaignPhase::Unspecified) {
+        pb::CampaignPhase::Running => "running",
+        pb::CampaignPhase::Finished => "finished",
+        pb::CampaignPhase::Failed => "failed",
+        pb::CampaignPhase::Cancelled => "cancelled",
+        pb::CampaignPhase::Unspecified => "unknown",
+    }
+}
+
+fn line(s: &pb::CampaignState) -> String {
+    let mut text = format!(
+        "{}  {:<10} {:<20} {} evaluations",
+        s.id,
+        phase_word(s.phase),
+        s.name,
+        s.evaluations
+    );
+    if s.best_objective.is_finite() {
+        text.push_str(&format!(", best {:.6e}", s.best_objective));
+    }
+    if !s.failure.is_empty() {
+        text.push_str(&format!("  [{}]", s.failure));
+    }
+    text
+}
+
+/// Write what a finished campaign left, as `calib calibrate` does.
+fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> Outcome {
+    match pb::CampaignPhase::try_from(state.phase) {
+        Ok(pb::CampaignPhase::Finished) => {}
+        _ => {
+            return Err(Failure::internal(format!(
+                "campaign {} {}{}",
+                state.id,
+                phase_word(state.phase),
+                if state.failure.is_empty() {
+                    String::new()
+                } else {
+                    format!(": {}", state.failure)
+                }
+            )))
+        }
+    }
+    let root = args.out.clone().unwrap_or_else(|| {
+        args.campaign
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("results")
+    });
+    let folder = root.join(&campaign.name);
+    std::fs::create_dir_all(&folder)
+        .map_err(|e| Failure::internal(format!("{}: {e}", folder.display())))?;
+    let mut written = Vec::new();
+    let result = folder.join("result.json");
+    std::fs::write(&result, format!("{}\n", state.result_json))
+        .map_err(|e| Failure::internal(format!("{}: {e}", result.display())))?;
+    written.push(result);
+    for (name, svg) in &state.plots {
+        // Names come from the coordinator: keep them inside the folder.
+        let Some(name) = Path::new(name).file_name() else {
+            continue;
+        };
+        let path = folder.join(name);
+        std::fs::write(&path, svg)
+            .map_err(|e| Failure::internal(format!("{}: {e}", path.display())))?;
+        written.push(path);
+    }
+    if args.json {
+        println!("{}", state.result_json);
+    } else {
+        let result: serde_json::Value = serde_json::from_str(&state.result_json)
+            .map_err(|e| Failure::internal(format!("coordinator: result is not JSON: {e}")))?;
+        let best = &result["best"];
+        println!("best ({} from start {}):", best["method"], best["start"]);
+        if let Some(parameters) = best["parameters"].as_object() {
+            for (name, value) in parameters {
+                println!("  {name:<20} = {value}");
+            }
+        }
+        println!(
+            "objective {} -> {}",
+            result["nominal_objective"], best["objective"]
+        );
+        for path in written {
+            println!("wrote {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+pub fn status(args: StatusArgs) -> Outcome {
+    let runtime = super::runtime()?;
+    runtime.block_on(async {
+        let mut client = connect(&args.coordinator.coordinator).await?;
+        match args.id {
+            Some(id) => {
+                let state = client
+                    .get_campaign(pb::GetCampaignRequest { id })
+                    .await
+                    .map_err(rpc)?
+                    .into_inner();
+                println!("{}", line(&state));
+            }
+            None => {
+                let mut token = String::new();
+                loop {
+                    let page = client
+                        .list_campaigns(pb::ListCampaignsRequest {
+                            page_size: 0,
+                            page_token: token,
+                        })
+                        .await
+                        .map_err(rpc)?
+                        .into_inner();
+                    for state in &page.campaigns {
+                        println!("{}", line(state));
+                    }
+                    if page.next_page_token.is_empty() {
+                        break;
+                    }
+                    token = page.next_page_token;
+                }
+            }
+        }
+        Ok(())
+    })
+}
+
+pub fn watch(args: IdArgs) -> Outcome {
+    let runtime = super::runtime()?;
+    runtime.block_on(async {
+        let mut client = connect(&args.coordinator.coordinator).await?;
+        follow(&mut client, &args.id).await.map(|_| ())
+    })
+}
+
+pub fn cancel(args: IdArgs) -> Outcome {
+    let runtime = super::runtime()?;
+    runtime.block_on(async {
+        let mut client = connect(&args.coordinator.coordinator).await?;
+        let state = client
+            .cancel_campaign(pb::CancelCampaignRequest { id: args.id })
+            .await
+            .map_err(rpc)?
+            .into_inner();
+        println!("{}", line(&state));
+        Ok(())
+    })
+}

@@ -1,0 +1,406 @@
+//! The Calibration API: campaigns submitted to a coordinator over gRPC give the runs a local
+//! calibration gives; submits are idempotent; cancels stop dispatching; bad requests are
+//! named and leave the coordinator serving.
+
+mod common;
+
+use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
+use calib_proto::v1 as pb;
+use calib_proto::v1::calibration_client::CalibrationClient;
+use common::cluster::*;
+use common::*;
+use serde_json::Value;
+use std::path::Path;
+use tonic::transport::Channel;
+
+/// A coordinator on a store, dispatching to `workers`, on a runtime of the test's.
+struct Coordinator {
+    runtime: tokio::runtime::Runtime,
+    server: Option<RunningCoordinator>,
+}
+
+impl Coordinator {
+    fn start(dir: &Path, workers: &[String]) -> Self {
+        let runtime = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()
+            .unwrap();
+        let mut config = CoordinatorConfig::new(
+            "127.0.0.1:0".parse().unwrap(),
+            calib_sandbox::cluster::dispatch_config(workers),
+        );
+        config.store = Some(dir.join("db"));
+        config.api = Some(dir.join("api"));
+        let server = runtime.block_on(async {
+            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            serve_coordinator(listener, config).unwrap()
+        });
+        Self {
+            runtime,
+            server: Some(server),
+        }
+    }
+
+    fn url(&self) -> String {
+        format!("http://{}", self.server.as_ref().unwrap().address())
+    }
+
+    fn client(&self) -> CalibrationClient<Channel> {
+        let url = self.url();
+        self.runtime
+            .block_on(async { CalibrationClient::connect(url).await })
+            .unwrap()
+    }
+}
+
+impl Drop for Coordinator {
+    fn drop(&mut self) {
+        if let Some(server) = self.server.take() {
+            self.runtime.block_on(server.shutdown());
+        }
+    }
+}
+
+fn upload(c: &Coordinator, file: &Path) -> pb::Dataset {
+    let bytes = std::fs::read(file).unwrap();
+    let mut client = c.client();
+    let chunks: Vec<pb::DatasetChunk> = bytes
+        .chunks(4096)
+        .enumerate()
+        .map(|(i, data)| pb::DatasetChunk {
+            file_name: if i == 0 {
+                "record.csv".into()
+            } else {
+                String::new()
+            },
+            time_column: if i == 0 {
+                "time_s".into()
+            } else {
+                String::new()
+            },
+            data: data.to_vec(),
+        })
+        .collect();
+    c.runtime
+        .block_on(client.upload_dataset(tokio_stream::iter(chunks)))
+        .unwrap()
+        .into_inner()
+}
+
+fn message(search: &str, dataset: &str) -> pb::Campaign {
+    let text = clean_campaign(search);
+    calib_coordinator::api::spec::campaign_message(&text, dataset).unwrap()
+}
+
+/// Follow a campaign to its end; every state seen.
+fn watch(c: &Coordinator, id: &str) -> Vec<pb::CampaignState> {
+    let mut client = c.client();
+    c.runtime.block_on(async {
+        let mut stream = client
+            .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut states = Vec::new();
+        while let Some(s) = stream.message().await.unwrap() {
+            states.push(s);
+        }
+        states
+    })
+}
+
+fn runs_of(result: &Value) -> Vec<(String, u64, f64, Value)> {
+    result["runs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| {
+            (
+                r["method"].as_str().unwrap().to_string(),
+                r["start"].as_u64().unwrap(),
+                r["objective"].as_f64().unwrap(),
+                r["parameters"].clone(),
+            )
+        })
+        .collect()
+}
+
+fn local_runs(search: &str, dir: &Path) -> Vec<(String, u64, f64, Value)> {
+    let campaign = write(dir, "local.toml", &clean_campaign(search));
+    runs_of(&calibrate_json(
+        &campaign,
+        &dir.join("local-db"),
+        &dir.join("local"),
+        &[],
+    ))
+}
+
+#[test]
+fn calib_submit_gives_the_runs_of_calib_calibrate() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let search = "methods = [\"nelder-mead\", \"powell\"]\nstarts = 2\nmax_evaluations = 120";
+    let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let submitted = json_of(&calib(&[
+        "submit",
+        campaign.to_str().unwrap(),
+        "--coordinator",
+        &coordinator.url(),
+        "--out",
+        dir.path().join("submitted").to_str().unwrap(),
+        "--json",
+    ]));
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("local-db"),
+        &dir.path().join("local"),
+        &[],
+    );
+    assert_eq!(runs_of(&submitted), runs_of(&local));
+    assert_eq!(submitted["best"], local["best"]);
+    let folder = dir.path().join("submitted").join("clean");
+    for file in ["result.json", "waterfall.svg", "armJoint.phi.svg"] {
+        assert!(folder.join(file).exists(), "{file} not written");
+    }
+    assert!(cluster.simulations() > 0, "the workers simulated nothing");
+
+    // `calib status` lists it as finished.
+    let out = calib(&["status", "--coordinator", &coordinator.url()]);
+    let listed = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && listed.contains("finished") && listed.contains("clean"));
+}
+
+#[test]
+fn two_campaigns_at_once_both_equal_their_local_runs_and_a_retried_submit_starts_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = upload(&coordinator, &repo().join("examples/data/furuta_clean.csv"));
+    assert_eq!(dataset.id.len(), 64);
+    assert!(dataset.columns.contains(&"arm_angle_rad".to_string()));
+    // The same bytes again: the same dataset.
+    assert_eq!(
+        upload(&coordinator, &repo().join("examples/data/furuta_clean.csv")),
+        dataset
+    );
+
+    let searches = [
+        "methods = [\"nelder-mead\"]\nstarts = 3\nmax_evaluations = 100\nseed = 5",
+        "methods = [\"powell\"]\nstarts = 2\nmax_evaluations = 100\nseed = 9",
+    ];
+    let mut client = coordinator.client();
+    let mut ids = Vec::new();
+    for (i, search) in searches.iter().enumerate() {
+        let reply = coordinator
+            .runtime
+            .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+                campaign: Some(message(search, &dataset.id)),
+                idempotency_key: format!("key-{i}"),
+            }))
+            .unwrap()
+            .into_inner();
+        assert!(reply.started);
+        ids.push(reply.id);
+    }
+    assert_ne!(ids[0], ids[1]);
+    // A retried submit, with the same key or the same campaign, returns the same id and
+    // starts nothing.
+    let again = coordinator
+        .runtime
+        .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+            campaign: Some(message(searches[1], &dataset.id)),
+            idempotency_key: "key-0".into(),
+        }))
+        .unwrap()
+        .into_inner();
+    assert_eq!((again.id.as_str(), again.started), (ids[0].as_str(), false));
+    let same = coordinator
+        .runtime
+        .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+            campaign: Some(message(searches[1], &dataset.id)),
+            idempotency_key: String::new(),
+        }))
+        .unwrap()
+        .into_inner();
+    assert_eq!((same.id.as_str(), same.started), (ids[1].as_str(), false));
+
+    for (id, search) in ids.iter().zip(searches) {
+        let states = watch(&coordinator, id);
+        let last = states.last().unwrap();
+        assert_eq!(last.phase(), pb::CampaignPhase::Finished, "{last:?}");
+        // Every state is whole: evaluations never go back.
+        assert!(states
+            .windows(2)
+            .all(|w| w[0].evaluations <= w[1].evaluations));
+        let result: Value = serde_json::from_str(&last.result_json).unwrap();
+        assert_eq!(runs_of(&result), local_runs(search, dir.path()), "{search}");
+        assert_eq!(last.run_best.len(), runs_of(&result).len());
+        // Fetched again, or watched after the end: the same result.
+        let fetched = coordinator
+            .runtime
+            .block_on(client.get_campaign(pb::GetCampaignRequest { id: id.clone() }))
+            .unwrap()
+            .into_inner();
+        assert_eq!(fetched.result_json, last.result_json);
+    }
+}
+
+#[test]
+fn a_cancelled_campaign_stops_dispatching() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = upload(&coordinator, &repo().join("examples/data/furuta_clean.csv"));
+    let search = "methods = [\"differential-evolution\"]\nstarts = 4\nmax_evaluations = 100000";
+    let mut client = coordinator.client();
+    let id = coordinator
+        .runtime
+        .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+            campaign: Some(message(search, &dataset.id)),
+            idempotency_key: String::new(),
+        }))
+        .unwrap()
+        .into_inner()
+        .id;
+    await_condition(
+        "the campaign to evaluate",
+        std::time::Duration::from_secs(60),
+        || {
+            let s = coordinator
+                .runtime
+                .block_on(client.get_campaign(pb::GetCampaignRequest { id: id.clone() }))
+                .unwrap()
+                .into_inner();
+            s.evaluations > 50
+        },
+    );
+    let state = coordinator
+        .runtime
+        .block_on(client.cancel_campaign(pb::CancelCampaignRequest { id: id.clone() }))
+        .unwrap()
+        .into_inner();
+    assert_eq!(state.id, id);
+    let last = watch(&coordinator, &id).pop().unwrap();
+    assert_eq!(last.phase(), pb::CampaignPhase::Cancelled, "{last:?}");
+    assert!(last.result_json.is_empty());
+    // Once cancelled, nothing more is simulated.
+    let simulated = cluster.settled_simulations();
+    std::thread::sleep(std::time::Duration::from_millis(500));
+    assert_eq!(cluster.simulations(), simulated);
+    assert!(
+        last.evaluations < 100_000,
+        "{} evaluations: the campaign ran to its end",
+        last.evaluations
+    );
+}
+
+#[test]
+fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = upload(&coordinator, &repo().join("examples/data/furuta_clean.csv"));
+    let mut client = coordinator.client();
+    let search = "methods = [\"nelder-mead\"]\nmax_evaluations = 10";
+    let submit = |client: &mut CalibrationClient<Channel>, campaign: Option<pb::Campaign>| {
+        coordinator
+            .runtime
+            .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+                campaign,
+                idempotency_key: String::new(),
+            }))
+            .unwrap_err()
+    };
+    let cases: Vec<(Option<pb::Campaign>, tonic::Code, &str)> = vec![
+        (None, tonic::Code::InvalidArgument, "campaign"),
+        (
+            Some(pb::Campaign {
+                model: "pendulum".into(),
+                ..message(search, &dataset.id)
+            }),
+            tonic::Code::InvalidArgument,
+            "model",
+        ),
+        (
+            Some({
+                let mut m = message(search, &dataset.id);
+                m.parameters[1].min = 0.9;
+                m.parameters[1].max = 0.1;
+                m
+            }),
+            tonic::Code::InvalidArgument,
+            "parameters",
+        ),
+        (
+            Some({
+                let mut m = message(search, &dataset.id);
+                m.outputs[0].measured = "no_such_column".into();
+                m
+            }),
+            tonic::Code::InvalidArgument,
+            "no_such_column",
+        ),
+        (
+            Some(message(search, &"0".repeat(64))),
+            tonic::Code::NotFound,
+            "campaign.dataset_id",
+        ),
+        (
+            Some(message(search, "")),
+            tonic::Code::InvalidArgument,
+            "campaign.dataset_id",
+        ),
+    ];
+    for (campaign, code, field) in cases {
+        let status = submit(&mut client, campaign);
+        assert_eq!(status.code(), code, "{status:?}");
+        assert!(
+            status.message().contains(field),
+            "{field}: {}",
+            status.message()
+        );
+    }
+    // Uploads: no file name, an oversized chunk, a file that is not a record.
+    let upload_err = |chunks: Vec<pb::DatasetChunk>| {
+        let mut client = coordinator.client();
+        coordinator
+            .runtime
+            .block_on(client.upload_dataset(tokio_stream::iter(chunks)))
+            .unwrap_err()
+    };
+    let e = upload_err(vec![pb::DatasetChunk {
+        data: b"time,a\n0,1\n".to_vec(),
+        ..Default::default()
+    }]);
+    assert!(e.message().starts_with("file_name"), "{e:?}");
+    let e = upload_err(vec![pb::DatasetChunk {
+        file_name: "big.csv".into(),
+        data: vec![b'1'; (1 << 20) + 1],
+        ..Default::default()
+    }]);
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().starts_with("data"), "{e:?}");
+    let e = upload_err(vec![pb::DatasetChunk {
+        file_name: "r.csv".into(),
+        time_column: "t".into(),
+        data: b"time,a\n0,1\n".to_vec(),
+    }]);
+    assert_eq!(e.code(), tonic::Code::InvalidArgument);
+    assert!(e.message().contains("\"t\""), "{e:?}");
+    for id in ["", "nonsense", &"f".repeat(64)] {
+        let e = coordinator
+            .runtime
+            .block_on(client.get_campaign(pb::GetCampaignRequest { id: id.into() }))
+            .unwrap_err();
+        assert_eq!(e.code(), tonic::Code::NotFound, "{e:?}");
+    }
+    // Still serving.
+    let listed = coordinator
+        .runtime
+        .block_on(client.list_campaigns(pb::ListCampaignsRequest::default()))
+        .unwrap()
+        .into_inner();
+    assert!(listed.campaigns.is_empty());
+}
