@@ -15,7 +15,7 @@ pub const MAX_DATASET_BYTES: usize = 256 << 20;
 /// What a dataset holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct DatasetInfo {
-    /// BLAKE3 of the file's bytes, hex.
+    /// [`dataset_id`], hex.
     pub id: String,
     pub file_name: String,
     pub time_column: String,
@@ -64,7 +64,7 @@ impl Datasets {
                 MAX_DATASET_BYTES
             )));
         }
-        let id = crate::store::hex(blake3::hash(bytes).as_bytes());
+        let id = dataset_id(time_column, bytes);
         if let Some(info) = self.get(&id)? {
             return Ok(info);
         }
@@ -125,6 +125,16 @@ impl Datasets {
     pub fn folder(&self) -> &Path {
         &self.folder
     }
+}
+
+/// A dataset's id: BLAKE3 of its time column's name, a zero byte and the file's bytes (the
+/// same file read with another time axis is another dataset).
+pub fn dataset_id(time_column: &str, bytes: &[u8]) -> String {
+    let mut hasher = blake3::Hasher::new();
+    hasher.update(time_column.as_bytes());
+    hasher.update(&[0]);
+    hasher.update(bytes);
+    crate::store::hex(hasher.finalize().as_bytes())
 }
 
 /// Write `bytes` to a temporary file beside `path`, then rename it into place: a reader
