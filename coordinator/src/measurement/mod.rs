@@ -19,6 +19,8 @@ mod csv;
 mod error;
 mod mat;
 #[cfg(test)]
+mod robustness;
+#[cfg(test)]
 mod testdata;
 
 use std::path::{Path, PathBuf};
@@ -60,9 +62,20 @@ impl Measurement {
                 }
             }
         })?;
-        match FileFormat::of(path, &bytes) {
-            Some(FileFormat::Csv) => csv::read(path, &bytes, time_column, columns),
-            Some(FileFormat::Mat) => mat::read(path, &bytes, time_column, columns),
+        Measurement::from_bytes(path, &bytes, time_column, columns)
+    }
+
+    /// Reads the content `bytes` of the file `path` as [`Measurement::load`] does, without
+    /// touching the file system: `path` decides the format and names the file in errors.
+    pub fn from_bytes(
+        path: &Path,
+        bytes: &[u8],
+        time_column: &str,
+        columns: &[&str],
+    ) -> Result<Measurement, MeasurementError> {
+        match FileFormat::of(path, bytes) {
+            Some(FileFormat::Csv) => csv::read(path, bytes, time_column, columns),
+            Some(FileFormat::Mat) => mat::read(path, bytes, time_column, columns),
             None => Err(MeasurementError::UnrecognizedFormat {
                 path: path.to_owned(),
             }),
