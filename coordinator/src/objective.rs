@@ -285,6 +285,41 @@ stop = 3.0
     }
 
     #[test]
+    fn stored_keys_are_pinned() {
+        // Evaluations, campaigns and datasets are stored under these hashes: a change
+        // here orphans every existing store, so it must come with a new tag.
+        let m = measurement(vec![100.0, 2.0, 4.0, 9.0, -50.0]);
+        let c = campaign("weight = 3.0");
+        let o = Objective::new(&c, &m).unwrap();
+        let key = crate::store::evaluation_key(&o, &[0.25]);
+        let identity = c.identity(&m.content_hash());
+        let hex = crate::store::hex;
+        assert_eq!(
+            hex(&m.content_hash()),
+            "e26cd9006ea76b9362f5dbbfbe2a88204c7519f99e32b332b641ac51a3893a92"
+        );
+        assert_eq!(
+            hex(&o.fingerprint()),
+            "7cc56ea080b1ffff64b4107299beaf036cec5639b19ad620f95a2856e543448a"
+        );
+        assert_eq!(
+            hex(&key),
+            "7efd2c123002a3798fded9b4f11ccfb9152407e84dcf6d579dd73f347b40686b"
+        );
+        assert_eq!(
+            hex(&identity),
+            "2c9b2ae261a0decfe9b0918be827b43efcfc5d8eddf4f581d25a92c19073576f"
+        );
+        assert_eq!(
+            hex(&calib_worker::scoring::measurement_hash(
+                &o.grid,
+                &o.measured
+            )),
+            "1295954f5261deafcbefb6c8019cd73c9867b9b806a12b4fbfcb4281e56fe992"
+        );
+    }
+
+    #[test]
     fn a_constant_signal_cannot_be_variance_scaled() {
         let m = measurement(vec![0.0, 2.0, 2.0, 2.0, 5.0]);
         let Err(e) = Objective::new(&campaign("scale = \"variance\""), &m) else {

@@ -81,9 +81,8 @@ impl LeastSquares {
                 }
             })
             .collect();
-        let scaled = nalgebra::DMatrix::from_fn(rows, columns.len(), |i, j| {
-            columns[j][i] / scale[j]
-        });
+        let scaled =
+            nalgebra::DMatrix::from_fn(rows, columns.len(), |i, j| columns[j][i] / scale[j]);
         let svd = (!scaled.is_empty() && scaled.iter().all(|x| x.is_finite()))
             .then(|| scaled.try_svd(true, true, f64::EPSILON, SVD_ITERATIONS))
             .flatten();
@@ -207,7 +206,10 @@ mod tests {
         // Exact data are fitted exactly.
         let y: Vec<f64> = (0..m).map(|t| 2.0 - 0.5 * t as f64).collect();
         let x = fit.solve(&y);
-        assert!((x[0] - 2.0).abs() < 1e-12 && (x[1] + 0.5).abs() < 1e-12, "{x:?}");
+        assert!(
+            (x[0] - 2.0).abs() < 1e-12 && (x[1] + 0.5).abs() < 1e-12,
+            "{x:?}"
+        );
     }
 
     #[test]
