@@ -11,6 +11,7 @@
 
 use crate::campaign::{Campaign, CampaignError, OutputScale};
 use crate::measurement::Measurement;
+use calib_worker::content_hash::ContentHasher;
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
 
@@ -140,35 +141,27 @@ impl Objective {
 
     fn compute_fingerprint(&self) -> [u8; 32] {
         let info = self.model.info();
-        let mut h = blake3::Hasher::new();
-        h.update(b"calib-objective-v1");
-        h.update(info.name.as_bytes());
-        h.update(&info.version.to_le_bytes());
-        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
-            h.update(&(v.len() as u64).to_le_bytes());
-            for x in v {
-                h.update(&x.to_bits().to_le_bytes());
-            }
-        };
-        let usizes = |h: &mut blake3::Hasher, v: &[usize]| {
-            h.update(&(v.len() as u64).to_le_bytes());
-            for x in v {
-                h.update(&(*x as u64).to_le_bytes());
+        let mut h = ContentHasher::new(b"calib-objective-v1");
+        h.bytes(info.name.as_bytes())
+            .bytes(&info.version.to_le_bytes());
+        let indices = |h: &mut ContentHasher, v: &[usize]| {
+            h.count(v.len());
+            for &x in v {
+                h.count(x);
             }
         };
         let mut fixed = self.base.clone();
         for &i in &self.free {
             fixed[i] = 0.0;
         }
-        f64s(&mut h, &fixed);
-        usizes(&mut h, &self.free);
-        f64s(&mut h, &self.grid);
-        h.update(&self.measurement_hash);
-        usizes(&mut h, &self.outputs);
-        f64s(&mut h, &self.weights);
-        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
-        h.update(&(self.solver.max_steps as u64).to_le_bytes());
-        *h.finalize().as_bytes()
+        h.series(&fixed);
+        indices(&mut h, &self.free);
+        h.series(&self.grid).bytes(&self.measurement_hash);
+        indices(&mut h, &self.outputs);
+        h.series(&self.weights)
+            .series(&[self.solver.rtol, self.solver.atol])
+            .count(self.solver.max_steps);
+        h.finish()
     }
 
     /// The full parameter vector with the free parameters set to `free_values`.
