@@ -245,9 +245,9 @@ mod tests {
         // The residual is still removed, by the step of least length.
         let y: Vec<f64> = (0..m).map(|t| 1.0 + t as f64).collect();
         let x = fit.solve(&y);
-        for t in 0..m {
+        for (t, measured) in y.iter().enumerate() {
             let fitted = x[0] + x[1] * t as f64 + x[2] * (3.0 - 2.0 * t as f64);
-            assert!((fitted - y[t]).abs() < 1e-10, "{t}: {fitted}");
+            assert!((fitted - measured).abs() < 1e-10, "{t}: {fitted}");
         }
     }
 
