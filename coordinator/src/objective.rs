@@ -11,6 +11,7 @@
 
 use crate::campaign::{Campaign, CampaignError, OutputScale};
 use crate::measurement::Measurement;
+use calib_worker::content_hash::ContentHasher;
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
 
@@ -140,35 +141,27 @@ impl Objective {
 
     fn compute_fingerprint(&self) -> [u8; 32] {
         let info = self.model.info();
-        let mut h = blake3::Hasher::new();
-        h.update(b"calib-objective-v1");
-        h.update(info.name.as_bytes());
-        h.update(&info.version.to_le_bytes());
-        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
-            h.update(&(v.len() as u64).to_le_bytes());
-            for x in v {
-                h.update(&x.to_bits().to_le_bytes());
-            }
-        };
-        let usizes = |h: &mut blake3::Hasher, v: &[usize]| {
-            h.update(&(v.len() as u64).to_le_bytes());
-            for x in v {
-                h.update(&(*x as u64).to_le_bytes());
+        let mut h = ContentHasher::new(b"calib-objective-v1");
+        h.bytes(info.name.as_bytes())
+            .bytes(&info.version.to_le_bytes());
+        let indices = |h: &mut ContentHasher, v: &[usize]| {
+            h.count(v.len());
+            for &x in v {
+                h.count(x);
             }
         };
         let mut fixed = self.base.clone();
         for &i in &self.free {
             fixed[i] = 0.0;
         }
-        f64s(&mut h, &fixed);
-        usizes(&mut h, &self.free);
-        f64s(&mut h, &self.grid);
-        h.update(&self.measurement_hash);
-        usizes(&mut h, &self.outputs);
-        f64s(&mut h, &self.weights);
-        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
-        h.update(&(self.solver.max_steps as u64).to_le_bytes());
-        *h.finalize().as_bytes()
+        h.series(&fixed);
+        indices(&mut h, &self.free);
+        h.series(&self.grid).bytes(&self.measurement_hash);
+        indices(&mut h, &self.outputs);
+        h.series(&self.weights)
+            .series(&[self.solver.rtol, self.solver.atol])
+            .count(self.solver.max_steps);
+        h.finish()
     }
 
     /// The full parameter vector with the free parameters set to `free_values`.
@@ -282,6 +275,41 @@ stop = 3.0
         // The score uses exactly these weights.
         let e = o.score(&[vec![3.0, 4.0, 9.0], vec![1.0, 2.0, 3.0]]);
         assert_eq!(e.objective, o.weights[0] * 1.0);
+    }
+
+    #[test]
+    fn stored_keys_are_pinned() {
+        // Evaluations, campaigns and datasets are stored under these hashes: a change
+        // here orphans every existing store, so it must come with a new tag.
+        let m = measurement(vec![100.0, 2.0, 4.0, 9.0, -50.0]);
+        let c = campaign("weight = 3.0");
+        let o = Objective::new(&c, &m).unwrap();
+        let key = crate::store::evaluation_key(&o, &[0.25]);
+        let identity = c.identity(&m.content_hash());
+        let hex = crate::store::hex;
+        assert_eq!(
+            hex(&m.content_hash()),
+            "e26cd9006ea76b9362f5dbbfbe2a88204c7519f99e32b332b641ac51a3893a92"
+        );
+        assert_eq!(
+            hex(&o.fingerprint()),
+            "7cc56ea080b1ffff64b4107299beaf036cec5639b19ad620f95a2856e543448a"
+        );
+        assert_eq!(
+            hex(&key),
+            "7efd2c123002a3798fded9b4f11ccfb9152407e84dcf6d579dd73f347b40686b"
+        );
+        assert_eq!(
+            hex(&identity),
+            "2c9b2ae261a0decfe9b0918be827b43efcfc5d8eddf4f581d25a92c19073576f"
+        );
+        assert_eq!(
+            hex(&calib_worker::scoring::measurement_hash(
+                &o.grid,
+                &o.measured
+            )),
+            "1295954f5261deafcbefb6c8019cd73c9867b9b806a12b4fbfcb4281e56fe992"
+        );
     }
 
     #[test]

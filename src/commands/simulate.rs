@@ -2,6 +2,7 @@ use super::{Failure, Outcome};
 use calib_worker::models;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use rand_distr::Normal;
 use std::io::Write;
 use std::path::PathBuf;
 
@@ -143,13 +144,13 @@ pub fn run(args: Args) -> Outcome {
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
 
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    for (series, sigma) in trajectory.values.iter_mut().zip(&noise) {
-        if *sigma > 0.0 {
+    for (series, &sigma) in trajectory.values.iter_mut().zip(&noise) {
+        if sigma > 0.0 {
+            // Checked above: every σ is finite and not negative.
+            let normal = Normal::new(0.0, sigma)
+                .map_err(|e| Failure::internal(format!("noise of σ = {sigma}: {e}")))?;
             for v in series.iter_mut() {
-                // Box–Muller.
-                let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-                let u2: f64 = rng.random();
-                *v += sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                *v += rng.sample(normal);
             }
         }
     }

@@ -171,13 +171,11 @@ pub fn await_condition(
     }
 }
 
-/// A draw of zero-mean Gaussian noise of standard deviation `sigma` (Box–Muller), for
-/// synthetic records made by the project's own models.
+/// A draw of zero-mean Gaussian noise of standard deviation `sigma`, for synthetic records
+/// made by the project's own models.
 pub fn gaussian(rng: &mut rand_chacha::ChaCha8Rng, sigma: f64) -> f64 {
     use rand::Rng;
-    let u1: f64 = rng.random::<f64>().max(f64::MIN_POSITIVE);
-    let u2: f64 = rng.random();
-    sigma * (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    rng.sample(rand_distr::Normal::new(0.0, sigma).expect("a finite standard deviation ≥ 0"))
 }
 
 /// Follow the `CALIB_PROGRESS=lines` progress of a `calib calibrate` child: the returned

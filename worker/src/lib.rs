@@ -4,6 +4,7 @@
 //! The worker is stateless: it simulates a model for a parameter vector and returns
 //! trajectories, or objective values against a measurement it caches by content hash.
 
+pub mod content_hash;
 pub mod effects;
 pub mod model;
 pub mod models;

@@ -6,6 +6,7 @@
 //! simulation that fails (diverged, step limit) or yields a non-finite value scores
 //! [`FAILURE_PENALTY`]: finite, so optimisers that compare or average costs keep working.
 
+use crate::content_hash::ContentHasher;
 use crate::{Model, SimulationError, SolverOptions};
 
 /// Objective value given to parameter sets whose simulation failed: far above any real fit.
@@ -86,19 +87,12 @@ pub fn evaluate(model: &dyn Model, params: &[f64], target: &Target) -> Evaluatio
 /// over "calib-measurement-v1", the count and bits of the times, then the count of columns
 /// and each column's length and bits, integers as little-endian `u64`.
 pub fn measurement_hash(times: &[f64], columns: &[Vec<f64>]) -> [u8; 32] {
-    let mut h = blake3::Hasher::new();
-    h.update(b"calib-measurement-v1");
-    let series = |h: &mut blake3::Hasher, values: &[f64]| {
-        h.update(&(values.len() as u64).to_le_bytes());
-        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
-        h.update(&bytes);
-    };
-    series(&mut h, times);
-    h.update(&(columns.len() as u64).to_le_bytes());
+    let mut h = ContentHasher::new(b"calib-measurement-v1");
+    h.series(times).count(columns.len());
     for column in columns {
-        series(&mut h, column);
+        h.series(column);
     }
-    *h.finalize().as_bytes()
+    h.finish()
 }
 
 #[cfg(test)]

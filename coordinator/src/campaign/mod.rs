@@ -7,6 +7,7 @@
 mod file;
 mod resolve;
 
+use calib_worker::content_hash::ContentHasher;
 use calib_worker::{Model, SolverOptions};
 use resolve::{resolve, Locator};
 use serde::Deserialize;
@@ -234,53 +235,37 @@ impl Campaign {
     /// formatting, comments and location do not count.
     pub fn identity(&self, measurement_hash: &[u8; 32]) -> [u8; 32] {
         let info = self.model.info();
-        let mut h = blake3::Hasher::new();
-        h.update(b"calib.campaign.v1\0");
-        let text = |h: &mut blake3::Hasher, s: &str| {
-            h.update(&(s.len() as u64).to_le_bytes());
-            h.update(s.as_bytes());
-        };
-        let f64s = |h: &mut blake3::Hasher, v: &[f64]| {
-            h.update(&(v.len() as u64).to_le_bytes());
-            for x in v {
-                h.update(&x.to_bits().to_le_bytes());
-            }
-        };
-        let count = |h: &mut blake3::Hasher, n: usize| {
-            h.update(&(n as u64).to_le_bytes());
-        };
-        text(&mut h, &self.name);
-        text(&mut h, &info.name);
-        h.update(&info.version.to_le_bytes());
-        f64s(&mut h, &self.base);
-        f64s(&mut h, &[self.stop_time, self.window.0, self.window.1]);
-        count(&mut h, self.free.len());
+        let mut h = ContentHasher::new(b"calib.campaign.v1\0");
+        h.text(&self.name)
+            .text(&info.name)
+            .bytes(&info.version.to_le_bytes())
+            .series(&self.base)
+            .series(&[self.stop_time, self.window.0, self.window.1])
+            .count(self.free.len());
         for p in &self.free {
-            count(&mut h, p.index);
-            f64s(&mut h, &[p.nominal, p.min, p.max]);
+            h.count(p.index).series(&[p.nominal, p.min, p.max]);
         }
-        h.update(measurement_hash);
-        count(&mut h, self.outputs.len());
+        h.bytes(measurement_hash).count(self.outputs.len());
         for o in &self.outputs {
-            count(&mut h, o.model_index);
-            text(&mut h, &o.measured);
-            f64s(&mut h, &[o.weight]);
-            text(&mut h, o.scale.name());
+            h.count(o.model_index)
+                .text(&o.measured)
+                .series(&[o.weight])
+                .text(o.scale.name());
         }
-        count(&mut h, self.search.methods.len());
+        h.count(self.search.methods.len());
         for m in &self.search.methods {
-            text(&mut h, m.name());
+            h.text(m.name());
         }
-        count(&mut h, self.search.starts);
-        count(&mut h, self.search.max_evaluations);
-        h.update(&self.search.seed.to_le_bytes());
-        count(&mut h, self.search.extra_starts.len());
+        h.count(self.search.starts)
+            .count(self.search.max_evaluations)
+            .bytes(&self.search.seed.to_le_bytes())
+            .count(self.search.extra_starts.len());
         for start in &self.search.extra_starts {
-            f64s(&mut h, start);
+            h.series(start);
         }
-        f64s(&mut h, &[self.solver.rtol, self.solver.atol]);
-        count(&mut h, self.solver.max_steps);
-        *h.finalize().as_bytes()
+        h.series(&[self.solver.rtol, self.solver.atol])
+            .count(self.solver.max_steps);
+        h.finish()
     }
 }
 

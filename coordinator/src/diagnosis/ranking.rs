@@ -11,7 +11,7 @@
 //! making a joint stick), and the descent separates effects whose first-order signatures look
 //! alike (viscous friction and quadratic drag on a joint, say).
 
-use super::linear::{self, dot, Basis};
+use super::linear::{dot, Basis, LeastSquares};
 use super::{sensitivity, Candidate, Fit};
 use crate::campaign::{Campaign, FreeParameter};
 use crate::error::{Error, Result};
@@ -207,11 +207,11 @@ fn descend<E: Evaluator + Simulator>(
             residual = measured.iter().zip(&model).map(|(w, y)| w - y).collect();
             columns = j.columns;
         }
-        let Some(inverse) = linear::invert(&linear::normal_matrix(&columns)) else {
+        let step = LeastSquares::new(&columns);
+        if !step.is_full_rank() {
             break;
-        };
-        let g: Vec<f64> = columns.iter().map(|c| dot(c, &residual)).collect();
-        let delta: Vec<f64> = inverse.iter().map(|row| dot(row, &g)).collect();
+        }
+        let delta = step.solve(&residual);
         let trials: Vec<Vec<f64>> = [1.0, 0.5, 0.25, 0.1]
             .iter()
             .map(|fraction| {

@@ -121,12 +121,10 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+    use rand_distr::Normal;
 
     fn gaussian(rng: &mut ChaCha8Rng, sigma: f64) -> f64 {
-        // Box–Muller.
-        let u1: f64 = rng.random::<f64>().max(1e-300);
-        let u2: f64 = rng.random();
-        sigma * (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+        rng.sample(Normal::new(0.0, sigma).expect("a finite standard deviation"))
     }
 
     #[test]

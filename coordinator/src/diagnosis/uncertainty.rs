@@ -1,13 +1,15 @@
 //! Confidence intervals of fitted parameters from the Jacobian at the optimum.
 //!
 //! Linearised least squares: `Cov = s² (JᵀJ)⁻¹` with `s² = SSE / (N − n)` (J weighted like
-//! the objective). A correlated residual carries fewer independent samples than its count,
+//! the objective), `(JᵀJ)⁻¹ = V Σ⁻² Vᵀ` from the singular value decomposition of `J`; when
+//! `J` is rank deficient (see [`super::linear::RANK_TOLERANCE`]) every interval is
+//! unbounded. A correlated residual carries fewer independent samples than its count,
 //! so the covariance is widened by `N / N_eff` (see [`super::residual::effective_samples`]).
 //! 95% intervals are `value ± 1.96 √Cov_ii`. Where a parameter's interval is wide or two
 //! parameters correlate beyond ±0.95, the data cannot tell them apart; the report shows the
 //! correlation matrix so a user sees it.
 
-use super::linear::{invert, normal_matrix};
+use super::linear::LeastSquares;
 use crate::campaign::FreeParameter;
 use serde::Serialize;
 
@@ -35,7 +37,7 @@ pub fn intervals(
     let dof = samples.saturating_sub(n).max(1) as f64;
     let s2 = sse / dof;
     let inflation = (samples as f64 / effective_samples.max(1.0)).max(1.0);
-    let cov = invert(&normal_matrix(jacobian));
+    let cov = LeastSquares::new(jacobian).covariance();
     let std: Vec<f64> = (0..n)
         .map(|i| match &cov {
             Some(c) => (c[i][i].max(0.0) * s2 * inflation).sqrt(),

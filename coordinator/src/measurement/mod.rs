@@ -19,9 +19,13 @@ mod csv;
 mod error;
 mod mat;
 #[cfg(test)]
+mod robustness;
+#[cfg(test)]
 mod testdata;
 
 use std::path::{Path, PathBuf};
+
+use calib_worker::content_hash::ContentHasher;
 
 pub use error::{Location, MeasurementError};
 
@@ -60,9 +64,20 @@ impl Measurement {
                 }
             }
         })?;
-        match FileFormat::of(path, &bytes) {
-            Some(FileFormat::Csv) => csv::read(path, &bytes, time_column, columns),
-            Some(FileFormat::Mat) => mat::read(path, &bytes, time_column, columns),
+        Measurement::from_bytes(path, &bytes, time_column, columns)
+    }
+
+    /// Reads the content `bytes` of the file `path` as [`Measurement::load`] does, without
+    /// touching the file system: `path` decides the format and names the file in errors.
+    pub fn from_bytes(
+        path: &Path,
+        bytes: &[u8],
+        time_column: &str,
+        columns: &[&str],
+    ) -> Result<Measurement, MeasurementError> {
+        match FileFormat::of(path, bytes) {
+            Some(FileFormat::Csv) => csv::read(path, bytes, time_column, columns),
+            Some(FileFormat::Mat) => mat::read(path, bytes, time_column, columns),
             None => Err(MeasurementError::UnrecognizedFormat {
                 path: path.to_owned(),
             }),
@@ -106,31 +121,21 @@ impl Measurement {
     /// the byte length of its name, the UTF-8 name and its values. Values are hashed as
     /// their little-endian IEEE-754 bits, so `0.0` and `-0.0` differ.
     pub fn content_hash(&self) -> [u8; 32] {
-        let mut hasher = blake3::Hasher::new();
-        hasher.update(CONTENT_HASH_TAG);
-        hasher.update(&(self.time.len() as u64).to_le_bytes());
-        hasher.update(&(self.columns.len() as u64).to_le_bytes());
-        hash_values(&mut hasher, &self.time);
+        let mut hasher = ContentHasher::new(CONTENT_HASH_TAG);
+        hasher
+            .count(self.time.len())
+            .count(self.columns.len())
+            .values(&self.time);
         for (name, values) in &self.columns {
-            hasher.update(&(name.len() as u64).to_le_bytes());
-            hasher.update(name.as_bytes());
-            hash_values(&mut hasher, values);
+            hasher.text(name).values(values);
         }
-        *hasher.finalize().as_bytes()
+        hasher.finish()
     }
 }
 
 /// Versions the encoding behind [`Measurement::content_hash`]: bump it whenever the
 /// encoding changes so that stale content addresses cannot collide with new ones.
 const CONTENT_HASH_TAG: &[u8] = b"calib.measurement.v1\0";
-
-fn hash_values(hasher: &mut blake3::Hasher, values: &[f64]) {
-    let mut bytes = Vec::with_capacity(values.len() * 8);
-    for value in values {
-        bytes.extend_from_slice(&value.to_le_bytes());
-    }
-    hasher.update(&bytes);
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum FileFormat {

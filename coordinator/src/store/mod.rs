@@ -29,6 +29,7 @@ pub use self::memory::MemoryStore;
 pub use self::sled::SledStore;
 
 use crate::objective::{Evaluation, Objective};
+use calib_worker::content_hash::ContentHasher;
 use std::fmt;
 use std::path::PathBuf;
 
@@ -51,14 +52,10 @@ pub fn evaluation_key(objective: &Objective, point: &[f64]) -> EvaluationKey {
 
 /// [`evaluation_key`] from a fingerprint.
 pub fn evaluation_key_from(fingerprint: &[u8; 32], point: &[f64]) -> EvaluationKey {
-    let mut h = blake3::Hasher::new();
-    h.update(EVALUATION_KEY_TAG);
-    h.update(fingerprint);
-    h.update(&(point.len() as u64).to_le_bytes());
-    for v in point {
-        h.update(&v.to_bits().to_le_bytes());
-    }
-    *h.finalize().as_bytes()
+    ContentHasher::new(EVALUATION_KEY_TAG)
+        .bytes(fingerprint)
+        .series(point)
+        .finish()
 }
 
 const EVALUATION_KEY_TAG: &[u8] = b"calib.evaluation.v1\0";

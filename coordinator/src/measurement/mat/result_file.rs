@@ -142,18 +142,21 @@ impl<'m, 'a> ResultFile<'m, 'a> {
         let table = |matrix| Table { matrix, transposed };
 
         let name_table = table(require("name")?);
-        let names: Vec<String> = (0..name_table.rows())
-            .map(|row| name_table.text_row(row))
-            .collect();
         let data_info = table(require("dataInfo")?);
-        if data_info.rows() != names.len() || data_info.cols() < 2 {
+        // Checked before the names are built: an empty `name` matrix may claim any
+        // number of rows, while dataInfo's rows of two or more values must all be in
+        // the file, so agreeing with it bounds the names by the file's size.
+        if data_info.rows() != name_table.rows() || data_info.cols() < 2 {
             return Err(malformed(format!(
                 "dataInfo is {} but \"name\" lists {} variables (expected {} rows of at least 2 columns)",
                 data_info.matrix.describe(),
-                names.len(),
-                names.len()
+                name_table.rows(),
+                name_table.rows()
             )));
         }
+        let names: Vec<String> = (0..name_table.rows())
+            .map(|row| name_table.text_row(row))
+            .collect();
         let data_2 = table(require("data_2")?);
         let data_1 = find("data_1").map(table);
         for data in std::iter::once(&data_2).chain(&data_1) {
@@ -482,6 +485,48 @@ mod tests {
         assert!(
             error.to_string().contains("\"name\" lists 2 variables"),
             "{error}"
+        );
+    }
+
+    #[test]
+    fn an_empty_name_matrix_claiming_billions_of_rows_is_refused_without_allocating() {
+        // 2^31 − 1 names of no characters take no bytes in the file; building them
+        // would take 48 GiB. dataInfo must agree with them before any name is read.
+        let writer = V4::new(testdata::ByteOrder::Little);
+        let mut file = Vec::new();
+        writer.text(
+            &mut file,
+            "Aclass",
+            &["Atrajectory", "1.1", "", "binNormal"],
+            false,
+        );
+        writer.header(
+            &mut file,
+            i32::from(precision::UINT8) * 10 + 1,
+            i32::MAX,
+            0,
+            false,
+            "name",
+        );
+        writer.table(
+            &mut file,
+            "dataInfo",
+            precision::INT32,
+            &[vec![0.0, 1.0, 0.0, -1.0]],
+            false,
+        );
+        writer.table(
+            &mut file,
+            "data_2",
+            precision::DOUBLE,
+            &[vec![0.0, 1.0]],
+            false,
+        );
+        let error = load(&file, "time", &[]).expect_err("name and dataInfo disagree");
+        assert_eq!(
+            error.to_string(),
+            "sim/Furuta_res.mat: not a valid MAT file: dataInfo is 1×4 int32 but \"name\" \
+             lists 2147483647 variables (expected 2147483647 rows of at least 2 columns)"
         );
     }
 

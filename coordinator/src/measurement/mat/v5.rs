@@ -14,6 +14,8 @@
 //!   parser (arithmetic overflow): the pre-scan checks every element's length against
 //!   the file, and the parser runs under `catch_unwind` for what the pre-scan cannot
 //!   see (the insides of compressed elements).
+//! * A compressed element is inflated whole into memory; deflate expands at most about
+//!   1,000-fold, which bounds what a corrupt or hostile file can make it allocate.
 //! * Parse errors carry no position, so a corrupt file is reported as such, without an
 //!   offset.
 //! * It prints "Unsupported variable type" on standard output for unknown top-level
