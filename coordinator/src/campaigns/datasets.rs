@@ -6,6 +6,7 @@
 
 use crate::error::{Error, Result};
 use crate::measurement::Measurement;
+use calib_worker::content_hash::ContentHasher;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -127,15 +128,19 @@ impl Datasets {
     }
 }
 
-/// A dataset's id: BLAKE3 of its time column's name, a zero byte and the file's bytes (the
-/// same file read with another time axis is another dataset).
+/// A dataset's id, in calib's content-hash encoding: the tag `calib.dataset.v1\0`, the time
+/// column's name (as text), the file's bytes (as a series of bytes: length, then bytes). The
+/// same file read on another time axis is another dataset.
 pub fn dataset_id(time_column: &str, bytes: &[u8]) -> String {
-    let mut hasher = blake3::Hasher::new();
-    hasher.update(time_column.as_bytes());
-    hasher.update(&[0]);
-    hasher.update(bytes);
-    crate::store::hex(hasher.finalize().as_bytes())
+    let hash = ContentHasher::new(DATASET_TAG)
+        .text(time_column)
+        .count(bytes.len())
+        .bytes(bytes)
+        .finish();
+    crate::store::hex(&hash)
 }
+
+const DATASET_TAG: &[u8] = b"calib.dataset.v1\0";
 
 /// Write `bytes` to a temporary file beside `path`, then rename it into place: a reader
 /// never sees half a file.
