@@ -1,5 +1,5 @@
 //! A client in another language: Python's grpcio, with stubs generated from `proto/`,
-//! calls a worker. Skipped (with the reason printed) where python3 or grpcio is missing,
+//! calls a worker, and runs a campaign on a coordinator through the Calibration API. Skipped (with the reason printed) where python3 or grpcio is missing,
 //! except under `CI=true`, where that fails the test.
 
 mod common;
@@ -23,26 +23,73 @@ fn python_missing() -> Option<String> {
     }
 }
 
+/// Python stubs of every proto file, in a temporary folder.
+fn python_stubs() -> tempfile::TempDir {
+    let stubs = tempfile::tempdir().unwrap();
+    let mut protoc = Command::new("python3");
+    protoc
+        .args(["-m", "grpc_tools.protoc", "-I"])
+        .arg(repo().join("proto"))
+        .arg(format!("--python_out={}", stubs.path().display()))
+        .arg(format!("--grpc_python_out={}", stubs.path().display()));
+    for file in ["simulator", "calibration"] {
+        protoc.arg(repo().join(format!("proto/calib/v1/{file}.proto")));
+    }
+    let out = protoc.output().unwrap();
+    assert!(
+        out.status.success(),
+        "protoc: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stubs
+}
+
+#[test]
+fn a_python_client_runs_a_campaign_on_a_coordinator() {
+    use calib_coordinator::server::{serve_coordinator, CoordinatorConfig};
+    if let Some(reason) = python_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let stubs = python_stubs();
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = common::cluster::TestCluster::start(2, 1);
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let mut config = CoordinatorConfig::new(
+        "127.0.0.1:0".parse().unwrap(),
+        calib_sandbox::cluster::dispatch_config(&cluster.urls()),
+    );
+    config.store = Some(dir.path().join("db"));
+    let coordinator = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        serve_coordinator(listener, config).unwrap()
+    });
+    let out = Command::new("python3")
+        .arg(repo().join("tests/python/calibration_client.py"))
+        .arg(coordinator.address().to_string())
+        .arg(stubs.path())
+        .arg(repo().join("examples/data/furuta_clean.csv"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        out.status.success(),
+        "python client failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.trim_end().ends_with("ok"));
+    assert!(cluster.simulations() > 0, "the workers simulated nothing");
+    runtime.block_on(coordinator.shutdown());
+}
+
 #[test]
 fn a_python_client_lists_models_and_simulates() {
     if let Some(reason) = python_missing() {
         common::skip(&reason);
         return;
     }
-    let stubs = tempfile::tempdir().unwrap();
-    let out = Command::new("python3")
-        .args(["-m", "grpc_tools.protoc", "-I"])
-        .arg(repo().join("proto"))
-        .arg(format!("--python_out={}", stubs.path().display()))
-        .arg(format!("--grpc_python_out={}", stubs.path().display()))
-        .arg(repo().join("proto/calib/v1/simulator.proto"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "protoc: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stubs = python_stubs();
     let worker = TestWorker::start(1, 16);
     let out = Command::new("python3")
         .arg(repo().join("tests/python/simulator_client.py"))
