@@ -5,11 +5,13 @@
 //! trajectories, or objective values against a measurement it caches by content hash.
 
 pub mod effects;
+pub mod limits;
 pub mod model;
 pub mod models;
 pub mod ode;
 pub mod scoring;
 pub mod service;
+pub mod validate;
 
 pub use model::{
     EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
