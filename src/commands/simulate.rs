@@ -56,7 +56,7 @@ pub fn run(args: Args) -> Outcome {
         validate::parameter_value(info, index, v).map_err(refused)?;
         params[index] = v;
     }
-    if !(args.stop > 0.0) {
+    if args.stop.is_nan() || args.stop <= 0.0 {
         return Err(Failure::input(format!(
             "--stop {}: must be a positive time",
             args.stop
