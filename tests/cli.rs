@@ -61,7 +61,46 @@ fn unknown_model() {
 fn unknown_parameter() {
     let dir = tempfile::tempdir().unwrap();
     let c = campaign_with(dir.path(), "name = \"armFriction\"", "name = \"armFrict\"");
-    expect_bad_input(&c, &["c.toml:", "armFrict", "no parameter"]);
+    expect_bad_input(
+        &c,
+        &[
+            "c.toml:",
+            "no parameter `armFrict`; did you mean `armFriction`?",
+        ],
+    );
+    // The nearest name, not every name the model has.
+    let out = calib(&["calibrate", c.to_str().unwrap(), "--out", "/dev/null/never"]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("pendulumFriction"), "{stderr}");
+}
+
+#[test]
+fn simulate_suggests_the_nearest_name_and_keeps_the_workers_limits() {
+    let stderr_of = |args: &[&str]| {
+        let out = calib(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = stderr_of(&["simulate", "furuta", "--set", "armFrict=0.01"]);
+    assert!(
+        e.contains("--set armFrict=0.01: model `furuta` has no parameter `armFrict`; did you mean `armFriction`?"),
+        "{e}"
+    );
+    assert!(!e.contains("pendulumFriction"), "{e}");
+    let e = stderr_of(&["simulate", "furtua"]);
+    assert!(
+        e.contains("unknown model `furtua`; did you mean `furuta`?"),
+        "{e}"
+    );
+    let e = stderr_of(&["simulate", "furuta", "--outputs", "armJoint.ph"]);
+    assert!(e.contains("did you mean `armJoint.phi`?"), "{e}");
+    // The same limits as a worker's request: rtol, grid length, stop time.
+    let e = stderr_of(&["simulate", "furuta", "--rtol", "0.5"]);
+    assert!(e.contains("--rtol 0.5: 0.5 is not in [1e-14, 0.1]"), "{e}");
+    let e = stderr_of(&["simulate", "furuta", "--stop", "10", "--step", "1e-5"]);
+    assert!(e.contains("at most 500000 rows"), "{e}");
+    let e = stderr_of(&["simulate", "furuta", "--stop", "2e6", "--step", "10"]);
+    assert!(e.contains("beyond what calib simulates"), "{e}");
 }
 
 #[test]

@@ -16,16 +16,8 @@ pub fn run(args: Args) -> Outcome {
         .map(|m| m.info())
         .filter(|i| args.model.as_ref().is_none_or(|n| *n == i.name))
         .collect();
-    if selected.is_empty() {
-        let known: Vec<_> = models::all()
-            .iter()
-            .map(|m| m.info().name.clone())
-            .collect();
-        return Err(super::Failure::input(format!(
-            "unknown model `{}` (hosted: {})",
-            args.model.unwrap_or_default(),
-            known.join(", ")
-        )));
+    if let Some(name) = &args.model {
+        calib_worker::validate::model(name).map_err(|e| super::Failure::input(e.message))?;
     }
     if args.json {
         println!(

@@ -1,5 +1,6 @@
 use super::{Failure, Outcome};
-use calib_worker::models;
+use calib_worker::limits;
+use calib_worker::validate::{self, SolverOverrides};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::Normal;
@@ -37,21 +38,8 @@ pub struct Args {
     out: Option<PathBuf>,
 }
 
-/// Most output rows `calib simulate` writes.
-const MAX_ROWS: f64 = 1e7;
-
 pub fn run(args: Args) -> Outcome {
-    let Some(model) = models::find(&args.model) else {
-        let known: Vec<_> = models::all()
-            .iter()
-            .map(|m| m.info().name.clone())
-            .collect();
-        return Err(Failure::input(format!(
-            "unknown model `{}` (hosted: {})",
-            args.model,
-            known.join(", ")
-        )));
-    };
+    let model = validate::model(&args.model).map_err(|e| Failure::input(e.message))?;
     let info = model.info();
     let mut params = info.default_vector();
     for assignment in &args.set {
@@ -61,60 +49,53 @@ pub fn run(args: Args) -> Outcome {
             )));
         };
         let (name, value) = (name.trim(), value.trim());
-        let Some(index) = info.parameter_index(name) else {
-            return Err(Failure::input(format!(
-                "--set {assignment}: model `{}` has no parameter `{name}`",
-                info.name
-            )));
-        };
+        let refused = |e: validate::Invalid| Failure::input(format!("--set {assignment}: {e}"));
+        let index = validate::parameter(info, name).map_err(refused)?;
         let v: f64 = value.parse().map_err(|_| {
             Failure::input(format!("--set {assignment}: `{value}` is not a number"))
         })?;
-        let (lo, hi) = info.bounds_at(index);
-        if !v.is_finite() || v < lo || v > hi {
-            return Err(Failure::input(format!(
-                "--set {assignment}: {v} is outside the admissible range [{lo}, {hi}]"
-            )));
-        }
+        validate::parameter_value(info, index, v).map_err(refused)?;
         params[index] = v;
     }
-    if !(args.stop > 0.0 && args.stop.is_finite()) {
+    if args.stop.is_nan() || args.stop <= 0.0 {
         return Err(Failure::input(format!(
             "--stop {}: must be a positive time",
             args.stop
         )));
     }
-    if !(args.step > 0.0 && args.stop / args.step <= MAX_ROWS) {
+    validate::stop_time(args.stop)
+        .map_err(|e| Failure::input(format!("--stop {}: {e}", args.stop)))?;
+    let rows = args.stop / args.step + 1.0;
+    if !(args.step > 0.0 && rows <= limits::MAX_TIMES as f64) {
         return Err(Failure::input(format!(
-            "--step {}: must be positive and give at most {MAX_ROWS} rows",
-            args.step
+            "--step {}: must be positive and give at most {} rows",
+            args.step,
+            limits::MAX_TIMES
         )));
     }
-    let mut options = model.default_options();
-    if let Some(rtol) = args.rtol {
-        if !(rtol > 0.0 && rtol < 1.0) {
-            return Err(Failure::input(format!("--rtol {rtol}: must be in (0, 1)")));
-        }
-        options.rtol = rtol;
-        options.atol = rtol * 1e-2;
-    }
+    // The CLI's one tolerance sets both: atol a hundredth of rtol.
+    let overrides = SolverOverrides {
+        rtol: args.rtol,
+        atol: args.rtol.map(|rtol| rtol * 1e-2),
+        max_steps: None,
+    };
+    let options = validate::solver_options(model, overrides).map_err(|(_, e)| {
+        Failure::input(format!("--rtol {}: {e}", args.rtol.unwrap_or(f64::NAN)))
+    })?;
     let outputs: Vec<usize> = if args.outputs.is_empty() {
         (0..info.outputs.len()).collect()
     } else {
         args.outputs
             .iter()
             .map(|name| {
-                info.output_index(name).ok_or_else(|| {
-                    Failure::input(format!(
-                        "--outputs: model `{}` has no output `{name}`",
-                        info.name
-                    ))
-                })
+                validate::output(info, name)
+                    .map_err(|e| Failure::input(format!("--outputs {name}: {e}")))
             })
             .collect::<Result<_, _>>()?
     };
     let n = (args.stop / args.step + 1e-9).floor() as usize;
     let grid: Vec<f64> = (0..=n).map(|i| i as f64 * args.step).collect();
+    validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
     let mut noise = vec![0.0; outputs.len()];
     for assignment in &args.noise {
         let Some((name, sigma)) = assignment.split_once('=') else {

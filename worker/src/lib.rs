@@ -6,11 +6,13 @@
 
 pub mod content_hash;
 pub mod effects;
+pub mod limits;
 pub mod model;
 pub mod models;
 pub mod ode;
 pub mod scoring;
 pub mod service;
+pub mod validate;
 
 pub use model::{
     EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,

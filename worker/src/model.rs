@@ -180,6 +180,17 @@ pub enum SimulationError {
     StepLimit { limit: usize, time: f64 },
     #[error("step size underflow at t = {time} s")]
     StepTooSmall { time: f64 },
+    /// Events accumulate at one time (a Zeno point) and the model has no mode that holds it.
+    #[error(
+        "events chatter at t = {time} s: {events} events within {span:e} s, the last \
+         `{event}`, and the model has no mode that stops the switching"
+    )]
+    Chattering {
+        time: f64,
+        event: String,
+        events: usize,
+        span: f64,
+    },
     #[error("solution diverged (non-finite state) at t = {time} s")]
     Diverged { time: f64 },
     #[error("invalid request: {0}")]

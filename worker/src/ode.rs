@@ -12,6 +12,15 @@
 //! from the event with a fresh first stage. The right-hand side is therefore always smooth
 //! inside a step, which is what the error control assumes.
 //!
+//! Events may accumulate: a ball bouncing ever lower, a friction model switching between
+//! sliding forward and backward around a speed of zero. Such a Zeno point would cost every
+//! step allowed, each with a root search. The [`ZenoGuard`] watches the event times; when
+//! [`ZENO_EVENTS`] events fall within a span that is tiny next to the integrated one, the
+//! system is asked to take the mode the switching approximates (a ball at rest, a joint held
+//! stuck: [`HybridSystem::on_chattering`]); a system that has none, or that chatters again
+//! at once, ends the simulation with [`SimulationError::Chattering`] naming the time and the
+//! event.
+//!
 //! References:
 //! - J. R. Dormand, P. J. Prince, "A family of embedded Runge–Kutta formulae",
 //!   J. Comp. Appl. Math. 6 (1980) 19–26.
@@ -40,6 +49,20 @@ pub trait HybridSystem {
 
     /// Called at a located event: switch mode, and adjust the state if the physics demands it.
     fn on_event(&mut self, _t: f64, _y: &mut [f64], _event: usize) {}
+
+    /// What event `k` stands for, for error messages.
+    fn event_name(&self, event: usize) -> String {
+        format!("event #{event}")
+    }
+
+    /// Called when events accumulate at `t` (a Zeno point), `event` being the last to fire:
+    /// switch to the mode the switching approximates (a ball at rest, a joint held stuck
+    /// while its driving torque stays within the static friction), adjust the state, and
+    /// return `true`; return `false` when there is no such mode, which ends the simulation
+    /// with [`SimulationError::Chattering`].
+    fn on_chattering(&mut self, _t: f64, _y: &mut [f64], _event: usize) -> bool {
+        false
+    }
 }
 
 // Dormand–Prince 5(4) tableau.
@@ -87,8 +110,62 @@ const EXPO1: f64 = 0.2 - BETA * 0.75;
 const FAC_MIN: f64 = 0.2; // smallest ratio h_new / h
 const FAC_MAX: f64 = 10.0; // largest ratio h_new / h
 
-/// Most event locations per step before the solver gives up on a chattering system.
-const MAX_EVENTS_AT_ONE_TIME: usize = 64;
+/// Events the [`ZenoGuard`] looks back over.
+pub const ZENO_EVENTS: usize = 32;
+/// Span of [`ZENO_EVENTS`] events, relative to the integrated span, below which events are
+/// taken to accumulate: a millionth of a second over a 1000 s simulation.
+const ZENO_RELATIVE_SPAN: f64 = 1e-9;
+
+/// Detects events that accumulate at one time: [`ZENO_EVENTS`] of them within a span tiny
+/// next to the integrated one. Located events come strictly one after the other, so a count
+/// of events at an identical time would never see them.
+struct ZenoGuard {
+    /// Times of the last events, oldest first once full.
+    times: std::collections::VecDeque<f64>,
+    span: f64,
+    /// When the system last resolved an accumulation by switching mode.
+    resolved_at: Option<f64>,
+}
+
+/// What the guard makes of an event.
+#[derive(Debug, PartialEq)]
+enum Zeno {
+    /// Events are not accumulating.
+    Clear,
+    /// Events accumulate: the system must take the mode the switching approximates.
+    Accumulating,
+    /// Events accumulate again right after the system switched mode for that: give up.
+    Persisting,
+}
+
+impl ZenoGuard {
+    fn new(t_end: f64) -> Self {
+        Self {
+            times: std::collections::VecDeque::with_capacity(ZENO_EVENTS),
+            span: ZENO_RELATIVE_SPAN * t_end.abs().max(1.0),
+            resolved_at: None,
+        }
+    }
+
+    fn record(&mut self, t: f64) -> Zeno {
+        if self.times.len() == ZENO_EVENTS {
+            self.times.pop_front();
+        }
+        self.times.push_back(t);
+        let oldest = self.times[0];
+        if self.times.len() < ZENO_EVENTS || t - oldest > self.span {
+            return Zeno::Clear;
+        }
+        self.times.clear();
+        match self.resolved_at {
+            Some(resolved) if oldest - resolved <= self.span => Zeno::Persisting,
+            _ => {
+                self.resolved_at = Some(t);
+                Zeno::Accumulating
+            }
+        }
+    }
+}
 
 /// The continuous extension of one accepted step.
 struct Dense {
@@ -165,8 +242,7 @@ where
     let mut h = initial_step(system, t, &y, &k[0], t_end - t, options, &mut stats);
     let mut fac_old: f64 = 1e-4;
     let mut last_rejected = false;
-    let mut events_here = 0usize;
-    let mut last_event_t = f64::NAN;
+    let mut zeno = ZenoGuard::new(t_end);
 
     loop {
         if stats.accepted_steps + stats.rejected_steps >= options.max_steps {
@@ -316,22 +392,25 @@ where
                 fac_old = err.max(1e-4);
                 h = h_new;
                 last_rejected = false;
-                events_here = 0;
             }
             Some((e, te)) => {
                 stats.events += 1;
-                if te == last_event_t {
-                    events_here += 1;
-                    if events_here > MAX_EVENTS_AT_ONE_TIME {
-                        return Err(SimulationError::StepTooSmall { time: te });
-                    }
-                } else {
-                    events_here = 0;
-                }
-                last_event_t = te;
                 dense.eval(te, &mut y);
                 t = te;
                 system.on_event(t, &mut y, e);
+                let resolved = match zeno.record(t) {
+                    Zeno::Clear => true,
+                    Zeno::Accumulating => system.on_chattering(t, &mut y, e),
+                    Zeno::Persisting => false,
+                };
+                if !resolved {
+                    return Err(SimulationError::Chattering {
+                        time: t,
+                        event: system.event_name(e),
+                        events: ZENO_EVENTS,
+                        span: zeno.span,
+                    });
+                }
                 if next_out == grid.len() {
                     return Ok(stats);
                 }
@@ -432,6 +511,7 @@ fn initial_step<S: HybridSystem>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::cell::Cell;
 
     struct Harmonic;
     impl HybridSystem for Harmonic {
@@ -481,10 +561,24 @@ mod tests {
         assert!(errs[1] < errs[0] / 100.0, "errors {errs:?}");
     }
 
-    /// A ball dropped from 1 m bouncing with restitution 0.5: event times in closed form
-    /// (the bounces accumulate at 3·t1 ≈ 1.35 s, so the run stops before).
+    /// A ball dropped from 1 m bouncing with restitution 0.5: event times in closed form.
+    /// The bounces accumulate at 3·t1 ≈ 1.355 s (t1 the first contact); from there the ball
+    /// rests on the floor, if it may.
     struct Ball {
         bounces: Vec<f64>,
+        may_rest: bool,
+        rests_since: Option<f64>,
+        probes: Cell<usize>,
+    }
+    impl Ball {
+        fn new(may_rest: bool) -> Self {
+            Self {
+                bounces: vec![],
+                may_rest,
+                rests_since: None,
+                probes: Cell::new(0),
+            }
+        }
     }
     impl HybridSystem for Ball {
         fn dim(&self) -> usize {
@@ -492,12 +586,17 @@ mod tests {
         }
         fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
             dy[0] = y[1];
-            dy[1] = -9.81;
+            dy[1] = if self.rests_since.is_some() {
+                0.0
+            } else {
+                -9.81
+            };
         }
         fn event_count(&self) -> usize {
             1
         }
         fn events(&self, _t: f64, y: &[f64], g: &mut [f64]) {
+            self.probes.set(self.probes.get() + 1);
             // Fires when the ball, falling, reaches the floor.
             g[0] = if y[1] < 0.0 { y[0] } else { 1.0 };
         }
@@ -506,18 +605,253 @@ mod tests {
             y[0] = 0.0;
             y[1] *= -0.5;
         }
+        fn event_name(&self, _event: usize) -> String {
+            "floor contact".into()
+        }
+        fn on_chattering(&mut self, t: f64, y: &mut [f64], _event: usize) -> bool {
+            if self.may_rest {
+                self.rests_since = Some(t);
+                y.fill(0.0);
+            }
+            self.may_rest
+        }
+    }
+
+    fn first_contact() -> f64 {
+        (2.0f64 / 9.81).sqrt()
     }
 
     #[test]
     fn events_are_located_on_the_dense_output() {
-        let mut ball = Ball { bounces: vec![] };
+        let mut ball = Ball::new(false);
         let opts = SolverOptions::default();
         integrate(&mut ball, &[1.0, 0.0], &[1.2], &opts, |_, _| {}).unwrap();
-        let t1 = (2.0f64 / 9.81).sqrt();
+        let t1 = first_contact();
         let v1 = 9.81 * t1;
         let t2 = t1 + 2.0 * 0.5 * v1 / 9.81;
         assert!((ball.bounces[0] - t1).abs() < 1e-9, "{:?}", ball.bounces);
         assert!((ball.bounces[1] - t2).abs() < 1e-9, "{:?}", ball.bounces);
+    }
+
+    #[test]
+    fn bounces_that_accumulate_end_at_rest_on_the_floor() {
+        let mut ball = Ball::new(true);
+        let grid = [1.0, 2.0, 3.0];
+        let mut heights = vec![f64::NAN; grid.len()];
+        let stats = integrate(
+            &mut ball,
+            &[1.0, 0.0],
+            &grid,
+            &SolverOptions::default(),
+            |i, y| {
+                heights[i] = y[0];
+            },
+        )
+        .unwrap();
+        let rest = ball.rests_since.expect("the ball comes to rest");
+        assert!(
+            (rest - 3.0 * first_contact()).abs() < 1e-6,
+            "rests at {rest}"
+        );
+        assert!(heights[0] > 0.0);
+        assert_eq!(&heights[1..], &[0.0, 0.0]);
+        // A bounded amount of work: the bounces down to the guard's span, and no more.
+        assert!(stats.events < 2 * ZENO_EVENTS + 40, "{stats:?}");
+        assert!(
+            stats.accepted_steps + stats.rejected_steps < 1_000,
+            "{stats:?}"
+        );
+        assert!(
+            ball.probes.get() < 10_000,
+            "{} event probes",
+            ball.probes.get()
+        );
+    }
+
+    #[test]
+    fn bounces_that_accumulate_without_a_resting_mode_are_a_typed_error() {
+        let mut ball = Ball::new(false);
+        let r = integrate(
+            &mut ball,
+            &[1.0, 0.0],
+            &[3.0],
+            &SolverOptions::default(),
+            |_, _| {},
+        );
+        let Err(SimulationError::Chattering { time, event, .. }) = r else {
+            panic!("{r:?}");
+        };
+        assert!((time - 3.0 * first_contact()).abs() < 1e-6, "at {time}");
+        assert_eq!(event, "floor contact");
+        assert!(
+            ball.bounces.len() < 2 * ZENO_EVENTS + 40,
+            "{}",
+            ball.bounces.len()
+        );
+        assert!(
+            ball.probes.get() < 10_000,
+            "{} event probes",
+            ball.probes.get()
+        );
+    }
+
+    /// A block of unit mass under the force u(t) = 1.5·sin t with Coulomb friction 1, state
+    /// (x, v), started forward at v = 0.2. Its friction is written as a relay, sliding
+    /// forward or backward, with the sticking mode only as the mode its chattering
+    /// approximates: held at v = 0 until |u| exceeds the friction.
+    struct Block {
+        sliding: Option<f64>,
+        may_stick: bool,
+        probes: Cell<usize>,
+        rhs_calls: Cell<usize>,
+    }
+    const BLOCK_FRICTION: f64 = 1.0;
+    fn block_force(t: f64) -> f64 {
+        1.5 * t.sin()
+    }
+    impl Block {
+        fn new(may_stick: bool) -> Self {
+            Self {
+                sliding: Some(1.0),
+                may_stick,
+                probes: Cell::new(0),
+                rhs_calls: Cell::new(0),
+            }
+        }
+    }
+    impl HybridSystem for Block {
+        fn dim(&self) -> usize {
+            2
+        }
+        fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+            self.rhs_calls.set(self.rhs_calls.get() + 1);
+            dy[0] = y[1];
+            dy[1] = match self.sliding {
+                Some(direction) => block_force(t) - BLOCK_FRICTION * direction,
+                None => 0.0,
+            };
+        }
+        fn event_count(&self) -> usize {
+            1
+        }
+        fn events(&self, t: f64, y: &[f64], g: &mut [f64]) {
+            self.probes.set(self.probes.get() + 1);
+            g[0] = match self.sliding {
+                Some(direction) => direction * y[1],
+                None => BLOCK_FRICTION - block_force(t).abs(),
+            };
+        }
+        fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
+            self.sliding = Some(match self.sliding {
+                // The speed crossed zero: the relay turns the friction round.
+                Some(direction) => {
+                    y[1] = 0.0;
+                    -direction
+                }
+                // Breakaway, the way the force pushes.
+                None => block_force(t).signum(),
+            });
+        }
+        fn event_name(&self, _event: usize) -> String {
+            "block friction".into()
+        }
+        fn on_chattering(&mut self, _t: f64, y: &mut [f64], _event: usize) -> bool {
+            if self.may_stick {
+                self.sliding = None;
+                y[1] = 0.0;
+            }
+            self.may_stick
+        }
+    }
+
+    /// When the block, sliding forward from v = 0.2, first stops: v(t) = 0.2 + 1.5·(1 − cos t) − t.
+    fn block_stops() -> f64 {
+        let mut t: f64 = 0.2;
+        for _ in 0..50 {
+            t -= (0.2 + 1.5 * (1.0 - t.cos()) - t) / (1.5 * t.sin() - 1.0);
+        }
+        t
+    }
+
+    #[test]
+    fn chattering_friction_sticks_until_the_force_breaks_it_away() {
+        let stop = block_stops();
+        let breakaway = (BLOCK_FRICTION / 1.5).asin();
+        assert!(
+            stop < 0.3 && breakaway > 0.7,
+            "stop {stop}, breakaway {breakaway}"
+        );
+        let x_stop = 0.2 * stop + 1.5 * (stop - stop.sin()) - 0.5 * stop * stop;
+        let grid: Vec<f64> = (0..=15).map(|i| i as f64 * 0.1).collect();
+        let mut states = vec![[f64::NAN; 2]; grid.len()];
+        let mut block = Block::new(true);
+        let stats = integrate(
+            &mut block,
+            &[0.0, 0.2],
+            &grid,
+            &SolverOptions::default(),
+            |i, y| {
+                states[i] = [y[0], y[1]];
+            },
+        )
+        .unwrap();
+        for (t, [x, v]) in grid.iter().zip(&states) {
+            if *t > stop + 1e-3 && *t < breakaway - 1e-3 {
+                assert_eq!(*v, 0.0, "speed at {t}");
+                assert!((x - x_stop).abs() < 1e-9, "x({t}) = {x}, stuck at {x_stop}");
+            }
+        }
+        // Sliding forward again after the breakaway, as the closed form says.
+        let v_end = 1.5 * (breakaway.cos() - 1.5f64.cos()) - (1.5 - breakaway);
+        assert!(
+            (states[15][1] - v_end).abs() < 1e-7,
+            "{:?} vs {v_end}",
+            states[15]
+        );
+        assert!(stats.events < ZENO_EVENTS + 8, "{stats:?}");
+        assert!(
+            block.probes.get() < 10_000,
+            "{} event probes",
+            block.probes.get()
+        );
+        assert!(
+            block.rhs_calls.get() < 5_000,
+            "{} rhs calls",
+            block.rhs_calls.get()
+        );
+    }
+
+    #[test]
+    fn chattering_without_a_sticking_mode_stops_early_with_a_typed_error() {
+        let mut block = Block::new(false);
+        let r = integrate(
+            &mut block,
+            &[0.0, 0.2],
+            &[10.0],
+            &SolverOptions::default(),
+            |_, _| {},
+        );
+        let Err(SimulationError::Chattering {
+            time, ref event, ..
+        }) = r
+        else {
+            panic!("{r:?}");
+        };
+        assert!((time - block_stops()).abs() < 1e-9, "at {time}");
+        assert_eq!(event, "block friction");
+        let message = r.unwrap_err().to_string();
+        assert!(message.contains("block friction") && message.contains(&format!("{time}")));
+        // Without the guard the relay would take every allowed step, each with a root search.
+        assert!(
+            block.probes.get() < 10_000,
+            "{} event probes",
+            block.probes.get()
+        );
+        assert!(
+            block.rhs_calls.get() < 5_000,
+            "{} rhs calls",
+            block.rhs_calls.get()
+        );
     }
 
     #[test]

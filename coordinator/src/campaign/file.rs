@@ -117,5 +117,5 @@ pub(super) fn default_max_evaluations() -> usize {
 pub(super) struct SolverSection {
     pub(super) rtol: Option<f64>,
     pub(super) atol: Option<f64>,
-    pub(super) max_steps: Option<usize>,
+    pub(super) max_steps: Option<u64>,
 }

@@ -366,6 +366,39 @@ seed = 7
     }
 
     #[test]
+    fn solver_options_are_held_to_the_workers_limits() {
+        let with = |solver: &str| format!("{GOOD}[solver]\n{solver}\n");
+        let solver_line = GOOD.lines().count() + 1;
+        let c = parse(&with("max_steps = 10000000\nrtol = 1e-6")).unwrap();
+        assert_eq!((c.solver.max_steps, c.solver.rtol), (10_000_000, 1e-6));
+        for (lines, field) in [
+            ("max_steps = 10000001", "solver.max_steps"),
+            ("max_steps = 0", "solver.max_steps"),
+            ("rtol = 0.5", "solver.rtol"),
+            ("atol = 0.0", "solver.atol"),
+        ] {
+            let e = parse(&with(lines)).unwrap_err();
+            assert_eq!(e.field, field, "{lines}: {e}");
+            assert!(
+                e.line.is_some_and(|l| l >= solver_line),
+                "{lines}: {e} (the [solver] table is on line {solver_line})"
+            );
+        }
+    }
+
+    #[test]
+    fn unknown_names_suggest_the_nearest() {
+        let e = error_for("name = \"armFriction\"", "name = \"armfriction\"");
+        assert!(e.message.ends_with("did you mean `armFriction`?"), "{e}");
+        assert!(!e.message.contains("pend_Izz"), "{e}");
+        let e = error_for("model = \"armJoint.phi\"", "model = \"armJoint.ph\"");
+        assert!(e.message.ends_with("did you mean `armJoint.phi`?"), "{e}");
+        let e = error_for("name = \"furuta\"", "name = \"furtua\"");
+        assert!(e.message.ends_with("did you mean `furuta`?"), "{e}");
+        assert_eq!(e.line, Some(4));
+    }
+
+    #[test]
     fn output_weights_sigmas_and_scales() {
         let with = |lines: &str| GOOD.replacen("weight = 1.0", lines, 1);
         let c = parse(&with("sigma = 0.5")).unwrap();

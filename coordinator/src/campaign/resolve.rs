@@ -9,7 +9,8 @@ use super::{
     Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, OutputScale, Scale,
     Search,
 };
-use calib_worker::{models, Model, ModelInfo, SolverOptions};
+use calib_worker::validate::{self, SolverOverrides};
+use calib_worker::{Model, ModelInfo, SolverOptions};
 use std::path::{Path, PathBuf};
 use toml::Spanned;
 
@@ -107,28 +108,10 @@ fn resolve_model(
     section: &ModelSection,
     at: &Locator,
 ) -> Result<&'static dyn Model, CampaignError> {
-    let name = section.name.get_ref();
-    match models::find(name) {
-        Some(model) => Ok(model),
-        None => {
-            let known: Vec<_> = models::all()
-                .iter()
-                .map(|m| m.info().name.clone())
-                .collect();
-            at.error(
-                section.name.span(),
-                "model.name",
-                format!("unknown model `{name}` (hosted: {})", known.join(", ")),
-            )
-        }
+    match validate::model(section.name.get_ref()) {
+        Ok(model) => Ok(model),
+        Err(e) => at.error(section.name.span(), "model.name", e.message),
     }
-}
-
-/// Every parameter and effect name of the model, for "it has: …" messages.
-fn known_parameters(info: &ModelInfo) -> String {
-    let mut names: Vec<&str> = info.parameters.iter().map(|p| p.name.as_str()).collect();
-    names.extend(info.effects.iter().map(|e| e.name.as_str()));
-    names.join(", ")
 }
 
 /// The model defaults with the campaign's fixed values, and the indices it fixed.
@@ -141,26 +124,13 @@ fn resolve_fixed(
     let mut fixed = Vec::new();
     for (name, value) in &section.parameters {
         let field = format!("model.parameters.{}", name.get_ref());
-        let Some(index) = info.parameter_index(name.get_ref()) else {
-            return at.error(
-                name.span(),
-                &field,
-                format!(
-                    "model `{}` has no parameter `{}` (it has: {})",
-                    info.name,
-                    name.get_ref(),
-                    known_parameters(info)
-                ),
-            );
+        let index = match validate::parameter(info, name.get_ref()) {
+            Ok(index) => index,
+            Err(e) => return at.error(name.span(), &field, e.message),
         };
         let v = *value.get_ref();
-        let (lo, hi) = info.bounds_at(index);
-        if !v.is_finite() || v < lo || v > hi {
-            return at.error(
-                value.span(),
-                &field,
-                format!("value {v} is outside the admissible range [{lo}, {hi}]"),
-            );
+        if let Err(e) = validate::parameter_value(info, index, v) {
+            return at.error(value.span(), &field, e.message);
         }
         base[index] = v;
         fixed.push(index);
@@ -190,28 +160,14 @@ fn resolve_free(
         let p = entry.get_ref();
         let name = p.name.get_ref();
         let field = format!("{section}[{i}] ({name})");
-        if is_effect && info.effect(name).is_none() {
-            let effects: Vec<&str> = info.effects.iter().map(|e| e.name.as_str()).collect();
-            return at.error(
-                p.name.span(),
-                &field,
-                format!(
-                    "model `{}` has no effect `{name}` (it has: {})",
-                    info.name,
-                    effects.join(", ")
-                ),
-            );
+        if is_effect {
+            if let Err(e) = validate::effect(info, name) {
+                return at.error(p.name.span(), &field, e.message);
+            }
         }
-        let Some(index) = info.parameter_index(name) else {
-            return at.error(
-                p.name.span(),
-                &field,
-                format!(
-                    "model `{}` has no parameter `{name}` (it has: {})",
-                    info.name,
-                    known_parameters(info)
-                ),
-            );
+        let index = match validate::parameter(info, name) {
+            Ok(index) => index,
+            Err(e) => return at.error(p.name.span(), &field, e.message),
         };
         if free.iter().any(|f| f.index == index) {
             return at.error(span, &field, "is listed twice".into());
@@ -223,26 +179,8 @@ fn resolve_free(
                 "is both fixed in [model.parameters] and free here".into(),
             );
         }
-        if !p.min.is_finite() || !p.max.is_finite() {
-            return at.error(span, &field, "min and max must be finite numbers".into());
-        }
-        if p.min >= p.max {
-            return at.error(
-                span,
-                &field,
-                format!("min ({}) must be below max ({})", p.min, p.max),
-            );
-        }
-        let (lo, hi) = info.bounds_at(index);
-        if p.min < lo || p.max > hi {
-            return at.error(
-                span,
-                &field,
-                format!(
-                    "bounds [{}, {}] exceed the model's admissible range [{lo}, {hi}]",
-                    p.min, p.max
-                ),
-            );
+        if let Err(e) = validate::bounds(info, index, p.min, p.max) {
+            return at.error(span, &field, e.message);
         }
         if p.scale == Scale::Log10 && p.min <= 0.0 {
             return at.error(
@@ -305,17 +243,9 @@ fn resolve_outputs(
         let o = entry.get_ref();
         let output = o.model.get_ref();
         let field = format!("outputs[{i}] ({output})");
-        let Some(model_index) = info.output_index(output) else {
-            let known: Vec<_> = info.outputs.iter().map(|o| o.name.as_str()).collect();
-            return at.error(
-                o.model.span(),
-                &field,
-                format!(
-                    "model `{}` has no output `{output}` (it has: {})",
-                    info.name,
-                    known.join(", ")
-                ),
-            );
+        let model_index = match validate::output(info, output) {
+            Ok(index) => index,
+            Err(e) => return at.error(o.model.span(), &field, e.message),
         };
         let weight = match (&o.weight, &o.sigma) {
             (Some(_), Some(sigma)) => {
@@ -426,12 +356,8 @@ fn resolve_stop_time(
         }
         None => window_stop,
     };
-    if stop_time > 1e6 {
-        return at.error(
-            model_span,
-            "model.stop_time",
-            format!("{stop_time} s is beyond what calib simulates (1e6 s)"),
-        );
+    if let Err(e) = validate::stop_time(stop_time) {
+        return at.error(model_span, "model.stop_time", e.message);
     }
     Ok(stop_time)
 }
@@ -489,31 +415,20 @@ fn resolve_solver(
     model: &dyn Model,
     at: &Locator,
 ) -> Result<SolverOptions, CampaignError> {
-    let mut solver = model.default_options();
-    let Some(s) = section else {
-        return Ok(solver);
+    let Some(section) = section else {
+        return Ok(model.default_options());
     };
-    let span = s.span();
-    let s = s.into_inner();
-    if let Some(rtol) = s.rtol {
-        if !(rtol > 0.0 && rtol < 1.0) {
-            return at.error(span, "solver.rtol", format!("{rtol} must be in (0, 1)"));
-        }
-        solver.rtol = rtol;
+    let span = section.span();
+    let s = section.into_inner();
+    let overrides = SolverOverrides {
+        rtol: s.rtol,
+        atol: s.atol,
+        max_steps: s.max_steps,
+    };
+    match validate::solver_options(model, overrides) {
+        Ok(solver) => Ok(solver),
+        Err((option, e)) => at.error(span, &format!("solver.{option}"), e.message),
     }
-    if let Some(atol) = s.atol {
-        if !(atol > 0.0 && atol.is_finite()) {
-            return at.error(span, "solver.atol", format!("{atol} must be > 0"));
-        }
-        solver.atol = atol;
-    }
-    if let Some(max_steps) = s.max_steps {
-        if max_steps == 0 {
-            return at.error(span, "solver.max_steps", "must be at least 1".into());
-        }
-        solver.max_steps = max_steps;
-    }
-    Ok(solver)
 }
 
 fn resolve_diagnosis(
@@ -558,12 +473,11 @@ fn resolve_diagnosis(
         diagnosis.refit = refit;
     }
     if let Some(candidates) = d.candidates {
-        if let Some(unknown) = candidates.iter().find(|c| info.effect(c).is_none()) {
-            return at.error(
-                span,
-                "diagnosis.candidates",
-                format!("model `{}` has no effect `{unknown}`", info.name),
-            );
+        if let Some(e) = candidates
+            .iter()
+            .find_map(|c| validate::effect(info, c).err())
+        {
+            return at.error(span, "diagnosis.candidates", e.message);
         }
         diagnosis.candidates = Some(candidates);
     }

@@ -497,6 +497,14 @@ impl HybridSystem for FurutaSystem {
         }
     }
 
+    fn event_name(&self, event: usize) -> String {
+        format!("{} bearing stick-slip", JOINTS[event])
+    }
+
+    // No `on_chattering`: each joint has its sticking mode already, entered at every stop it
+    // can hold, so switching that still accumulates has no mode to settle in and ends the
+    // simulation with a typed error.
+
     fn on_event(&mut self, _t: f64, y: &mut [f64], event: usize) {
         if self.modes[event] != Mode::Stuck {
             // The joint came to rest.

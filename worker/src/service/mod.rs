@@ -26,19 +26,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 use tonic::transport::server::TcpIncoming;
 
-/// Bounds on what one request may ask for.
-pub mod limits {
-    /// Largest gRPC message accepted or sent [bytes].
-    pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
-    /// Most times in one grid.
-    pub const MAX_TIMES: usize = 500_000;
-    /// Most points in one Evaluate request.
-    pub const MAX_POINTS: usize = 10_000;
-    /// Latest stop time [s].
-    pub const MAX_STOP_TIME: f64 = 1e6;
-    /// Largest step budget of one simulation.
-    pub const MAX_STEPS: u64 = 10_000_000;
-}
+pub use crate::limits;
 
 /// How a worker runs.
 #[derive(Debug, Clone)]

@@ -5,8 +5,7 @@
 //! learns exactly what to fix.
 
 use super::error::{Error, Result};
-use super::limits;
-use crate::{models, Model, ModelInfo, SolverOptions};
+use crate::{limits, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
 /// Reject any protocol version but ours.
@@ -23,37 +22,19 @@ pub fn check_protocol(client: u32) -> Result<()> {
 
 /// The hosted model called `name`.
 pub fn hosted_model(name: &str) -> Result<&'static dyn Model> {
-    models::find(name).ok_or_else(|| {
-        let known: Vec<_> = models::all()
-            .iter()
-            .map(|m| m.info().name.clone())
-            .collect();
-        Error::invalid(
-            "model",
-            format!("unknown model `{name}` (hosted: {})", known.join(", ")),
-        )
-    })
+    validate::model(name).map_err(|e| Error::invalid("model", e.message))
 }
 
-/// A value for entry `index` of the model's parameter vector: finite and within its range.
+/// A refusal of [`validate`] placed at `field`, or at its element when it names one.
+fn at(field: &str, e: validate::Invalid) -> Error {
+    match e.index {
+        Some(i) => Error::invalid(format!("{field}[{i}]"), e.message),
+        None => Error::invalid(field, e.message),
+    }
+}
+
 fn check_value(info: &ModelInfo, index: usize, value: f64, field: &str) -> Result<()> {
-    let name = info.name_at(index);
-    if !value.is_finite() {
-        return Err(Error::invalid(
-            field,
-            format!("`{name}` = {value} is not a finite number"),
-        ));
-    }
-    let (lo, hi) = info.bounds_at(index);
-    // Points mapped from a unit box may land an ulp outside the bounds they came from.
-    let slack = 1e-9 * (hi - lo).abs().max(f64::MIN_POSITIVE);
-    if value < lo - slack || value > hi + slack {
-        return Err(Error::invalid(
-            field,
-            format!("`{name}` = {value} is outside its admissible range [{lo}, {hi}]"),
-        ));
-    }
-    Ok(())
+    validate::parameter_value(info, index, value).map_err(|e| at(field, e))
 }
 
 /// The model's defaults overridden by the named values.
@@ -61,12 +42,8 @@ fn parameter_vector(info: &ModelInfo, values: &[proto::ParameterValue]) -> Resul
     let mut params = info.default_vector();
     let mut seen = vec![false; params.len()];
     for (i, p) in values.iter().enumerate() {
-        let index = info.parameter_index(&p.name).ok_or_else(|| {
-            Error::invalid(
-                format!("parameters[{i}].name"),
-                format!("model `{}` has no parameter `{}`", info.name, p.name),
-            )
-        })?;
+        let index = validate::parameter(info, &p.name)
+            .map_err(|e| at(&format!("parameters[{i}].name"), e))?;
         if std::mem::replace(&mut seen[index], true) {
             return Err(Error::invalid(
                 format!("parameters[{i}].name"),
@@ -79,97 +56,27 @@ fn parameter_vector(info: &ModelInfo, values: &[proto::ParameterValue]) -> Resul
     Ok(params)
 }
 
-/// Output times: non-empty, finite, ≥ 0, non-decreasing, bounded in number and extent.
 fn check_times(times: &[f64], field: &str) -> Result<()> {
-    let Some(&stop) = times.last() else {
-        return Err(Error::invalid(field, "empty time grid"));
-    };
-    if times.len() > limits::MAX_TIMES {
-        return Err(Error::invalid(
-            field,
-            format!(
-                "{} times exceed the limit of {}",
-                times.len(),
-                limits::MAX_TIMES
-            ),
-        ));
-    }
-    if let Some(i) = times.iter().position(|t| !t.is_finite()) {
-        return Err(Error::invalid(
-            format!("{field}[{i}]"),
-            format!("{} is not a finite time", times[i]),
-        ));
-    }
-    if stop < 0.0 {
-        return Err(Error::invalid(
-            field,
-            format!("stop time {stop} s is negative"),
-        ));
-    }
-    if stop > limits::MAX_STOP_TIME {
-        return Err(Error::invalid(
-            field,
-            format!(
-                "stop time {stop} s is beyond what calib simulates ({} s)",
-                limits::MAX_STOP_TIME
-            ),
-        ));
-    }
-    if let Some(i) = times.iter().position(|t| *t < 0.0) {
-        return Err(Error::invalid(
-            format!("{field}[{i}]"),
-            format!("{} s is negative: simulations start at 0 s", times[i]),
-        ));
-    }
-    if let Some(i) = times.windows(2).position(|w| w[1] < w[0]) {
-        return Err(Error::invalid(
-            format!("{field}[{}]", i + 1),
-            format!(
-                "{} s comes after {} s: times must not decrease",
-                times[i + 1],
-                times[i]
-            ),
-        ));
-    }
-    Ok(())
+    validate::output_grid(times).map_err(|e| at(field, e))
 }
 
 fn output_index(info: &ModelInfo, name: &str, field: &str) -> Result<usize> {
-    info.output_index(name).ok_or_else(|| {
-        Error::invalid(
-            field,
-            format!("model `{}` has no output `{name}`", info.name),
-        )
-    })
+    validate::output(info, name).map_err(|e| at(field, e))
 }
 
-fn solver_options(options: Option<proto::SolverOptions>) -> Result<SolverOptions> {
-    let Some(o) = options else {
-        return Ok(SolverOptions::default());
-    };
-    if !(o.rtol > 0.0 && o.rtol < 1.0) {
-        return Err(Error::invalid(
-            "solver.rtol",
-            format!("{} is not in (0, 1)", o.rtol),
-        ));
-    }
-    if !(o.atol > 0.0 && o.atol.is_finite()) {
-        return Err(Error::invalid(
-            "solver.atol",
-            format!("{} is not a positive finite number", o.atol),
-        ));
-    }
-    if o.max_steps == 0 || o.max_steps > limits::MAX_STEPS {
-        return Err(Error::invalid(
-            "solver.max_steps",
-            format!("{} is not between 1 and {}", o.max_steps, limits::MAX_STEPS),
-        ));
-    }
-    Ok(SolverOptions {
-        rtol: o.rtol,
-        atol: o.atol,
-        max_steps: o.max_steps as usize,
-    })
+/// The request's solver options, or the model's own calibration tolerances when it sends
+/// none.
+fn solver_options(
+    model: &dyn Model,
+    options: Option<proto::SolverOptions>,
+) -> Result<SolverOptions> {
+    let overrides = options.map_or_else(Default::default, |o| validate::SolverOverrides {
+        rtol: Some(o.rtol),
+        atol: Some(o.atol),
+        max_steps: Some(o.max_steps),
+    });
+    validate::solver_options(model, overrides)
+        .map_err(|(option, e)| at(&format!("solver.{option}"), e))
 }
 
 /// One simulation, checked.
@@ -204,7 +111,7 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
             params,
             times: r.times,
             outputs,
-            solver: solver_options(r.solver)?,
+            solver: solver_options(model, r.solver)?,
         })
     }
 }
@@ -292,12 +199,7 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
         let mut free = Vec::with_capacity(r.free_parameters.len());
         for (i, name) in r.free_parameters.iter().enumerate() {
             let field = format!("free_parameters[{i}]");
-            let index = info.parameter_index(name).ok_or_else(|| {
-                Error::invalid(
-                    &field,
-                    format!("model `{}` has no parameter `{name}`", info.name),
-                )
-            })?;
+            let index = validate::parameter(info, name).map_err(|e| at(&field, e))?;
             if free.contains(&index) {
                 return Err(Error::invalid(field, format!("`{name}` is listed twice")));
             }
@@ -383,7 +285,74 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
             measurement_hash,
             measurement,
             points,
-            solver: solver_options(r.solver)?,
+            solver: solver_options(model, r.solver)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn simulate_request(
+        model: &str,
+        solver: Option<proto::SolverOptions>,
+    ) -> proto::SimulateRequest {
+        proto::SimulateRequest {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            model: model.into(),
+            parameters: vec![],
+            times: vec![0.0, 1.0],
+            outputs: vec![],
+            solver,
+        }
+    }
+
+    #[test]
+    fn a_request_without_solver_options_gets_the_models_own_tolerances() {
+        let hx = Simulation::try_from(simulate_request("hx_lowfi", None)).unwrap();
+        assert_eq!(hx.solver.rtol, 1e-6);
+        assert_eq!(hx.solver, hx.model.default_options());
+        let furuta = Simulation::try_from(simulate_request("furuta", None)).unwrap();
+        assert_eq!(furuta.solver.rtol, 1e-8);
+        let given = proto::SolverOptions {
+            rtol: 1e-4,
+            atol: 1e-6,
+            max_steps: 10,
+        };
+        let s = Simulation::try_from(simulate_request("hx_lowfi", Some(given))).unwrap();
+        assert_eq!(
+            (s.solver.rtol, s.solver.atol, s.solver.max_steps),
+            (1e-4, 1e-6, 10)
+        );
+    }
+
+    #[test]
+    fn refusals_name_the_field_and_suggest_the_nearest_name() {
+        let mut r = simulate_request("furuta", None);
+        r.parameters.push(proto::ParameterValue {
+            name: "armFrict".into(),
+            value: 0.1,
+        });
+        let e = Simulation::try_from(r).err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "parameters[0].name: model `furuta` has no parameter `armFrict`; did you mean \
+             `armFriction`?"
+        );
+        let mut r = simulate_request("furuta", None);
+        r.times = vec![0.0, 2.0, 1.0];
+        let e = Simulation::try_from(r).err().unwrap();
+        assert!(e.to_string().starts_with("times[2]: "), "{e}");
+        let r = simulate_request(
+            "furuta",
+            Some(proto::SolverOptions {
+                rtol: 1e-8,
+                atol: 1e-10,
+                max_steps: 20_000_000,
+            }),
+        );
+        let e = Simulation::try_from(r).err().unwrap();
+        assert!(e.to_string().starts_with("solver.max_steps: "), "{e}");
     }
 }

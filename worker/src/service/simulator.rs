@@ -178,6 +178,7 @@ fn failure(e: &SimulationError) -> proto::SimulationFailure {
         SimulationError::StepLimit { time, .. } => (Kind::StepLimit, *time),
         SimulationError::StepTooSmall { time } => (Kind::StepTooSmall, *time),
         SimulationError::Diverged { time } => (Kind::Diverged, *time),
+        SimulationError::Chattering { time, .. } => (Kind::Unspecified, *time),
         SimulationError::InvalidInput(_) => (Kind::Unspecified, f64::NAN),
         SimulationError::Failed { time, .. } => (Kind::Unspecified, *time),
     };

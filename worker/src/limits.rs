@@ -1,0 +1,21 @@
+//! Bounds on what one simulation may ask for. A campaign file, `calib simulate` and a
+//! worker's gRPC request are checked against these same numbers ([`crate::validate`]), so
+//! that what one accepts the others never refuse.
+
+use std::ops::RangeInclusive;
+
+/// Largest gRPC message accepted or sent [bytes].
+pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+/// Most times in one output grid.
+pub const MAX_TIMES: usize = 500_000;
+/// Most points in one Evaluate request.
+pub const MAX_POINTS: usize = 10_000;
+/// Latest stop time [s].
+pub const MAX_STOP_TIME: f64 = 1e6;
+/// Step budgets of one simulation (accepted plus rejected steps).
+pub const MAX_STEPS: RangeInclusive<u64> = 1..=10_000_000;
+/// Relative tolerances of the ODE solver: below 1e-14 the error control asks for more than
+/// double precision resolves, above 0.1 it controls nothing.
+pub const RTOL: RangeInclusive<f64> = 1e-14..=0.1;
+/// Absolute tolerances of the ODE solver, in the unit of each state.
+pub const ATOL: RangeInclusive<f64> = 1e-300..=1e300;
