@@ -9,6 +9,7 @@ use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
 use crate::error::{Error, Result};
 use crate::store::SledStore;
 use calib_proto::v1::registry_server::RegistryServer;
+use calib_security::ServerSecurity;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -28,6 +29,8 @@ pub struct CoordinatorConfig {
     /// Folder for the results of resumed campaigns, one `<name>/` each [default:
     /// `results/<name>/` beside each campaign file].
     pub results: Option<PathBuf>,
+    /// TLS and the token this coordinator's server requires.
+    pub security: ServerSecurity,
 }
 
 impl CoordinatorConfig {
@@ -38,6 +41,7 @@ impl CoordinatorConfig {
             dispatch,
             store: None,
             results: None,
+            security: ServerSecurity::default(),
         }
     }
 }
@@ -132,13 +136,17 @@ pub fn serve_coordinator(
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
+    let mut builder = config
+        .security
+        .apply(tonic::transport::Server::builder())
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?;
     let (shutdown_tx, shutdown_rx) = oneshot::channel::<()>();
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
     let server = tokio::spawn(async move {
         health_reporter
             .set_serving::<RegistryServer<RegistryService>>()
             .await;
-        tonic::transport::Server::builder()
+        builder
             .add_service(health)
             .add_service(reflection)
             .add_service(registry)
@@ -147,7 +155,12 @@ pub fn serve_coordinator(
             })
             .await
     });
-    tracing::info!(%address, "coordinator serving");
+    tracing::info!(
+        %address,
+        tls = config.security.tls.is_some(),
+        token = config.security.token.is_some(),
+        "coordinator serving"
+    );
     let control = Arc::new(resume::ResumeControl::default());
     let resume = store.map(|store| {
         let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
