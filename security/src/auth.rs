@@ -62,7 +62,9 @@ impl<S> RequireToken<S> {
         if token.matches(presented) {
             None
         } else {
-            Some(tonic::Status::unauthenticated("the bearer token is not valid"))
+            Some(tonic::Status::unauthenticated(
+                "the bearer token is not valid",
+            ))
         }
     }
 }
@@ -113,8 +115,15 @@ mod tests {
     fn refuses_a_missing_or_wrong_token_but_not_health_checks() {
         let guarded = layer(Some("right"));
         let simulate = "/calib.v1.Simulator/Simulate";
-        assert!(guarded.refusal(&request(simulate, Some("Bearer right"))).is_none());
-        for presented in [None, Some("Bearer wrong"), Some("Bearer "), Some("Basic right")] {
+        assert!(guarded
+            .refusal(&request(simulate, Some("Bearer right")))
+            .is_none());
+        for presented in [
+            None,
+            Some("Bearer wrong"),
+            Some("Bearer "),
+            Some("Basic right"),
+        ] {
             let status = guarded
                 .refusal(&request(simulate, presented))
                 .unwrap_or_else(|| panic!("{presented:?} let through"));

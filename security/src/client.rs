@@ -22,7 +22,11 @@ pub type SecureChannel = InterceptedService<Channel, PresentToken>;
 impl ClientSecurity {
     /// An endpoint for `url`: TLS for `https://` (verifying the server as `server_name`,
     /// by default the URL's host), plain HTTP/2 for `http://`.
-    pub fn endpoint(&self, url: &str, server_name: Option<&str>) -> Result<Endpoint, SecurityError> {
+    pub fn endpoint(
+        &self,
+        url: &str,
+        server_name: Option<&str>,
+    ) -> Result<Endpoint, SecurityError> {
         let url_error = |reason: String| SecurityError::Url {
             url: url.to_string(),
             reason,
@@ -67,10 +71,8 @@ impl PresentToken {
     pub fn new(token: Option<&Token>) -> Self {
         Self {
             value: token.map(|t| {
-                let mut value: MetadataValue<Ascii> = t
-                    .header_value()
-                    .parse()
-                    .expect("a token is visible ASCII");
+                let mut value: MetadataValue<Ascii> =
+                    t.header_value().parse().expect("a token is visible ASCII");
                 value.set_sensitive(true);
                 value
             }),
@@ -87,9 +89,14 @@ impl std::fmt::Debug for PresentToken {
 }
 
 impl tonic::service::Interceptor for PresentToken {
-    fn call(&mut self, mut request: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+    fn call(
+        &mut self,
+        mut request: tonic::Request<()>,
+    ) -> Result<tonic::Request<()>, tonic::Status> {
         if let Some(value) = &self.value {
-            request.metadata_mut().insert("authorization", value.clone());
+            request
+                .metadata_mut()
+                .insert("authorization", value.clone());
         }
         Ok(request)
     }

@@ -39,9 +39,9 @@ impl DialArgs {
 
     pub fn client(&self) -> Result<ClientSecurity, Failure> {
         let ca = match &self.tls_ca {
-            Some(path) => Some(
-                TrustedCa::load(path).map_err(|e| Failure::input(format!("--tls-ca {e}")))?,
-            ),
+            Some(path) => {
+                Some(TrustedCa::load(path).map_err(|e| Failure::input(format!("--tls-ca {e}")))?)
+            }
             None => None,
         };
         Ok(ClientSecurity {

@@ -5,9 +5,9 @@ use crate::evaluator::Outputs;
 use crate::objective::{Evaluation, Objective};
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
+use calib_security::{ClientSecurity, SecureChannel};
 use calib_worker::scoring;
 use calib_worker::service::limits::MAX_MESSAGE_BYTES;
-use calib_security::{ClientSecurity, SecureChannel};
 use std::time::Duration;
 use tonic_health::pb::health_client::HealthClient;
 

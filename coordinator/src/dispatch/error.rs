@@ -56,7 +56,10 @@ impl From<tonic::Status> for WorkerError {
             Code::NotFound => WorkerError::MeasurementMissing,
             Code::ResourceExhausted => WorkerError::Busy(message),
             Code::FailedPrecondition | Code::Unimplemented => WorkerError::Incompatible(message),
-            code => WorkerError::Unavailable(format!("{code:?}: {message}")),
+            code => match calib_security::failure::plain_to_tls_hint(&status) {
+                Some(hint) => WorkerError::Unavailable(format!("{code:?}: {message}; {hint}")),
+                None => WorkerError::Unavailable(format!("{code:?}: {message}")),
+            },
         }
     }
 }
@@ -90,7 +93,10 @@ mod tests {
             (Status::deadline_exceeded("late"), true),
             (Status::failed_precondition("protocol_version"), true),
             (Status::not_found("measurement_hash"), true),
-            (Status::unauthenticated("the bearer token is not valid"), false),
+            (
+                Status::unauthenticated("the bearer token is not valid"),
+                false,
+            ),
         ];
         for (status, retryable) in cases {
             let error = WorkerError::from(status.clone());

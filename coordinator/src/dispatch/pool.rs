@@ -341,11 +341,7 @@ impl WorkerPool {
     /// token or certificate); an empty pool may still fill.
     pub fn has_prospects(&self) -> bool {
         let state = self.state.lock().expect("pool lock");
-        state.workers.is_empty()
-            || state
-                .workers
-                .iter()
-                .any(|w| !w.health.is_set_aside())
+        state.workers.is_empty() || state.workers.iter().any(|w| !w.health.is_set_aside())
     }
 
     fn probe_soon(self: &Arc<Self>, worker: u64) {

@@ -88,7 +88,7 @@ async fn register_once(
         .connect()
         .await
         .map_err(|e| match calib_security::failure::tls_failure(&e) {
-            Some(reason) => Failure::Refused(format!("TLS handshake failed: {reason}")),
+            Some(reason) => Failure::Refused(reason),
             None => Failure::Other(e.to_string()),
         })?;
     let answer = proto::registry_client::RegistryClient::new(security.authorize(channel))
