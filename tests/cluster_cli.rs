@@ -109,18 +109,6 @@ fn an_unbounded_deadline_or_wait_is_refused_as_bad_input() {
 }
 
 #[test]
-fn https_workers_are_refused_until_tls_is_built_in() {
-    let dir = tempfile::tempdir().unwrap();
-    let campaign = small_campaign(dir.path());
-    let (code, stderr) = calibrate_on(&campaign, &["--workers", "https://127.0.0.1:50051"]);
-    assert_eq!(code, Some(2), "{stderr}");
-    assert!(
-        stderr.contains("--workers `https://127.0.0.1:50051`: TLS is not built in"),
-        "{stderr}"
-    );
-}
-
-#[test]
 fn out_is_a_results_root_with_one_folder_per_campaign() {
     let dir = tempfile::tempdir().unwrap();
     let campaign = small_campaign(dir.path());

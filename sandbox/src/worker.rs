@@ -6,6 +6,8 @@ use std::net::SocketAddr;
 
 pub struct SandboxWorker {
     worker: RunningWorker,
+    /// `http`, or `https` when serving TLS.
+    scheme: &'static str,
     runtime: Option<tokio::runtime::Runtime>,
 }
 
@@ -32,29 +34,39 @@ impl SandboxWorker {
         Self::serve(address, |config| config.slots = slots)
     }
 
+    /// A worker on a loopback port, configured by `configure` (slots, security, registration).
+    pub fn start_with(configure: impl FnOnce(&mut WorkerConfig)) -> Self {
+        Self::serve(loopback(), configure)
+    }
+
     fn serve(address: SocketAddr, configure: impl FnOnce(&mut WorkerConfig)) -> Self {
         let runtime = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)
             .enable_all()
             .build()
             .expect("worker runtime");
-        let worker = runtime.block_on(async {
+        let (worker, scheme) = runtime.block_on(async {
             let listener = tokio::net::TcpListener::bind(address)
                 .await
                 .unwrap_or_else(|e| panic!("bind {address}: {e}"));
             let mut config = WorkerConfig::new(listener.local_addr().expect("bound"));
             config.queue_bound = 64;
             configure(&mut config);
-            serve_worker(listener, config).expect("serve worker")
+            let scheme = config.security.scheme();
+            (
+                serve_worker(listener, config).expect("serve worker"),
+                scheme,
+            )
         });
         Self {
             worker,
+            scheme,
             runtime: Some(runtime),
         }
     }
 
     pub fn url(&self) -> String {
-        format!("http://{}", self.worker.address())
+        format!("{}://{}", self.scheme, self.worker.address())
     }
 
     pub fn address(&self) -> SocketAddr {

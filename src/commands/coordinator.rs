@@ -12,6 +12,8 @@ pub struct Args {
     listen: SocketAddr,
     #[command(flatten)]
     workers: super::WorkersArgs,
+    #[command(flatten)]
+    serve: super::security::ServeArgs,
     /// Evaluation store (a folder, as for `calib calibrate --db`). Campaigns it holds
     /// unfinished (their `calib calibrate` or coordinator was killed) are resumed on the
     /// workers as soon as the coordinator is up, replaying every stored evaluation instead of
@@ -40,8 +42,9 @@ pub fn run(args: Args) -> Outcome {
     };
     let mut config = CoordinatorConfig::new(
         args.listen,
-        args.workers.apply(DispatchConfig::new(addresses)),
+        args.workers.apply(DispatchConfig::new(addresses))?,
     );
+    config.security = args.serve.server(&args.workers.dial)?;
     config.store = args.db;
     config.results = args.out;
     config.api = args.api_dir;

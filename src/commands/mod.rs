@@ -8,6 +8,7 @@ pub mod calibrate;
 pub mod coordinator;
 pub mod diagnose;
 pub mod models;
+pub mod security;
 pub mod simulate;
 pub mod store;
 pub mod submit;

@@ -17,14 +17,18 @@ pub struct Args {
     /// Bound of the measurement cache [MiB].
     #[arg(long, default_value_t = 256)]
     cache_mib: usize,
-    /// Register with the coordinator at this URL (e.g. http://coordinator:50050) and renew
-    /// the registration as a heartbeat.
+    /// Register with the coordinator at this URL (e.g. http://coordinator:50050, or
+    /// https:// with --tls-ca) and renew the registration as a heartbeat.
     #[arg(long, value_name = "URL")]
     register: Option<String>,
     /// URL the coordinator should dial back [default: the bound address, or this host's
-    /// name when listening on every interface].
+    /// name when listening on every interface; https:// with --tls-cert].
     #[arg(long, value_name = "URL")]
     advertise: Option<String>,
+    #[command(flatten)]
+    serve: super::security::ServeArgs,
+    #[command(flatten)]
+    dial: super::security::DialArgs,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -42,6 +46,8 @@ pub fn run(args: Args) -> Outcome {
     config.cache_bytes = args.cache_mib << 20;
     config.register = args.register;
     config.advertise = args.advertise;
+    config.security = args.serve.server(&args.dial)?;
+    config.register_security = args.dial.client()?;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let worker = service::start_worker(config.clone())

@@ -9,10 +9,13 @@ use std::time::Duration;
 /// Where evaluations run, for the commands that dispatch them.
 #[derive(clap::Args, Debug, Clone)]
 pub struct WorkersArgs {
-    /// Workers to spread evaluations over, comma separated: http://HOST:PORT (one worker)
-    /// or dns:///NAME:PORT (every address NAME resolves to, re-resolved periodically).
+    /// Workers to spread evaluations over, comma separated: http://HOST:PORT or
+    /// https://HOST:PORT (one worker) or dns:///NAME:PORT (every address NAME resolves to,
+    /// re-resolved periodically; over TLS verified as NAME when --tls-ca is given).
     #[arg(long, value_name = "LIST")]
     pub workers: Option<String>,
+    #[command(flatten)]
+    pub dial: super::security::DialArgs,
     /// Deadline of one request to a worker [s].
     #[arg(long, default_value = "120", value_name = "SECONDS", value_parser = seconds)]
     pub deadline: Duration,
@@ -45,7 +48,7 @@ impl WorkersArgs {
     ) -> Result<RemoteWorkers, Failure> {
         let addresses =
             dispatch::parse_list(list).map_err(|e| Failure::input(format!("--workers {e}")))?;
-        let config = self.apply(DispatchConfig::new(addresses));
+        let config = self.apply(DispatchConfig::new(addresses))?;
         let wait = config.wait_for_workers;
         let workers = RemoteWorkers::connect(config)?;
         workers
@@ -59,10 +62,11 @@ impl WorkersArgs {
         self.connect_reporting(list, &|line| eprintln!("{line}"))
     }
 
-    pub fn apply(&self, mut config: DispatchConfig) -> DispatchConfig {
+    pub fn apply(&self, mut config: DispatchConfig) -> Result<DispatchConfig, Failure> {
         config.deadline = self.deadline;
         config.wait_for_workers = self.wait_for_workers;
-        config
+        config.security = self.dial.client()?;
+        Ok(config)
     }
 }
 

@@ -5,10 +5,10 @@ use crate::evaluator::Outputs;
 use crate::objective::{Evaluation, Objective};
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
+use calib_security::{ClientSecurity, SecureChannel};
 use calib_worker::scoring;
 use calib_worker::service::limits::MAX_MESSAGE_BYTES;
 use std::time::Duration;
-use tonic::transport::{Channel, Endpoint};
 use tonic_health::pb::health_client::HealthClient;
 
 /// What a probe learns about a worker.
@@ -148,14 +148,21 @@ impl WireSimulation {
 #[derive(Clone)]
 pub struct WorkerClient {
     url: String,
-    simulator: SimulatorClient<Channel>,
-    health: HealthClient<Channel>,
+    simulator: SimulatorClient<SecureChannel>,
+    health: HealthClient<SecureChannel>,
 }
 
 impl WorkerClient {
-    /// A client for the worker at `url`; connects on first use and reconnects as needed.
-    pub fn new(url: &str) -> Result<Self, String> {
-        let channel = Endpoint::from_shared(url.to_string())
+    /// A client for the worker at `url`, dialed with `security` (an `https://` worker is
+    /// verified as `server_name`, by default the URL's host); connects on first use and
+    /// reconnects as needed.
+    pub fn new(
+        url: &str,
+        security: &ClientSecurity,
+        server_name: Option<&str>,
+    ) -> Result<Self, String> {
+        let channel = security
+            .endpoint(url, server_name)
             .map_err(|e| format!("`{url}` is not a worker URL: {e}"))?
             .connect_timeout(Duration::from_secs(3))
             .tcp_nodelay(true)
@@ -163,6 +170,7 @@ impl WorkerClient {
             .keep_alive_timeout(Duration::from_secs(10))
             .keep_alive_while_idle(true)
             .connect_lazy();
+        let channel = security.authorize(channel);
         Ok(Self {
             url: url.to_string(),
             simulator: SimulatorClient::new(channel.clone())

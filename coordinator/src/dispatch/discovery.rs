@@ -47,9 +47,10 @@ impl std::fmt::Debug for Resolver {
 /// One entry of a `--workers` list.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum WorkerAddress {
-    /// `http://host:port`: one worker (`https://` is refused: no TLS is built in).
+    /// `http://host:port` or `https://host:port`: one worker.
     Url(String),
-    /// `dns:///name:port`: every address `name` resolves to, re-resolved periodically.
+    /// `dns:///name:port`: every address `name` resolves to, re-resolved periodically;
+    /// dialed over TLS, verified as `name`, when the pool trusts a CA of its own.
     Dns { host: String, port: u16 },
 }
 
@@ -75,24 +76,21 @@ impl std::str::FromStr for WorkerAddress {
                 port,
             });
         }
-        if text.starts_with("https://") {
-            return Err(format!(
-                "`{text}`: TLS is not built in; reach workers over http:// on a trusted \
-                 network (or through a TLS-terminating proxy)"
-            ));
-        }
-        if let Some(rest) = text.strip_prefix("http://") {
+        let scheme = ["http://", "https://"]
+            .into_iter()
+            .find_map(|scheme| text.strip_prefix(scheme).map(|rest| (scheme, rest)));
+        if let Some((scheme, rest)) = scheme {
             let authority = rest.split('/').next().unwrap_or_default();
             let has_port = authority
                 .rsplit_once(':')
                 .is_some_and(|(h, p)| !h.is_empty() && p.parse::<u16>().is_ok());
             if !has_port {
-                return Err(format!("`{text}`: expected http://HOST:PORT"));
+                return Err(format!("`{text}`: expected {scheme}HOST:PORT"));
             }
             return Ok(WorkerAddress::Url(text.trim_end_matches('/').to_string()));
         }
         Err(format!(
-            "`{text}`: a worker is http://HOST:PORT or dns:///NAME:PORT"
+            "`{text}`: a worker is http://HOST:PORT, https://HOST:PORT or dns:///NAME:PORT"
         ))
     }
 }
@@ -145,9 +143,14 @@ async fn resolve_forever(
                 continue;
             }
         };
+        let scheme = if pool.config().security.ca.is_some() {
+            "https"
+        } else {
+            "http"
+        };
         let mut urls: Vec<String> = addresses
             .into_iter()
-            .map(|a| format!("http://{a}"))
+            .map(|a| format!("{scheme}://{a}"))
             .collect();
         urls.sort();
         urls.dedup();
@@ -171,7 +174,7 @@ mod tests {
     #[test]
     fn parses_every_form() {
         assert_eq!(
-            parse_list("http://a:1, http://b:2/,dns:///w.default.svc:50051").unwrap(),
+            parse_list("http://a:1, http://b:2/,dns:///w.default.svc:50051,https://c:3").unwrap(),
             vec![
                 WorkerAddress::Url("http://a:1".into()),
                 WorkerAddress::Url("http://b:2".into()),
@@ -179,6 +182,7 @@ mod tests {
                     host: "w.default.svc".into(),
                     port: 50051
                 },
+                WorkerAddress::Url("https://c:3".into()),
             ]
         );
         assert_eq!(
@@ -199,7 +203,7 @@ mod tests {
             "dns:///:5",
             "http://:5",
             "tcp://a:1",
-            "https://a:1",
+            "https://a",
         ] {
             assert!(bad.parse::<WorkerAddress>().is_err(), "{bad}");
         }

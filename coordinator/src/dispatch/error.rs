@@ -22,23 +22,31 @@ pub enum WorkerError {
     /// Unreachable, timed out, crashed or shutting down: the request may succeed elsewhere.
     #[error("worker unavailable: {0}")]
     Unavailable(String),
+    /// The worker refused this client's token, or this client does not trust the worker's
+    /// certificate: a matter of configuration, which asking again does not change.
+    #[error("{0}")]
+    Untrusted(String),
     /// The answer does not fit the request (wrong number of results).
     #[error("malformed answer: {0}")]
     Malformed(String),
 }
 
 impl WorkerError {
-    /// True when the same request may succeed on another worker or later: the dispatcher
+    /// True when the same request may succeed on another worker or later (not when invalid,
+    /// nor when the token or the certificate was refused): the dispatcher
     /// retries the chunk elsewhere (and takes the worker out) or stops the batch with a
     /// [`Fault`](crate::evaluator::Fault) of kind `Rejected`. The one place that decides.
     pub fn is_retryable(&self) -> bool {
-        !matches!(self, WorkerError::Rejected(_))
+        !matches!(self, WorkerError::Rejected(_) | WorkerError::Untrusted(_))
     }
 }
 
 impl From<tonic::Status> for WorkerError {
     fn from(status: tonic::Status) -> Self {
         use tonic::Code;
+        if let Some(reason) = calib_security::failure::refusal(&status) {
+            return WorkerError::Untrusted(reason);
+        }
         let message = status.message().to_string();
         if refused(&status) {
             return WorkerError::Refused(message);
@@ -48,7 +56,10 @@ impl From<tonic::Status> for WorkerError {
             Code::NotFound => WorkerError::MeasurementMissing,
             Code::ResourceExhausted => WorkerError::Busy(message),
             Code::FailedPrecondition | Code::Unimplemented => WorkerError::Incompatible(message),
-            code => WorkerError::Unavailable(format!("{code:?}: {message}")),
+            code => match calib_security::failure::plain_to_tls_hint(&status) {
+                Some(hint) => WorkerError::Unavailable(format!("{code:?}: {message}; {hint}")),
+                None => WorkerError::Unavailable(format!("{code:?}: {message}")),
+            },
         }
     }
 }
@@ -82,6 +93,10 @@ mod tests {
             (Status::deadline_exceeded("late"), true),
             (Status::failed_precondition("protocol_version"), true),
             (Status::not_found("measurement_hash"), true),
+            (
+                Status::unauthenticated("the bearer token is not valid"),
+                false,
+            ),
         ];
         for (status, retryable) in cases {
             let error = WorkerError::from(status.clone());

@@ -230,14 +230,17 @@ pub async fn dispatch<W: Work>(
             Err(error) if !error.is_retryable() => {
                 pool.release(&lease, 0);
                 tracing::warn!(worker = %lease.client.url(), %error, "worker refused a request for good");
-                let reason = match error {
-                    WorkerError::Rejected(reason) => reason,
-                    other => other.to_string(),
-                };
-                fault.get_or_insert(Fault::rejected(format!(
-                    "worker {} rejected the request: {reason}",
-                    lease.client.url()
-                )));
+                let url = lease.client.url();
+                fault.get_or_insert(Fault::rejected(match error {
+                    WorkerError::Rejected(reason) => {
+                        format!("worker {url} rejected the request: {reason}")
+                    }
+                    WorkerError::Untrusted(reason) => {
+                        pool.set_aside_untrusted(lease.worker, reason.clone());
+                        format!("worker {url}: {reason}")
+                    }
+                    other => format!("worker {url} rejected the request: {other}"),
+                }));
                 pending.clear();
             }
             Err(error) => {

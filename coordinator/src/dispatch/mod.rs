@@ -17,6 +17,7 @@ pub use grpc::{GrpcEvaluator, Work};
 pub use pool::{Health, WorkerPool, WorkerView};
 
 use crate::error::{Error, Result};
+use calib_security::ClientSecurity;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -43,6 +44,8 @@ pub struct DispatchConfig {
     pub wait_for_workers: Duration,
     /// Heartbeat interval asked of registering workers.
     pub heartbeat: Duration,
+    /// The CA trusted for `https://` workers and the token presented to every worker.
+    pub security: ClientSecurity,
 }
 
 impl DispatchConfig {
@@ -58,6 +61,7 @@ impl DispatchConfig {
             max_attempts: 5,
             wait_for_workers: Duration::from_secs(300),
             heartbeat: Duration::from_secs(5),
+            security: ClientSecurity::default(),
         }
     }
 }
@@ -110,7 +114,8 @@ impl RemoteWorkers {
 
     /// Wait until a worker is up, telling `changed` what is awaited whenever that changes.
     /// Fails at once when every worker is a fixed URL where nothing listens and none was ever
-    /// up (workers not started, or a wrong port), and once `timeout` has passed otherwise.
+    /// up (workers not started, or a wrong port), when every worker is set aside (another
+    /// protocol, a refused token or certificate), and once `timeout` has passed otherwise.
     pub fn wait_for_worker(
         &self,
         timeout: Duration,
@@ -134,6 +139,9 @@ impl RemoteWorkers {
             if self.fixed && !workers.is_empty() && workers.iter().all(|w| w.refused && !w.ever_up)
             {
                 return Err(format!("no worker is listening: {state}"));
+            }
+            if !self.pool.has_prospects() {
+                return Err(format!("no worker can be used: {state}"));
             }
             if Instant::now() > until {
                 return Err(format!(

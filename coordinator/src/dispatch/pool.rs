@@ -45,6 +45,17 @@ pub enum Health {
     Incompatible {
         reason: String,
     },
+    /// Refused this coordinator's token, or its certificate is not trusted: never used.
+    Untrusted {
+        reason: String,
+    },
+}
+
+impl Health {
+    /// Set aside for good: no probe brings it back.
+    pub fn is_set_aside(&self) -> bool {
+        matches!(self, Health::Incompatible { .. } | Health::Untrusted { .. })
+    }
 }
 
 impl std::fmt::Display for Health {
@@ -54,6 +65,7 @@ impl std::fmt::Display for Health {
             Health::Up => write!(f, "up"),
             Health::Down { reason } => write!(f, "down: {reason}"),
             Health::Incompatible { reason } => write!(f, "incompatible: {reason}"),
+            Health::Untrusted { reason } => write!(f, "untrusted: {reason}"),
         }
     }
 }
@@ -154,7 +166,12 @@ impl WorkerPool {
             }
             return Ok(());
         }
-        let client = WorkerClient::new(url)?;
+        let server_name = match &origin {
+            // Verified as the name it was found by, which its certificate is made out to.
+            Origin::Dns(name) => name.rsplit_once(':').map(|(host, _)| host.to_string()),
+            _ => None,
+        };
+        let client = WorkerClient::new(url, &self.config.security, server_name.as_deref())?;
         let id = state.next_id;
         state.next_id += 1;
         tracing::info!(worker = %url, origin = origin.kind(), "worker added");
@@ -290,7 +307,7 @@ impl WorkerPool {
             if w.health == Health::Up {
                 tracing::warn!(worker = %w.client.url(), %reason, "worker taken out");
             }
-            if !matches!(w.health, Health::Incompatible { .. }) {
+            if !w.health.is_set_aside() {
                 w.failed(reason, self.config.probe_interval);
             }
         }
@@ -305,20 +322,26 @@ impl WorkerPool {
         }
     }
 
+    /// Set a worker aside for good: it refused the token, or its certificate is not trusted.
+    pub fn set_aside_untrusted(&self, worker: u64, reason: String) {
+        let mut state = self.state.lock().expect("pool lock");
+        if let Some(w) = state.workers.iter_mut().find(|w| w.id == worker) {
+            tracing::error!(worker = %w.client.url(), %reason, "untrusted worker set aside");
+            w.health = Health::Untrusted { reason };
+        }
+    }
+
     /// Completes when slots are released or a worker comes up (call `enable` on it before
     /// looking at the pool, so that no change is missed).
     pub fn notified(&self) -> tokio::sync::futures::Notified<'_> {
         self.changed.notified()
     }
 
-    /// False when every known worker is set aside for good (an empty pool may still fill).
+    /// False when every known worker is set aside for good (another protocol, a refused
+    /// token or certificate); an empty pool may still fill.
     pub fn has_prospects(&self) -> bool {
         let state = self.state.lock().expect("pool lock");
-        state.workers.is_empty()
-            || state
-                .workers
-                .iter()
-                .any(|w| !matches!(w.health, Health::Incompatible { .. }))
+        state.workers.is_empty() || state.workers.iter().any(|w| !w.health.is_set_aside())
     }
 
     fn probe_soon(self: &Arc<Self>, worker: u64) {
@@ -366,6 +389,10 @@ impl WorkerPool {
             Err(super::error::WorkerError::Incompatible(reason)) => {
                 tracing::error!(worker = %w.client.url(), %reason, "incompatible worker set aside");
                 w.health = Health::Incompatible { reason };
+            }
+            Err(super::error::WorkerError::Untrusted(reason)) => {
+                tracing::error!(worker = %w.client.url(), %reason, "untrusted worker set aside");
+                w.health = Health::Untrusted { reason };
             }
             Err(e) => {
                 if w.health == Health::Up {

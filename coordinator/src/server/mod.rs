@@ -14,6 +14,7 @@ use crate::error::{Error, Result};
 use crate::store::{MemoryStore, SledStore, Store};
 use calib_proto::v1::calibration_server::CalibrationServer;
 use calib_proto::v1::registry_server::RegistryServer;
+use calib_security::ServerSecurity;
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -45,6 +46,8 @@ pub struct CoordinatorConfig {
     /// Folder of the Calibration API: uploaded datasets in `datasets/`, results of submitted
     /// campaigns in `results/<id>/` [default: `calib-api/` beside the store].
     pub api: Option<PathBuf>,
+    /// TLS and the token this coordinator's server requires.
+    pub security: ServerSecurity,
 }
 
 impl CoordinatorConfig {
@@ -56,6 +59,7 @@ impl CoordinatorConfig {
             store: None,
             results: None,
             api: None,
+            security: ServerSecurity::default(),
         }
     }
 }
@@ -181,6 +185,10 @@ pub fn serve_coordinator(
     let reflection_v1alpha = reflection()
         .build_v1alpha()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
+    let mut builder = config
+        .security
+        .apply(tonic::transport::Server::builder())
+        .map_err(|e| Error::InvalidRequest(e.to_string()))?;
     let (shutdown_tx, shutdown_rx) = oneshot::channel::<()>();
     let incoming = TcpIncoming::from(listener).with_nodelay(Some(true));
     let server = tokio::spawn(async move {
@@ -190,7 +198,7 @@ pub fn serve_coordinator(
         health_reporter
             .set_serving::<CalibrationServer<CalibrationApi>>()
             .await;
-        tonic::transport::Server::builder()
+        builder
             .add_service(health)
             .add_service(reflection_v1)
             .add_service(reflection_v1alpha)
@@ -201,7 +209,12 @@ pub fn serve_coordinator(
             })
             .await
     });
-    tracing::info!(%address, "coordinator serving");
+    tracing::info!(
+        %address,
+        tls = config.security.tls.is_some(),
+        token = config.security.token.is_some(),
+        "coordinator serving"
+    );
     let control = Arc::new(resume::ResumeControl::default());
     let resume = store.map(|store| {
         let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());

@@ -18,6 +18,7 @@ pub use error::Error;
 pub use pool::PoolLoad;
 
 use calib_proto::v1::simulator_server::SimulatorServer;
+use calib_security::{ClientSecurity, ServerSecurity};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -42,6 +43,10 @@ pub struct WorkerConfig {
     pub register: Option<String>,
     /// URL the coordinator should dial back; default: derived from the bound address.
     pub advertise: Option<String>,
+    /// TLS and the token this worker requires.
+    pub security: ServerSecurity,
+    /// The CA this worker trusts and the token it presents when registering.
+    pub register_security: ClientSecurity,
 }
 
 impl WorkerConfig {
@@ -55,6 +60,8 @@ impl WorkerConfig {
             cache_bytes: 256 << 20,
             register: None,
             advertise: None,
+            security: ServerSecurity::default(),
+            register_security: ClientSecurity::default(),
         }
     }
 }
@@ -120,6 +127,10 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
     let simulator = SimulatorServer::from_arc(service.clone())
         .max_decoding_message_size(limits::MAX_MESSAGE_BYTES)
         .max_encoding_message_size(limits::MAX_MESSAGE_BYTES);
+    let builder = config
+        .security
+        .apply(tonic::transport::Server::builder())
+        .map_err(std::io::Error::other)?;
     let (shutdown_tx, shutdown_rx) = oneshot::channel::<()>();
     let incoming = TcpIncoming::from(listener)
         .with_nodelay(Some(true))
@@ -128,7 +139,7 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
         health_reporter
             .set_serving::<SimulatorServer<simulator::SimulatorService>>()
             .await;
-        tonic::transport::Server::builder()
+        builder
             .http2_keepalive_interval(Some(Duration::from_secs(10)))
             .http2_keepalive_timeout(Some(Duration::from_secs(20)))
             .add_service(health)
@@ -143,10 +154,21 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
         let advertised = config
             .advertise
             .clone()
-            .unwrap_or_else(|| registration::advertised_url(address));
-        tokio::spawn(registration::heartbeat(coordinator, advertised))
+            .unwrap_or_else(|| registration::advertised_url(address, config.security.scheme()));
+        tokio::spawn(registration::heartbeat(
+            coordinator,
+            advertised,
+            config.register_security.clone(),
+        ))
     });
-    tracing::info!(%address, slots = config.slots, queue_bound = config.queue_bound, "worker serving");
+    tracing::info!(
+        %address,
+        slots = config.slots,
+        queue_bound = config.queue_bound,
+        tls = config.security.tls.is_some(),
+        token = config.security.token.is_some(),
+        "worker serving"
+    );
     Ok(RunningWorker {
         address,
         service,

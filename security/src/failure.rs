@@ -1,0 +1,57 @@
+//! A failed call in words: a certificate the client does not trust, a token the server
+//! refused. Neither gets better by asking again.
+
+use std::error::Error;
+
+/// Why a call failed for want of trust, or `None` when it failed otherwise.
+pub fn refusal(status: &tonic::Status) -> Option<String> {
+    if status.code() == tonic::Code::Unauthenticated {
+        return Some(format!(
+            "the token was refused (UNAUTHENTICATED: {}); give the cluster's token with \
+             --token-file FILE or {}",
+            status.message(),
+            crate::token::TOKEN_ENV
+        ));
+    }
+    tls_failure(status)
+}
+
+/// The TLS error among the sources of `error`, in words with what to check.
+pub fn tls_failure(error: &(dyn Error + 'static)) -> Option<String> {
+    let tls = find_tls_error(error)?;
+    let hint = match tls {
+        rustls::Error::InvalidCertificate(_) | rustls::Error::NoCertificatesPresented => {
+            "check that --tls-ca names the CA that signed the server's certificate and that \
+             the certificate is made out to the name dialed"
+        }
+        rustls::Error::InvalidMessage(_) | rustls::Error::InappropriateMessage { .. } => {
+            "is the server serving TLS? A server without --tls-cert is dialed http://"
+        }
+        _ => "check the server's certificate and the CA given with --tls-ca",
+    };
+    Some(format!("TLS handshake failed: {tls}; {hint}"))
+}
+
+fn find_tls_error<'a>(error: &'a (dyn Error + 'static)) -> Option<&'a rustls::Error> {
+    let mut next: Option<&(dyn Error + 'static)> = Some(error);
+    while let Some(e) = next {
+        if let Some(tls) = e.downcast_ref::<rustls::Error>() {
+            return Some(tls);
+        }
+        // An I/O error hides the error it wraps from `source()`.
+        if let Some(io) = e.downcast_ref::<std::io::Error>() {
+            if let Some(tls) = io.get_ref().and_then(|i| i.downcast_ref::<rustls::Error>()) {
+                return Some(tls);
+            }
+        }
+        next = e.source();
+    }
+    None
+}
+
+/// A hint for a call over plain HTTP/2 that the server answered with something else,
+/// as a TLS server does; `None` for any other failure.
+pub fn plain_to_tls_hint(status: &tonic::Status) -> Option<&'static str> {
+    (status.code() == tonic::Code::Internal && status.message().contains("h2 protocol error"))
+        .then_some("if the server serves TLS, dial it with https://")
+}
