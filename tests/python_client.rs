@@ -23,6 +23,9 @@ fn python_missing() -> Option<String> {
     }
 }
 
+/// The cluster's bearer token in the TLS test.
+const TOKEN: &str = "py-client-token-7f3a";
+
 /// Python stubs of every proto file, in a temporary folder.
 fn python_stubs() -> tempfile::TempDir {
     let stubs = tempfile::tempdir().unwrap();
@@ -53,13 +56,29 @@ fn a_python_client_runs_a_campaign_on_a_coordinator() {
     }
     let stubs = python_stubs();
     let dir = tempfile::tempdir().unwrap();
-    let cluster = common::cluster::TestCluster::start(2, 1);
+    // Everything over TLS, every request with the cluster's token: the two workers, the
+    // coordinator dialing them, and the Python client.
+    let pki = common::pki::Pki::new();
+    let workers: Vec<common::cluster::TestWorker> = (0..2)
+        .map(|_| {
+            let security = pki.server(Some(TOKEN));
+            common::cluster::TestWorker::start_with(move |config| {
+                config.slots = 1;
+                config.security = security;
+            })
+        })
+        .collect();
+    let urls: Vec<String> = workers
+        .iter()
+        .map(|w| format!("https://{}", w.address()))
+        .collect();
     let runtime = tokio::runtime::Runtime::new().unwrap();
-    let mut config = CoordinatorConfig::new(
-        "127.0.0.1:0".parse().unwrap(),
-        calib_sandbox::cluster::dispatch_config(&cluster.urls()),
-    );
+    let mut dispatch = calib_sandbox::cluster::dispatch_config(&urls);
+    dispatch.security = pki.client(Some(TOKEN));
+    let mut config = CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch);
     config.store = Some(dir.path().join("db"));
+    config.security = pki.server(Some(TOKEN));
+    let token_file = pki.file("token", TOKEN);
     let coordinator = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         serve_coordinator(listener, config).unwrap()
@@ -69,6 +88,8 @@ fn a_python_client_runs_a_campaign_on_a_coordinator() {
         .arg(coordinator.address().to_string())
         .arg(stubs.path())
         .arg(repo().join("examples/data/furuta_clean.csv"))
+        .arg(&pki.ca)
+        .arg(&token_file)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -79,7 +100,11 @@ fn a_python_client_runs_a_campaign_on_a_coordinator() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.trim_end().ends_with("ok"));
-    assert!(cluster.simulations() > 0, "the workers simulated nothing");
+    let simulated: Vec<u64> = workers.iter().map(|w| w.simulations()).collect();
+    assert!(
+        simulated.iter().all(|&n| n > 0),
+        "both workers must simulate: {simulated:?}"
+    );
     runtime.block_on(coordinator.shutdown());
 }
 

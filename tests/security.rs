@@ -12,78 +12,14 @@ use calib_coordinator::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerA
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Silent;
 use calib_proto::v1 as proto;
-use calib_security::{ClientSecurity, ServerSecurity, ServerTls, Token, TrustedCa};
+use calib_security::{ClientSecurity, ServerTls};
 use common::cluster::TestWorker;
+use common::pki::Pki;
 use common::*;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 const TOKEN: &str = "k7Qz-cluster-secret-91";
-
-/// A CA and a server certificate it signed, made out to `localhost` and `127.0.0.1`, as
-/// PEM files in a temporary folder.
-struct Pki {
-    dir: tempfile::TempDir,
-    ca: PathBuf,
-    cert: PathBuf,
-    key: PathBuf,
-}
-
-impl Pki {
-    fn new() -> Self {
-        use rcgen::{
-            BasicConstraints, CertificateParams, DnType, IsCa, Issuer, KeyPair, KeyUsagePurpose,
-        };
-        let dir = tempfile::tempdir().unwrap();
-        let ca_key = KeyPair::generate().unwrap();
-        let mut ca_params = CertificateParams::new(Vec::<String>::new()).unwrap();
-        ca_params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-        ca_params
-            .distinguished_name
-            .push(DnType::CommonName, "calib test CA");
-        ca_params.key_usages = vec![
-            KeyUsagePurpose::KeyCertSign,
-            KeyUsagePurpose::CrlSign,
-            KeyUsagePurpose::DigitalSignature,
-        ];
-        let ca_cert = ca_params.self_signed(&ca_key).unwrap();
-        let issuer = Issuer::new(ca_params, ca_key);
-        let key = KeyPair::generate().unwrap();
-        let cert = CertificateParams::new(vec!["localhost".to_string(), "127.0.0.1".to_string()])
-            .unwrap()
-            .signed_by(&key, &issuer)
-            .unwrap();
-        let pki = Self {
-            ca: dir.path().join("ca.pem"),
-            cert: dir.path().join("server.pem"),
-            key: dir.path().join("server.key"),
-            dir,
-        };
-        std::fs::write(&pki.ca, ca_cert.pem()).unwrap();
-        std::fs::write(&pki.cert, cert.pem()).unwrap();
-        std::fs::write(&pki.key, key.serialize_pem()).unwrap();
-        pki
-    }
-
-    fn server(&self, token: Option<&str>) -> ServerSecurity {
-        ServerSecurity {
-            tls: Some(ServerTls::load(&self.cert, &self.key).unwrap()),
-            token: token.map(|t| Token::new(t).unwrap()),
-        }
-    }
-
-    fn client(&self, token: Option<&str>) -> ClientSecurity {
-        ClientSecurity {
-            ca: Some(TrustedCa::load(&self.ca).unwrap()),
-            token: token.map(|t| Token::new(t).unwrap()),
-        }
-    }
-
-    /// `text` in a file of this folder.
-    fn file(&self, name: &str, text: &str) -> PathBuf {
-        write(self.dir.path(), name, text)
-    }
-}
 
 /// A single-slot worker serving TLS and requiring `token`.
 fn secure_worker(pki: &Pki, token: Option<&str>) -> TestWorker {

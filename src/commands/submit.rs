@@ -6,17 +6,21 @@ use calib_coordinator::campaign::Campaign;
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
 use std::path::{Path, PathBuf};
-use tonic::transport::Channel;
 
 /// Bytes per upload chunk.
 const CHUNK: usize = 1 << 20;
 
 #[derive(clap::Args)]
 pub struct CoordinatorArg {
-    /// The coordinator's address, e.g. http://calib-coordinator:50050.
+    /// The coordinator's address, e.g. http://calib-coordinator:50050 (https:// when it
+    /// serves TLS).
     #[arg(long, value_name = "URL", env = "CALIB_COORDINATOR")]
     coordinator: String,
+    #[command(flatten)]
+    dial: super::security::DialArgs,
 }
+
+type Client = CalibrationClient<calib_security::client::SecureChannel>;
 
 #[derive(clap::Args)]
 pub struct SubmitArgs {
@@ -52,16 +56,17 @@ pub struct IdArgs {
     coordinator: CoordinatorArg,
 }
 
-async fn connect(url: &str) -> Result<CalibrationClient<Channel>, Failure> {
-    let endpoint = Channel::from_shared(url.to_string())
-        .map_err(|e| Failure::input(format!("--coordinator `{url}`: {e}")))?;
+async fn connect(arg: &CoordinatorArg) -> Result<Client, Failure> {
+    let url = &arg.coordinator;
+    let security = arg.dial.client()?;
+    let endpoint = security
+        .endpoint(url, None)
+        .map_err(|e| Failure::input(format!("--coordinator {e}")))?;
     let channel = endpoint.connect().await.map_err(|e| {
-        Failure::internal(format!(
-            "cannot reach the coordinator at {url}: {}",
-            source(&e)
-        ))
+        let why = calib_security::failure::tls_failure(&e).unwrap_or_else(|| source(&e));
+        Failure::internal(format!("cannot reach the coordinator at {url}: {why}"))
     })?;
-    Ok(CalibrationClient::new(channel)
+    Ok(CalibrationClient::new(security.authorize(channel))
         .max_decoding_message_size(64 << 20)
         .max_encoding_message_size(64 << 20))
 }
@@ -76,6 +81,9 @@ fn source(e: &(dyn std::error::Error + 'static)) -> String {
 }
 
 fn rpc(status: tonic::Status) -> Failure {
+    if let Some(refused) = calib_security::failure::refusal(&status) {
+        return Failure::internal(format!("coordinator: {refused}"));
+    }
     let message = format!("coordinator: {}", status.message());
     match status.code() {
         tonic::Code::InvalidArgument | tonic::Code::NotFound => Failure::input(message),
@@ -91,7 +99,7 @@ pub fn submit(args: SubmitArgs) -> Outcome {
         .map_err(|e| Failure::input(format!("{}: {e}", campaign.measurement_file.display())))?;
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let mut client = connect(&args.coordinator.coordinator).await?;
+        let mut client = connect(&args.coordinator).await?;
         let file_name = campaign
             .measurement_file
             .file_name()
@@ -148,10 +156,7 @@ pub fn submit(args: SubmitArgs) -> Outcome {
 }
 
 /// Print the campaign's progress until it ends; its last state.
-async fn follow(
-    client: &mut CalibrationClient<Channel>,
-    id: &str,
-) -> Result<pb::CampaignState, Failure> {
+async fn follow(client: &mut Client, id: &str) -> Result<pb::CampaignState, Failure> {
     let mut stream = client
         .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
         .await
@@ -265,7 +270,7 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
 pub fn status(args: StatusArgs) -> Outcome {
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let mut client = connect(&args.coordinator.coordinator).await?;
+        let mut client = connect(&args.coordinator).await?;
         match args.id {
             Some(id) => {
                 let state = client
@@ -303,7 +308,7 @@ pub fn status(args: StatusArgs) -> Outcome {
 pub fn watch(args: IdArgs) -> Outcome {
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let mut client = connect(&args.coordinator.coordinator).await?;
+        let mut client = connect(&args.coordinator).await?;
         follow(&mut client, &args.id).await.map(|_| ())
     })
 }
@@ -311,7 +316,7 @@ pub fn watch(args: IdArgs) -> Outcome {
 pub fn cancel(args: IdArgs) -> Outcome {
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let mut client = connect(&args.coordinator.coordinator).await?;
+        let mut client = connect(&args.coordinator).await?;
         let state = client
             .cancel_campaign(pb::CancelCampaignRequest { id: args.id })
             .await

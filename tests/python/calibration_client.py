@@ -1,8 +1,10 @@
 """A Calibration API client written from proto/calib/v1/calibration.proto alone.
 
-Usage: calibration_client.py HOST:PORT STUBS_DIR RECORD.csv
+Usage: calibration_client.py HOST:PORT STUBS_DIR RECORD.csv [CA.pem TOKEN_FILE]
 
-Uploads the record, submits a campaign on it (Nelder-Mead from two starts), follows the
+With a CA and a token file, dials over TLS (trusting that CA) and presents the token as
+`authorization: Bearer TOKEN` on every call; first checks that a call without the token is
+refused as UNAUTHENTICATED. Uploads the record, submits a campaign on it (Nelder-Mead from two starts), follows the
 campaign's stream to its end, fetches the result and checks the recovered frictions.
 Prints the recovered values and "ok" last.
 """
@@ -18,7 +20,24 @@ from calib.v1 import calibration_pb2_grpc as rpc  # noqa: E402
 
 TRUTH = {"armFriction": 0.010125, "pendulumFriction": 0.00117}
 
-channel = grpc.insecure_channel(address)
+if len(sys.argv) > 5:
+    with open(sys.argv[4], "rb") as f:
+        ca = f.read()
+    with open(sys.argv[5]) as f:
+        token = f.read().strip()
+    tls = grpc.ssl_channel_credentials(root_certificates=ca)
+    # The certificate names localhost and 127.0.0.1.
+    anonymous = rpc.CalibrationStub(grpc.secure_channel(address, tls))
+    try:
+        anonymous.ListCampaigns(pb.ListCampaignsRequest())
+        raise AssertionError("a call without the token was answered")
+    except grpc.RpcError as e:
+        assert e.code() == grpc.StatusCode.UNAUTHENTICATED, e
+    credentials = grpc.composite_channel_credentials(tls, grpc.access_token_call_credentials(token))
+    channel = grpc.secure_channel(address, credentials)
+    print("over TLS with a token; without it: UNAUTHENTICATED")
+else:
+    channel = grpc.insecure_channel(address)
 api = rpc.CalibrationStub(channel)
 
 
