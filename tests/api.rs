@@ -404,3 +404,111 @@ fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
         .into_inner();
     assert!(listed.campaigns.is_empty());
 }
+
+/// `calib coordinator` on a store, in a process of its own; its address.
+fn spawn_coordinator(dir: &Path, workers: &str) -> (std::process::Child, String) {
+    use std::io::{BufRead, BufReader};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args([
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            workers,
+        ])
+        .arg("--db")
+        .arg(dir.join("db"))
+        .arg("--api-dir")
+        .arg(dir.join("api"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let address = line
+        .trim()
+        .strip_prefix("coordinator listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line: {line}"))
+        .to_string();
+    (child, format!("http://{address}"))
+}
+
+fn get(url: &str, id: &str) -> pb::CampaignState {
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let mut client = CalibrationClient::connect(url.to_string()).await.unwrap();
+        client
+            .get_campaign(pb::GetCampaignRequest { id: id.into() })
+            .await
+            .unwrap()
+            .into_inner()
+    })
+}
+
+#[test]
+fn a_submitted_campaign_survives_a_killed_coordinator() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let search = "methods = [\"differential-evolution\", \"nelder-mead\"]\nstarts = 2\nmax_evaluations = 600";
+    let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let (mut first, url) = spawn_coordinator(dir.path(), &cluster.workers_arg());
+    let submit = |url: &str| {
+        let out = calib(&[
+            "submit",
+            campaign.to_str().unwrap(),
+            "--coordinator",
+            url,
+            "--detach",
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).trim().to_string()
+    };
+    let id = submit(&url);
+    let mut under_way = get(&url, &id);
+    await_condition(
+        "the campaign to be under way",
+        std::time::Duration::from_secs(120),
+        || {
+            under_way = get(&url, &id);
+            under_way.evaluations > 200
+        },
+    );
+    first.kill().unwrap();
+    assert_eq!(
+        under_way.phase(),
+        pb::CampaignPhase::Running,
+        "{under_way:?}"
+    );
+    first.wait().unwrap();
+
+    // A new coordinator on the same store finishes it; submitted again, it is the same
+    // campaign and starts nothing.
+    let (mut second, url) = spawn_coordinator(dir.path(), &cluster.workers_arg());
+    assert_eq!(submit(&url), id);
+    let mut last = get(&url, &id);
+    await_condition(
+        "the resumed campaign to finish",
+        std::time::Duration::from_secs(300),
+        || {
+            last = get(&url, &id);
+            last.phase() == pb::CampaignPhase::Finished
+        },
+    );
+    second.kill().unwrap();
+    second.wait().unwrap();
+    let result: Value = serde_json::from_str(&last.result_json).unwrap();
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("local-db"),
+        &dir.path().join("local"),
+        &[],
+    );
+    assert_eq!(runs_of(&result), runs_of(&local));
+}

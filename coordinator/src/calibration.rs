@@ -108,10 +108,22 @@ pub fn resume_unfinished_each<E: Evaluator>(
     store: &dyn Store,
     evaluator: &E,
     progress: &dyn Progress,
+    finished: impl FnMut(Calibration),
+) -> Result<()> {
+    resume_unfinished_except(store, evaluator, progress, &|_| false, finished)
+}
+
+/// [`resume_unfinished_each`], leaving alone the campaigns `skip` names (those another
+/// part of this process is running).
+pub fn resume_unfinished_except<E: Evaluator>(
+    store: &dyn Store,
+    evaluator: &E,
+    progress: &dyn Progress,
+    skip: &dyn Fn(&CampaignId) -> bool,
     mut finished: impl FnMut(Calibration),
 ) -> Result<()> {
     for (id, record) in store.campaigns()? {
-        if record.status != CampaignStatus::Running {
+        if record.status != CampaignStatus::Running || skip(&id) {
             continue;
         }
         tracing::info!(campaign = %record.name, id = %hex(&id), "resuming campaign");

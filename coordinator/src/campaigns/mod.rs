@@ -137,6 +137,11 @@ impl Campaigns {
         }
     }
 
+    /// Whether this coordinator runs campaign `id` (the store's resume leaves it alone).
+    pub fn is_live(&self, id: &CampaignId) -> bool {
+        self.live.lock().expect("live lock").contains_key(id)
+    }
+
     pub fn datasets(&self) -> &Datasets {
         &self.datasets
     }
@@ -168,10 +173,10 @@ impl Campaigns {
         if live.contains_key(&id) {
             return Ok((hex(&id), false));
         }
-        if let Some(record) = self.store.campaign(&id)? {
-            if record.status != CampaignStatus::Running {
-                return Ok((hex(&id), false));
-            }
+        if self.store.campaign(&id)?.is_some() {
+            // Finished, failed or cancelled before; or left running by an earlier
+            // coordinator, which this one's resume of the store finishes.
+            return Ok((hex(&id), false));
         }
         let (state, _) = watch::channel(Snapshot::running(&hex(&id), &campaign.name));
         let entry = Arc::new(Live {

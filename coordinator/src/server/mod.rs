@@ -161,7 +161,7 @@ pub fn serve_coordinator(
         Datasets::open(&api_folder.join("datasets"))?,
         api_folder.join("results"),
     ));
-    let calibration = CalibrationServer::new(CalibrationApi::new(campaigns))
+    let calibration = CalibrationServer::new(CalibrationApi::new(campaigns.clone()))
         .max_decoding_message_size(64 << 20)
         .max_encoding_message_size(64 << 20);
     let registry = RegistryServer::new(RegistryService::new(
@@ -220,6 +220,7 @@ pub fn serve_coordinator(
         let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
         let results = config.results.clone();
         let (pool, control) = (pool.clone(), control.clone());
+        let live = campaigns.clone();
         // Campaigns block for as long as they run: on a thread of their own.
         tokio::task::spawn_blocking(move || {
             let resumed = resume::resume_until_finished(
@@ -228,6 +229,7 @@ pub fn serve_coordinator(
                 results.as_deref(),
                 &pool,
                 &control,
+                &|id| live.is_live(id),
             );
             match &resumed {
                 Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),

@@ -11,7 +11,7 @@ use crate::error::Result;
 use crate::evaluator::Evaluator;
 use crate::optim::problem::Silent;
 use crate::report;
-use crate::store::{CampaignStatus, Store};
+use crate::store::{CampaignId, CampaignStatus, Store};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -44,8 +44,19 @@ pub fn resume_campaigns<E: Evaluator>(
     evaluator: &E,
     results: Option<&Path>,
 ) -> Result<usize> {
+    resume_campaigns_except(store, evaluator, results, &|_| false)
+}
+
+/// [`resume_campaigns`], leaving alone the campaigns `skip` names (submitted through the
+/// Calibration API and running in this coordinator already).
+pub fn resume_campaigns_except<E: Evaluator>(
+    store: &dyn Store,
+    evaluator: &E,
+    results: Option<&Path>,
+    skip: &dyn Fn(&CampaignId) -> bool,
+) -> Result<usize> {
     let mut finished = 0;
-    calibration::resume_unfinished_each(store, evaluator, &Silent, |calibration| {
+    calibration::resume_unfinished_except(store, evaluator, &Silent, skip, |calibration| {
         finished += 1;
         let folder = result_folder(&calibration, results);
         let best = calibration.best_run();
@@ -90,17 +101,18 @@ pub fn resume_until_finished<E: Evaluator>(
     results: Option<&Path>,
     pool: &WorkerPool,
     control: &ResumeControl,
+    skip: &dyn Fn(&CampaignId) -> bool,
 ) -> Result<usize> {
     let tick = pool.config().probe_interval.max(Duration::from_millis(10));
     let mut pause = tick;
     let mut finished = 0;
     loop {
-        finished += resume_campaigns(store, evaluator, results)?;
+        finished += resume_campaigns_except(store, evaluator, results, skip)?;
         control.passes.fetch_add(1, Ordering::SeqCst);
         let running = store
             .campaigns()?
             .iter()
-            .filter(|(_, r)| r.status == CampaignStatus::Running)
+            .filter(|(id, r)| r.status == CampaignStatus::Running && !skip(id))
             .count();
         if running == 0 {
             return Ok(finished);
