@@ -512,3 +512,80 @@ fn a_submitted_campaign_survives_a_killed_coordinator() {
     );
     assert_eq!(runs_of(&result), runs_of(&local));
 }
+
+#[test]
+fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let bytes = std::fs::read(repo().join("examples/data/furuta_viscous_arm.csv")).unwrap();
+    let mut client = coordinator.client();
+    let dataset = coordinator
+        .runtime
+        .block_on(
+            client.upload_dataset(tokio_stream::iter(vec![pb::DatasetChunk {
+                file_name: "furuta_viscous_arm.csv".into(),
+                time_column: "time_s".into(),
+                data: bytes,
+            }])),
+        )
+        .unwrap()
+        .into_inner();
+    let text = std::fs::read_to_string(repo().join("examples/furuta_viscous_arm.toml")).unwrap();
+    let campaign = calib_coordinator::api::spec::campaign_message(&text, &dataset.id).unwrap();
+    assert!(
+        campaign.diagnosis.is_some(),
+        "the [diagnosis] section travels"
+    );
+    let id = coordinator
+        .runtime
+        .block_on(client.submit_campaign(pb::SubmitCampaignRequest {
+            campaign: Some(campaign),
+            idempotency_key: String::new(),
+        }))
+        .unwrap()
+        .into_inner()
+        .id;
+    let diagnose = |client: &mut CalibrationClient<Channel>| {
+        coordinator.runtime.block_on(async {
+            let mut stream = client
+                .diagnose(pb::DiagnoseRequest { id: id.clone() })
+                .await?
+                .into_inner();
+            let mut states = Vec::new();
+            while let Some(s) = stream.message().await? {
+                states.push(s);
+            }
+            Ok::<_, tonic::Status>(states)
+        })
+    };
+    // Not before the campaign has finished.
+    let early = diagnose(&mut client);
+    if let Err(e) = &early {
+        assert_eq!(e.code(), tonic::Code::InvalidArgument, "{e:?}");
+        assert!(e.message().contains("not finished"), "{e:?}");
+    }
+    let last = watch(&coordinator, &id).pop().unwrap();
+    assert_eq!(last.phase(), pb::CampaignPhase::Finished);
+
+    let states = diagnose(&mut client).unwrap();
+    let done = states.last().unwrap();
+    assert_eq!(done.phase(), pb::CampaignPhase::Finished, "{done:?}");
+    let report: Value = serde_json::from_str(&done.report_json).unwrap();
+    assert_eq!(
+        report["selected"],
+        serde_json::json!(["viscous_friction.arm"])
+    );
+    assert!(done.files.contains_key("diagnosis.md"));
+    // Asked again: the finished diagnosis, at once.
+    let again = diagnose(&mut client).unwrap();
+    assert_eq!(again.len(), 1);
+    assert_eq!(again[0].report_json, done.report_json);
+    let unknown = coordinator.runtime.block_on(async {
+        client
+            .diagnose(pb::DiagnoseRequest { id: "0".repeat(64) })
+            .await
+            .map(|_| ())
+    });
+    assert_eq!(unknown.unwrap_err().code(), tonic::Code::NotFound);
+}

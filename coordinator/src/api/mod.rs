@@ -4,6 +4,7 @@
 pub mod spec;
 
 use crate::campaigns::datasets::MAX_DATASET_BYTES;
+use crate::campaigns::diagnoses::DiagnosisSnapshot;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
 use calib_proto::v1 as pb;
@@ -85,6 +86,24 @@ async fn blocking<T: Send + 'static>(
         .await
         .map_err(|e| Status::internal(format!("task failed: {e}")))?
         .map_err(status)
+}
+
+type DiagnosisStream =
+    Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::DiagnosisState, Status>> + Send>>;
+
+fn diagnosis_state(s: &DiagnosisSnapshot) -> pb::DiagnosisState {
+    pb::DiagnosisState {
+        campaign_id: s.campaign_id.clone(),
+        phase: phase(s.phase).into(),
+        evaluations: s.evaluations,
+        failure: s.failure.clone().unwrap_or_default(),
+        report_json: s
+            .report
+            .as_ref()
+            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
+            .unwrap_or_default(),
+        files: s.files.iter().cloned().collect(),
+    }
 }
 
 type StateStream =
@@ -207,6 +226,35 @@ impl Calibration for CalibrationApi {
                 });
             }
         }
+        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+    }
+
+    type DiagnoseStream = DiagnosisStream;
+
+    async fn diagnose(
+        &self,
+        request: Request<pb::DiagnoseRequest>,
+    ) -> Result<Response<Self::DiagnoseStream>, Status> {
+        let id = request.into_inner().id;
+        let campaigns = self.campaigns.clone();
+        let watched = {
+            let id = id.clone();
+            blocking(move || campaigns.diagnose(&id)).await?
+        };
+        let mut receiver = watched.ok_or_else(|| not_found(&id))?;
+        let (tx, rx) = tokio::sync::mpsc::channel(16);
+        tokio::spawn(async move {
+            loop {
+                let snapshot = receiver.borrow_and_update().clone();
+                if tx.send(Ok(diagnosis_state(&snapshot))).await.is_err() || snapshot.phase.ended()
+                {
+                    break;
+                }
+                if receiver.changed().await.is_err() {
+                    break;
+                }
+            }
+        });
         Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 

@@ -96,6 +96,23 @@ pub fn campaign_file(c: &pb::Campaign, file: &Path, time_column: &str) -> Result
         }
         root.insert("solver".into(), t.into());
     }
+    if let Some(d) = &c.diagnosis {
+        let mut t = Table::new();
+        if let Some(v) = d.holdout_start {
+            t.insert("holdout_start".into(), v.into());
+        }
+        if let Some(v) = d.holdout_stop {
+            t.insert("holdout_stop".into(), v.into());
+        }
+        if let Some(n) = d.refit {
+            t.insert("refit".into(), integer("diagnosis.refit", n)?);
+        }
+        if !d.candidates.is_empty() {
+            let list: Vec<Value> = d.candidates.iter().map(|c| c.clone().into()).collect();
+            t.insert("candidates".into(), list.into());
+        }
+        root.insert("diagnosis".into(), t.into());
+    }
     toml::to_string(&root).map_err(|e| format!("campaign: {e}"))
 }
 
@@ -209,5 +226,21 @@ pub fn campaign_message(text: &str, dataset: &str) -> Result<pb::Campaign, Strin
         rtol: float(&solver, "rtol"),
         atol: float(&solver, "atol"),
         max_steps: uint(&solver, "max_steps"),
+        diagnosis: root.get("diagnosis").and_then(|v| v.as_table()).map(|d| {
+            pb::DiagnosisSettings {
+                holdout_start: float(d, "holdout_start"),
+                holdout_stop: float(d, "holdout_stop"),
+                refit: uint(d, "refit"),
+                candidates: d
+                    .get("candidates")
+                    .and_then(|v| v.as_array())
+                    .map(|a| {
+                        a.iter()
+                            .filter_map(|c| c.as_str().map(str::to_string))
+                            .collect()
+                    })
+                    .unwrap_or_default(),
+            }
+        }),
     })
 }

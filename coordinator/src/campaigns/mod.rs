@@ -17,11 +17,12 @@
 //! growing pauses (at most [`MAX_PAUSE`]), and resumes from the store when workers are back.
 
 pub mod datasets;
+pub mod diagnoses;
 
 use crate::calibration::{self, Calibration};
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
-use crate::evaluator::{Evaluator, Fault, FaultKind};
+use crate::evaluator::{Evaluator, Fault, FaultKind, Simulator};
 use crate::objective::{Evaluation, Objective};
 use crate::optim::problem::Progress;
 use crate::report;
@@ -103,6 +104,12 @@ impl Snapshot {
     }
 }
 
+/// What runs a coordinator's campaigns and diagnoses: objective evaluations and
+/// trajectories, on its workers.
+pub trait Engine: Evaluator + Simulator {}
+
+impl<T: Evaluator + Simulator + ?Sized> Engine for T {}
+
 /// A campaign running in this coordinator.
 struct Live {
     cancel: AtomicBool,
@@ -112,28 +119,30 @@ struct Live {
 /// The campaigns of one coordinator.
 pub struct Campaigns {
     store: Arc<dyn Store>,
-    evaluator: Arc<dyn Evaluator>,
+    engine: Arc<dyn Engine>,
     datasets: Datasets,
     /// `<results>/<id>/` holds each finished campaign's result.json and plots.
     results: PathBuf,
     live: Mutex<HashMap<CampaignId, Arc<Live>>>,
     keys: Mutex<HashMap<String, CampaignId>>,
+    diagnoses: Mutex<HashMap<CampaignId, watch::Sender<diagnoses::DiagnosisSnapshot>>>,
 }
 
 impl Campaigns {
     pub fn new(
         store: Arc<dyn Store>,
-        evaluator: Arc<dyn Evaluator>,
+        engine: Arc<dyn Engine>,
         datasets: Datasets,
         results: PathBuf,
     ) -> Self {
         Self {
             store,
-            evaluator,
+            engine,
             datasets,
             results,
             live: Mutex::new(HashMap::new()),
             keys: Mutex::new(HashMap::new()),
+            diagnoses: Mutex::new(HashMap::new()),
         }
     }
 
@@ -200,7 +209,7 @@ impl Campaigns {
             evaluations: AtomicU64::new(0),
         };
         let evaluator = Cancellable {
-            inner: &*self.evaluator,
+            inner: &*self.engine,
             cancel: &live.cancel,
         };
         let mut pause = Duration::from_secs(1);
@@ -401,12 +410,12 @@ impl Progress for LiveProgress<'_> {
 }
 
 /// An evaluator that refuses every batch once its campaign is cancelled.
-struct Cancellable<'a> {
-    inner: &'a dyn Evaluator,
+struct Cancellable<'a, E: ?Sized> {
+    inner: &'a E,
     cancel: &'a AtomicBool,
 }
 
-impl Evaluator for Cancellable<'_> {
+impl<E: Evaluator + ?Sized> Evaluator for Cancellable<'_, E> {
     fn evaluate(
         &self,
         objective: &Objective,

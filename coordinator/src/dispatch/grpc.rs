@@ -217,7 +217,13 @@ pub async fn dispatch<W: Work>(
             result,
         } = match joined {
             Ok(outcome) => outcome,
-            Err(e) => panic!("dispatch task failed: {e}"),
+            // The runtime is shutting down (the coordinator stops): no answer will come.
+            Err(e) if e.is_cancelled() => {
+                return Err(Fault::unavailable(
+                    "dispatch stopped: the coordinator is shutting down",
+                ))
+            }
+            Err(e) => std::panic::resume_unwind(e.into_panic()),
         };
         match result {
             Ok(done) => {
