@@ -411,17 +411,37 @@ fn a_flood_beyond_the_queue_is_refused() {
         println!("{served} served, {refused} refused");
         assert!(served >= 3, "{served} served");
         assert!(refused > 0, "nothing refused");
-        // A batch larger than slots plus queue is refused whole, before anything runs.
-        let before = worker.simulations();
-        expect(
-            "oversized batch",
-            c.clone().evaluate(evaluate_request(4)).await,
-            Code::ResourceExhausted,
-            "the worker's queue is full",
-        );
-        assert_eq!(worker.simulations(), before);
+        // Once the flood has drained, a batch larger than slots plus queue is answered.
+        let answer = c.clone().evaluate(evaluate_request(4)).await.unwrap();
+        assert_eq!(answer.into_inner().results.len(), 4);
         // And the worker still serves.
         assert!(c.clone().simulate(simulate_request()).await.is_ok());
+    });
+}
+
+#[test]
+fn a_batch_larger_than_the_queue_is_answered_in_full_by_an_idle_worker() {
+    // Two slots and 128 waiting: 131 points are more than the worker holds at once.
+    let worker = TestWorker::start(2, 128);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let whole = c.evaluate(evaluate_request(131)).await.unwrap().into_inner();
+        assert_eq!(whole.results.len(), 131);
+        assert!(whole.results.iter().all(|r| r.failure.is_none()));
+        // The same points in pieces of two and of 129 give the same answers, bit for bit.
+        let all = evaluate_request(131).points;
+        let mut pieces = Vec::new();
+        for range in [0..2, 2..131] {
+            let mut request = evaluate_request(0);
+            request.points = all[range].to_vec();
+            pieces.extend(c.evaluate(request).await.unwrap().into_inner().results);
+        }
+        assert_eq!(pieces.len(), 131);
+        for (i, (a, b)) in whole.results.iter().zip(&pieces).enumerate() {
+            assert_eq!(a.objective.to_bits(), b.objective.to_bits(), "point {i}");
+            assert_eq!(a.sse, b.sse, "point {i}");
+        }
+        assert_eq!(worker.simulations(), 262);
     });
 }
 
