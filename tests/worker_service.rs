@@ -508,25 +508,18 @@ fn health_and_models_are_served() {
     });
 }
 
-#[test]
-fn reflection_lists_the_services() {
-    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
-    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
-    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
-    use tonic_reflection::pb::v1::ServerReflectionRequest;
-    let worker = TestWorker::start(1, 16);
-    runtime().block_on(async {
-        let channel = Channel::from_shared(worker.url())
-            .unwrap()
-            .connect()
-            .await
-            .unwrap();
-        let mut reflection = ServerReflectionClient::new(channel);
+/// The services a reflection client of protocol version `$v` (v1 or v1alpha) lists.
+macro_rules! listed_services {
+    ($v:ident, $channel:expr) => {{
+        use tonic_reflection::pb::$v::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$v::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$v::server_reflection_response::MessageResponse;
+        use tonic_reflection::pb::$v::ServerReflectionRequest;
         let request = ServerReflectionRequest {
             host: String::new(),
             message_request: Some(MessageRequest::ListServices(String::new())),
         };
-        let mut answers = reflection
+        let mut answers = ServerReflectionClient::new($channel)
             .server_reflection_info(tokio_stream::iter(vec![request]))
             .await
             .unwrap()
@@ -535,12 +528,37 @@ fn reflection_lists_the_services() {
         let Some(MessageResponse::ListServicesResponse(list)) = answer.message_response else {
             panic!("unexpected answer {answer:?}");
         };
-        let names: Vec<_> = list.service.iter().map(|s| s.name.as_str()).collect();
-        for expected in ["calib.v1.Simulator", "grpc.health.v1.Health"] {
-            assert!(
-                names.contains(&expected),
-                "{expected} missing from {names:?}"
-            );
-        }
+        let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+        names.sort();
+        names
+    }};
+}
+
+#[test]
+fn reflection_lists_exactly_the_served_services_in_both_versions() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let channel = Channel::from_shared(worker.url())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        let expected = [
+            "calib.v1.Simulator",
+            "grpc.health.v1.Health",
+            "grpc.reflection.v1.ServerReflection",
+            "grpc.reflection.v1alpha.ServerReflection",
+        ];
+        assert_eq!(listed_services!(v1, channel.clone()), expected);
+        assert_eq!(listed_services!(v1alpha, channel.clone()), expected);
+        assert_eq!(calib_worker::service::SERVED, expected);
+        // The Registry is the coordinator's: a worker does not answer it.
+        let mut registry =
+            calib_proto::v1::registry_client::RegistryClient::new(channel.clone());
+        let status = registry
+            .register(proto::RegisterRequest::default())
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::Unimplemented);
     });
 }
