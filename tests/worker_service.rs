@@ -446,6 +446,69 @@ fn a_batch_larger_than_the_queue_is_answered_in_full_by_an_idle_worker() {
 }
 
 #[test]
+fn a_client_setting_every_described_default_simulates_the_defaults() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let models = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .models;
+        let furuta = models.iter().find(|m| m.name == "furuta").unwrap();
+        let effect = |name: &str| furuta.effects.iter().find(|e| e.name == name).unwrap();
+        let parameter = |name: &str| furuta.parameters.iter().find(|p| p.name == name).unwrap();
+        for (alias, of) in [
+            ("coulomb_friction.arm", "armFriction"),
+            ("coulomb_friction.pendulum", "pendulumFriction"),
+        ] {
+            assert_eq!(effect(alias).alias_of, of);
+            assert_eq!(effect(alias).default_value, parameter(of).default_value);
+            assert!(effect(alias).default_value > 0.0);
+        }
+        assert!(furuta.parameters.iter().all(|p| p.alias_of.is_empty()));
+        assert_eq!(effect("viscous_friction.arm").alias_of, "");
+        for model in &models {
+            let described = |with: Vec<proto::ParameterValue>| proto::SimulateRequest {
+                protocol_version: V,
+                model: model.name.clone(),
+                parameters: with,
+                times: grid(2.0, 0.1),
+                outputs: Vec::new(),
+                solver: None,
+            };
+            let untouched = c.simulate(described(Vec::new())).await.unwrap().into_inner();
+            assert!(untouched.failure.is_none(), "{}", model.name);
+            // Every described default, aliases skipped, as the proto says.
+            let every = model
+                .parameters
+                .iter()
+                .chain(&model.effects)
+                .filter(|p| p.alias_of.is_empty())
+                .map(|p| proto::ParameterValue {
+                    name: p.name.clone(),
+                    value: p.default_value,
+                })
+                .collect();
+            let answer = c.simulate(described(every)).await.unwrap().into_inner();
+            assert_eq!(answer.series, untouched.series, "{}", model.name);
+            // An alias set to its described default changes nothing either.
+            for alias in model.effects.iter().filter(|e| !e.alias_of.is_empty()) {
+                let only = vec![proto::ParameterValue {
+                    name: alias.name.clone(),
+                    value: alias.default_value,
+                }];
+                let answer = c.simulate(described(only)).await.unwrap().into_inner();
+                assert_eq!(answer.series, untouched.series, "{}", alias.name);
+            }
+        }
+    });
+}
+
+#[test]
 fn health_and_models_are_served() {
     use tonic_health::pb::health_client::HealthClient;
     let worker = TestWorker::start(1, 16);

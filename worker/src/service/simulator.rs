@@ -204,6 +204,7 @@ pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
                 min: p.min,
                 max: p.max,
                 description: p.description.clone(),
+                alias_of: String::new(),
             })
             .collect(),
         outputs: info
@@ -218,13 +219,22 @@ pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
         effects: info
             .effects
             .iter()
-            .map(|e| proto::ParameterDescription {
-                name: e.name.clone(),
-                unit: e.unit.clone(),
-                default_value: 0.0,
-                min: e.min,
-                max: e.max,
-                description: e.description.clone(),
+            .map(|e| {
+                // An effect that is a base parameter: its value is that parameter's.
+                let aliased = e
+                    .parameter
+                    .as_deref()
+                    .and_then(|name| info.parameters.iter().find(|p| p.name == name));
+                let (min, max) = aliased.map_or((e.min, e.max), |p| (p.min, p.max));
+                proto::ParameterDescription {
+                    name: e.name.clone(),
+                    unit: e.unit.clone(),
+                    default_value: aliased.map_or(0.0, |p| p.default),
+                    min,
+                    max,
+                    description: e.description.clone(),
+                    alias_of: aliased.map_or_else(String::new, |p| p.name.clone()),
+                }
             })
             .collect(),
     }
