@@ -182,9 +182,8 @@ fn every_bad_simulate_request_names_its_field() {
                 "bad tolerance",
                 Box::new(|r| {
                     r.solver = Some(proto::SolverOptions {
-                        rtol: 0.0,
-                        atol: 1e-9,
-                        max_steps: 1000,
+                        rtol: Some(0.0),
+                        ..Default::default()
                     })
                 }),
                 Code::InvalidArgument,
@@ -353,9 +352,8 @@ fn a_failed_simulation_is_a_typed_answer() {
         let mut c = client(&worker).await;
         let mut request = simulate_request();
         request.solver = Some(proto::SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 5,
+            max_steps: Some(5),
+            ..Default::default()
         });
         let answer = c.simulate(request).await.unwrap().into_inner();
         let failure = answer.failure.expect("a failure");
@@ -364,9 +362,8 @@ fn a_failed_simulation_is_a_typed_answer() {
 
         let mut request = evaluate_request(2);
         request.solver = Some(proto::SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 5,
+            max_steps: Some(5),
+            ..Default::default()
         });
         let answer = c.evaluate(request).await.unwrap().into_inner();
         for r in &answer.results {
@@ -505,6 +502,71 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 assert_eq!(answer.series, untouched.series, "{}", alias.name);
             }
         }
+    });
+}
+
+#[test]
+fn solver_options_are_taken_field_by_field() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let models = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .models;
+        let own = |name: &str| {
+            let m = models.iter().find(|m| m.name == name).unwrap();
+            let s = m.default_solver.unwrap();
+            (s.rtol.unwrap(), s.atol.unwrap(), s.max_steps.unwrap())
+        };
+        assert_eq!(own("furuta"), (1e-8, 1e-10, 200_000));
+        assert_eq!(own("hx_lowfi"), (1e-6, 1e-8, 200_000));
+        assert_eq!(own("hx_highfi"), (1e-6, 1e-8, 200_000));
+        // Only rtol set: accepted, with the model's own atol and max_steps.
+        let with = |solver| {
+            let mut r = simulate_request();
+            r.solver = Some(solver);
+            r
+        };
+        let only_rtol = c
+            .simulate(with(proto::SolverOptions {
+                rtol: Some(1e-6),
+                ..Default::default()
+            }))
+            .await
+            .unwrap()
+            .into_inner();
+        assert!(only_rtol.failure.is_none());
+        let (_, atol, max_steps) = own("furuta");
+        let spelled_out = c
+            .simulate(with(proto::SolverOptions {
+                rtol: Some(1e-6),
+                atol: Some(atol),
+                max_steps: Some(max_steps),
+            }))
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(only_rtol.series, spelled_out.series);
+        assert_eq!(only_rtol.statistics, spelled_out.statistics);
+        // And it differs from the model's own rtol: the field was taken.
+        let own_rtol = c.simulate(simulate_request()).await.unwrap().into_inner();
+        assert_ne!(only_rtol.statistics, own_rtol.statistics);
+        // A field set to 0 is checked, not taken for unset.
+        expect(
+            "atol 0",
+            c.simulate(with(proto::SolverOptions {
+                atol: Some(0.0),
+                ..Default::default()
+            }))
+            .await,
+            Code::InvalidArgument,
+            "solver.atol",
+        );
     });
 }
 

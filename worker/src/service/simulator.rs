@@ -6,7 +6,7 @@ use super::error::{Error, Result};
 use super::pool::{PoolLoad, SimulationPool};
 use super::request::{self, Evaluation, Simulation};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
-use crate::{models, ModelInfo, SimulationError};
+use crate::{models, Model, SimulationError};
 use calib_proto::v1 as proto;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -189,8 +189,15 @@ fn failure(e: &SimulationError) -> proto::SimulationFailure {
     }
 }
 
-pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
+pub fn describe(model: &dyn Model) -> proto::ModelDescription {
+    let info = model.info();
+    let solver = model.default_options();
     proto::ModelDescription {
+        default_solver: Some(proto::SolverOptions {
+            rtol: Some(solver.rtol),
+            atol: Some(solver.atol),
+            max_steps: Some(solver.max_steps as u64),
+        }),
         name: info.name.clone(),
         version: info.version,
         description: info.description.clone(),
@@ -247,7 +254,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
         request: Request<proto::ListModelsRequest>,
     ) -> Result<Response<proto::ListModelsResponse>, Status> {
         request::check_protocol(request.get_ref().protocol_version)?;
-        let models = models::all().iter().map(|m| describe(m.info())).collect();
+        let models = models::all().iter().map(|m| describe(m.as_ref())).collect();
         Ok(Response::new(proto::ListModelsResponse { models }))
     }
 
@@ -259,7 +266,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
         request::check_protocol(request.protocol_version)?;
         let model = request::hosted_model(&request.model)?;
         Ok(Response::new(proto::DescribeResponse {
-            model: Some(describe(model.info())),
+            model: Some(describe(model)),
         }))
     }
 
