@@ -571,6 +571,73 @@ fn solver_options_are_taken_field_by_field() {
 }
 
 #[test]
+fn read_only_calls_accept_the_protocol_version_unset() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        for version in [0, V] {
+            let models = c
+                .list_models(proto::ListModelsRequest {
+                    protocol_version: version,
+                })
+                .await
+                .unwrap()
+                .into_inner()
+                .models;
+            assert_eq!(models.len(), 3);
+            let furuta = c
+                .describe(proto::DescribeRequest {
+                    protocol_version: version,
+                    model: "furuta".into(),
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(furuta.model.unwrap().name, "furuta");
+            let status = c
+                .status(proto::StatusRequest {
+                    protocol_version: version,
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(status.protocol_version, V);
+        }
+        // Another version is refused by every call.
+        let other = V + 1;
+        let list = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: other,
+            })
+            .await;
+        expect("list", list, Code::FailedPrecondition, "protocol_version");
+        let describe = c
+            .describe(proto::DescribeRequest {
+                protocol_version: other,
+                model: "furuta".into(),
+            })
+            .await;
+        expect("describe", describe, Code::FailedPrecondition, "protocol_version");
+        let status = c
+            .status(proto::StatusRequest {
+                protocol_version: other,
+            })
+            .await;
+        expect("status", status, Code::FailedPrecondition, "protocol_version");
+        // Requests that simulate still require the version.
+        let mut simulate = simulate_request();
+        simulate.protocol_version = 0;
+        let answer = c.simulate(simulate).await;
+        expect("simulate", answer, Code::FailedPrecondition, "protocol_version");
+        let mut evaluate = evaluate_request(1);
+        evaluate.protocol_version = 0;
+        let answer = c.evaluate(evaluate).await;
+        expect("evaluate", answer, Code::FailedPrecondition, "protocol_version");
+        assert_eq!(worker.simulations(), 0);
+    });
+}
+
+#[test]
 fn health_and_models_are_served() {
     use tonic_health::pb::health_client::HealthClient;
     let worker = TestWorker::start(1, 16);

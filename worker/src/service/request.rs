@@ -8,9 +8,19 @@ use super::error::{Error, Result};
 use crate::{limits, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
-/// Reject any protocol version but ours.
+/// Reject any protocol version but ours: the check of requests that simulate.
 pub fn check_protocol(client: u32) -> Result<()> {
-    if client == calib_proto::PROTOCOL_VERSION {
+    check_protocol_among(client, &[calib_proto::PROTOCOL_VERSION])
+}
+
+/// Reject any protocol version but ours or unset (0): the check of read-only requests
+/// (ListModels, Describe, Status), which a client may send before it knows the version.
+pub fn check_read_protocol(client: u32) -> Result<()> {
+    check_protocol_among(client, &[0, calib_proto::PROTOCOL_VERSION])
+}
+
+fn check_protocol_among(client: u32, accepted: &[u32]) -> Result<()> {
+    if accepted.contains(&client) {
         Ok(())
     } else {
         Err(Error::ProtocolMismatch {

@@ -253,7 +253,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
         &self,
         request: Request<proto::ListModelsRequest>,
     ) -> Result<Response<proto::ListModelsResponse>, Status> {
-        request::check_protocol(request.get_ref().protocol_version)?;
+        request::check_read_protocol(request.get_ref().protocol_version)?;
         let models = models::all().iter().map(|m| describe(m.as_ref())).collect();
         Ok(Response::new(proto::ListModelsResponse { models }))
     }
@@ -263,7 +263,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
         request: Request<proto::DescribeRequest>,
     ) -> Result<Response<proto::DescribeResponse>, Status> {
         let request = request.into_inner();
-        request::check_protocol(request.protocol_version)?;
+        request::check_read_protocol(request.protocol_version)?;
         let model = request::hosted_model(&request.model)?;
         Ok(Response::new(proto::DescribeResponse {
             model: Some(describe(model)),
@@ -288,7 +288,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
         &self,
         request: Request<proto::StatusRequest>,
     ) -> Result<Response<proto::StatusResponse>, Status> {
-        request::check_protocol(request.get_ref().protocol_version)?;
+        request::check_read_protocol(request.get_ref().protocol_version)?;
         Ok(Response::new(self.status()))
     }
 }
