@@ -292,3 +292,62 @@ impl proto::simulator_server::Simulator for SimulatorService {
         Ok(Response::new(self.status()))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::limits::{MAX_MESSAGE_BYTES, MAX_POINTS, MAX_TIMES};
+    use prost::Message;
+
+    /// The answer to a Simulate request of the longest grid and every output of `model`.
+    fn largest_simulate_response(model: &dyn Model) -> proto::SimulateResponse {
+        let times: Vec<f64> = (0..MAX_TIMES).map(|i| i as f64 * 1.1).collect();
+        proto::SimulateResponse {
+            series: model
+                .info()
+                .outputs
+                .iter()
+                .map(|o| proto::Series {
+                    output: o.name.clone(),
+                    values: times.iter().map(|t| t.sin()).collect(),
+                })
+                .collect(),
+            times,
+            failure: None,
+            statistics: Some(proto::SolverStatistics {
+                accepted_steps: u64::MAX,
+                rejected_steps: u64::MAX,
+                rhs_evaluations: u64::MAX,
+                events: u64::MAX,
+            }),
+        }
+    }
+
+    #[test]
+    fn the_largest_answers_fit_in_a_message_as_the_proto_says() {
+        let mut largest = 0;
+        for model in models::all() {
+            let outputs = model.info().outputs.len();
+            let len = largest_simulate_response(model.as_ref()).encoded_len();
+            // 8 bytes per time and per time and output, plus a few bytes of framing.
+            assert!(len >= 8 * MAX_TIMES * (1 + outputs), "{len}");
+            assert!(len < 8 * MAX_TIMES * (1 + outputs) + 1024, "{len}");
+            largest = largest.max(len);
+            let evaluate = proto::EvaluateResponse {
+                results: vec![
+                    proto::PointResult {
+                        objective: 1.5,
+                        sse: vec![0.25; outputs],
+                        failure: None,
+                    };
+                    MAX_POINTS
+                ],
+            };
+            let len = evaluate.encoded_len();
+            assert!(len <= MAX_POINTS * (14 + 8 * outputs), "{len}");
+            assert!(len < 1 << 20, "{len}");
+        }
+        assert!(largest < MAX_MESSAGE_BYTES);
+        assert!((43_000_000..45_000_000).contains(&largest), "{largest}");
+    }
+}
