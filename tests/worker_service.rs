@@ -422,7 +422,11 @@ fn a_batch_larger_than_the_queue_is_answered_in_full_by_an_idle_worker() {
     let worker = TestWorker::start(2, 128);
     runtime().block_on(async {
         let mut c = client(&worker).await;
-        let whole = c.evaluate(evaluate_request(131)).await.unwrap().into_inner();
+        let whole = c
+            .evaluate(evaluate_request(131))
+            .await
+            .unwrap()
+            .into_inner();
         assert_eq!(whole.results.len(), 131);
         assert!(whole.results.iter().all(|r| r.failure.is_none()));
         // The same points in pieces of two and of 129 give the same answers, bit for bit.
@@ -477,7 +481,11 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 outputs: Vec::new(),
                 solver: None,
             };
-            let untouched = c.simulate(described(Vec::new())).await.unwrap().into_inner();
+            let untouched = c
+                .simulate(described(Vec::new()))
+                .await
+                .unwrap()
+                .into_inner();
             assert!(untouched.failure.is_none(), "{}", model.name);
             // Every described default, aliases skipped, as the proto says.
             let every = model
@@ -617,22 +625,42 @@ fn read_only_calls_accept_the_protocol_version_unset() {
                 model: "furuta".into(),
             })
             .await;
-        expect("describe", describe, Code::FailedPrecondition, "protocol_version");
+        expect(
+            "describe",
+            describe,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
         let status = c
             .status(proto::StatusRequest {
                 protocol_version: other,
             })
             .await;
-        expect("status", status, Code::FailedPrecondition, "protocol_version");
+        expect(
+            "status",
+            status,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
         // Requests that simulate still require the version.
         let mut simulate = simulate_request();
         simulate.protocol_version = 0;
         let answer = c.simulate(simulate).await;
-        expect("simulate", answer, Code::FailedPrecondition, "protocol_version");
+        expect(
+            "simulate",
+            answer,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
         let mut evaluate = evaluate_request(1);
         evaluate.protocol_version = 0;
         let answer = c.evaluate(evaluate).await;
-        expect("evaluate", answer, Code::FailedPrecondition, "protocol_version");
+        expect(
+            "evaluate",
+            answer,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
         assert_eq!(worker.simulations(), 0);
     });
 }
@@ -745,8 +773,7 @@ fn reflection_lists_exactly_the_served_services_in_both_versions() {
         assert_eq!(listed_services!(v1alpha, channel.clone()), expected);
         assert_eq!(calib_worker::service::SERVED, expected);
         // The Registry is the coordinator's: a worker does not answer it.
-        let mut registry =
-            calib_proto::v1::registry_client::RegistryClient::new(channel.clone());
+        let mut registry = calib_proto::v1::registry_client::RegistryClient::new(channel.clone());
         let status = registry
             .register(proto::RegisterRequest::default())
             .await

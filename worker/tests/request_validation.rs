@@ -65,13 +65,15 @@ fn any_name() -> impl Strategy<Value = String> {
 
 fn any_solver() -> impl Strategy<Value = Option<proto::SolverOptions>> {
     use proptest::option::of;
-    of((of(any_float()), of(any_float()), of(any::<u64>())).prop_map(
-        |(rtol, atol, max_steps)| proto::SolverOptions {
-            rtol,
-            atol,
-            max_steps,
-        },
-    ))
+    of(
+        (of(any_float()), of(any_float()), of(any::<u64>())).prop_map(|(rtol, atol, max_steps)| {
+            proto::SolverOptions {
+                rtol,
+                atol,
+                max_steps,
+            }
+        }),
+    )
 }
 
 fn any_parameters() -> impl Strategy<Value = Vec<proto::ParameterValue>> {
@@ -231,16 +233,15 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 t
             });
             use proptest::option::of;
-            let solver = of((
-                of(1e-12..1e-2f64),
-                of(1e-12..1e-2f64),
-                of(1..1_000_000u64),
-            )
-                .prop_map(|(rtol, atol, max_steps)| proto::SolverOptions {
-                    rtol,
-                    atol,
-                    max_steps,
-                }));
+            let solver = of(
+                (of(1e-12..1e-2f64), of(1e-12..1e-2f64), of(1..1_000_000u64)).prop_map(
+                    |(rtol, atol, max_steps)| proto::SolverOptions {
+                        rtol,
+                        atol,
+                        max_steps,
+                    },
+                ),
+            );
             (Just(model), values, times, output_names, solver)
         })
         .prop_map(
