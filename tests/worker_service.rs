@@ -182,9 +182,8 @@ fn every_bad_simulate_request_names_its_field() {
                 "bad tolerance",
                 Box::new(|r| {
                     r.solver = Some(proto::SolverOptions {
-                        rtol: 0.0,
-                        atol: 1e-9,
-                        max_steps: 1000,
+                        rtol: Some(0.0),
+                        ..Default::default()
                     })
                 }),
                 Code::InvalidArgument,
@@ -353,9 +352,8 @@ fn a_failed_simulation_is_a_typed_answer() {
         let mut c = client(&worker).await;
         let mut request = simulate_request();
         request.solver = Some(proto::SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 5,
+            max_steps: Some(5),
+            ..Default::default()
         });
         let answer = c.simulate(request).await.unwrap().into_inner();
         let failure = answer.failure.expect("a failure");
@@ -364,9 +362,8 @@ fn a_failed_simulation_is_a_typed_answer() {
 
         let mut request = evaluate_request(2);
         request.solver = Some(proto::SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 5,
+            max_steps: Some(5),
+            ..Default::default()
         });
         let answer = c.evaluate(request).await.unwrap().into_inner();
         for r in &answer.results {
@@ -411,17 +408,260 @@ fn a_flood_beyond_the_queue_is_refused() {
         println!("{served} served, {refused} refused");
         assert!(served >= 3, "{served} served");
         assert!(refused > 0, "nothing refused");
-        // A batch larger than slots plus queue is refused whole, before anything runs.
-        let before = worker.simulations();
-        expect(
-            "oversized batch",
-            c.clone().evaluate(evaluate_request(4)).await,
-            Code::ResourceExhausted,
-            "the worker's queue is full",
-        );
-        assert_eq!(worker.simulations(), before);
+        // Once the flood has drained, a batch larger than slots plus queue is answered.
+        let answer = c.clone().evaluate(evaluate_request(4)).await.unwrap();
+        assert_eq!(answer.into_inner().results.len(), 4);
         // And the worker still serves.
         assert!(c.clone().simulate(simulate_request()).await.is_ok());
+    });
+}
+
+#[test]
+fn a_batch_larger_than_the_queue_is_answered_in_full_by_an_idle_worker() {
+    // Two slots and 128 waiting: 131 points are more than the worker holds at once.
+    let worker = TestWorker::start(2, 128);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let whole = c
+            .evaluate(evaluate_request(131))
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(whole.results.len(), 131);
+        assert!(whole.results.iter().all(|r| r.failure.is_none()));
+        // The same points in pieces of two and of 129 give the same answers, bit for bit.
+        let all = evaluate_request(131).points;
+        let mut pieces = Vec::new();
+        for range in [0..2, 2..131] {
+            let mut request = evaluate_request(0);
+            request.points = all[range].to_vec();
+            pieces.extend(c.evaluate(request).await.unwrap().into_inner().results);
+        }
+        assert_eq!(pieces.len(), 131);
+        for (i, (a, b)) in whole.results.iter().zip(&pieces).enumerate() {
+            assert_eq!(a.objective.to_bits(), b.objective.to_bits(), "point {i}");
+            assert_eq!(a.sse, b.sse, "point {i}");
+        }
+        assert_eq!(worker.simulations(), 262);
+    });
+}
+
+#[test]
+fn a_client_setting_every_described_default_simulates_the_defaults() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let models = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .models;
+        let furuta = models.iter().find(|m| m.name == "furuta").unwrap();
+        let effect = |name: &str| furuta.effects.iter().find(|e| e.name == name).unwrap();
+        let parameter = |name: &str| furuta.parameters.iter().find(|p| p.name == name).unwrap();
+        for (alias, of) in [
+            ("coulomb_friction.arm", "armFriction"),
+            ("coulomb_friction.pendulum", "pendulumFriction"),
+        ] {
+            assert_eq!(effect(alias).alias_of, of);
+            assert_eq!(effect(alias).default_value, parameter(of).default_value);
+            assert!(effect(alias).default_value > 0.0);
+        }
+        assert!(furuta.parameters.iter().all(|p| p.alias_of.is_empty()));
+        assert_eq!(effect("viscous_friction.arm").alias_of, "");
+        for model in &models {
+            let described = |with: Vec<proto::ParameterValue>| proto::SimulateRequest {
+                protocol_version: V,
+                model: model.name.clone(),
+                parameters: with,
+                times: grid(2.0, 0.1),
+                outputs: Vec::new(),
+                solver: None,
+            };
+            let untouched = c
+                .simulate(described(Vec::new()))
+                .await
+                .unwrap()
+                .into_inner();
+            assert!(untouched.failure.is_none(), "{}", model.name);
+            // Every described default, aliases skipped, as the proto says.
+            let every = model
+                .parameters
+                .iter()
+                .chain(&model.effects)
+                .filter(|p| p.alias_of.is_empty())
+                .map(|p| proto::ParameterValue {
+                    name: p.name.clone(),
+                    value: p.default_value,
+                })
+                .collect();
+            let answer = c.simulate(described(every)).await.unwrap().into_inner();
+            assert_eq!(answer.series, untouched.series, "{}", model.name);
+            // An alias set to its described default changes nothing either.
+            for alias in model.effects.iter().filter(|e| !e.alias_of.is_empty()) {
+                let only = vec![proto::ParameterValue {
+                    name: alias.name.clone(),
+                    value: alias.default_value,
+                }];
+                let answer = c.simulate(described(only)).await.unwrap().into_inner();
+                assert_eq!(answer.series, untouched.series, "{}", alias.name);
+            }
+        }
+    });
+}
+
+#[test]
+fn solver_options_are_taken_field_by_field() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let models = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+            .models;
+        let own = |name: &str| {
+            let m = models.iter().find(|m| m.name == name).unwrap();
+            let s = m.default_solver.unwrap();
+            (s.rtol.unwrap(), s.atol.unwrap(), s.max_steps.unwrap())
+        };
+        assert_eq!(own("furuta"), (1e-8, 1e-10, 200_000));
+        assert_eq!(own("hx_lowfi"), (1e-6, 1e-8, 200_000));
+        assert_eq!(own("hx_highfi"), (1e-6, 1e-8, 200_000));
+        // Only rtol set: accepted, with the model's own atol and max_steps.
+        let with = |solver| {
+            let mut r = simulate_request();
+            r.solver = Some(solver);
+            r
+        };
+        let only_rtol = c
+            .simulate(with(proto::SolverOptions {
+                rtol: Some(1e-6),
+                ..Default::default()
+            }))
+            .await
+            .unwrap()
+            .into_inner();
+        assert!(only_rtol.failure.is_none());
+        let (_, atol, max_steps) = own("furuta");
+        let spelled_out = c
+            .simulate(with(proto::SolverOptions {
+                rtol: Some(1e-6),
+                atol: Some(atol),
+                max_steps: Some(max_steps),
+            }))
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(only_rtol.series, spelled_out.series);
+        assert_eq!(only_rtol.statistics, spelled_out.statistics);
+        // And it differs from the model's own rtol: the field was taken.
+        let own_rtol = c.simulate(simulate_request()).await.unwrap().into_inner();
+        assert_ne!(only_rtol.statistics, own_rtol.statistics);
+        // A field set to 0 is checked, not taken for unset.
+        expect(
+            "atol 0",
+            c.simulate(with(proto::SolverOptions {
+                atol: Some(0.0),
+                ..Default::default()
+            }))
+            .await,
+            Code::InvalidArgument,
+            "solver.atol",
+        );
+    });
+}
+
+#[test]
+fn read_only_calls_accept_the_protocol_version_unset() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        for version in [0, V] {
+            let models = c
+                .list_models(proto::ListModelsRequest {
+                    protocol_version: version,
+                })
+                .await
+                .unwrap()
+                .into_inner()
+                .models;
+            assert_eq!(models.len(), 3);
+            let furuta = c
+                .describe(proto::DescribeRequest {
+                    protocol_version: version,
+                    model: "furuta".into(),
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(furuta.model.unwrap().name, "furuta");
+            let status = c
+                .status(proto::StatusRequest {
+                    protocol_version: version,
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(status.protocol_version, V);
+        }
+        // Another version is refused by every call.
+        let other = V + 1;
+        let list = c
+            .list_models(proto::ListModelsRequest {
+                protocol_version: other,
+            })
+            .await;
+        expect("list", list, Code::FailedPrecondition, "protocol_version");
+        let describe = c
+            .describe(proto::DescribeRequest {
+                protocol_version: other,
+                model: "furuta".into(),
+            })
+            .await;
+        expect(
+            "describe",
+            describe,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
+        let status = c
+            .status(proto::StatusRequest {
+                protocol_version: other,
+            })
+            .await;
+        expect(
+            "status",
+            status,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
+        // Requests that simulate still require the version.
+        let mut simulate = simulate_request();
+        simulate.protocol_version = 0;
+        let answer = c.simulate(simulate).await;
+        expect(
+            "simulate",
+            answer,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
+        let mut evaluate = evaluate_request(1);
+        evaluate.protocol_version = 0;
+        let answer = c.evaluate(evaluate).await;
+        expect(
+            "evaluate",
+            answer,
+            Code::FailedPrecondition,
+            "protocol_version",
+        );
+        assert_eq!(worker.simulations(), 0);
     });
 }
 
@@ -488,25 +728,18 @@ fn health_and_models_are_served() {
     });
 }
 
-#[test]
-fn reflection_lists_the_services() {
-    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
-    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
-    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
-    use tonic_reflection::pb::v1::ServerReflectionRequest;
-    let worker = TestWorker::start(1, 16);
-    runtime().block_on(async {
-        let channel = Channel::from_shared(worker.url())
-            .unwrap()
-            .connect()
-            .await
-            .unwrap();
-        let mut reflection = ServerReflectionClient::new(channel);
+/// The services a reflection client of protocol version `$v` (v1 or v1alpha) lists.
+macro_rules! listed_services {
+    ($v:ident, $channel:expr) => {{
+        use tonic_reflection::pb::$v::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$v::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$v::server_reflection_response::MessageResponse;
+        use tonic_reflection::pb::$v::ServerReflectionRequest;
         let request = ServerReflectionRequest {
             host: String::new(),
             message_request: Some(MessageRequest::ListServices(String::new())),
         };
-        let mut answers = reflection
+        let mut answers = ServerReflectionClient::new($channel)
             .server_reflection_info(tokio_stream::iter(vec![request]))
             .await
             .unwrap()
@@ -515,12 +748,36 @@ fn reflection_lists_the_services() {
         let Some(MessageResponse::ListServicesResponse(list)) = answer.message_response else {
             panic!("unexpected answer {answer:?}");
         };
-        let names: Vec<_> = list.service.iter().map(|s| s.name.as_str()).collect();
-        for expected in ["calib.v1.Simulator", "grpc.health.v1.Health"] {
-            assert!(
-                names.contains(&expected),
-                "{expected} missing from {names:?}"
-            );
-        }
+        let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+        names.sort();
+        names
+    }};
+}
+
+#[test]
+fn reflection_lists_exactly_the_served_services_in_both_versions() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let channel = Channel::from_shared(worker.url())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        let expected = [
+            "calib.v1.Simulator",
+            "grpc.health.v1.Health",
+            "grpc.reflection.v1.ServerReflection",
+            "grpc.reflection.v1alpha.ServerReflection",
+        ];
+        assert_eq!(listed_services!(v1, channel.clone()), expected);
+        assert_eq!(listed_services!(v1alpha, channel.clone()), expected);
+        assert_eq!(calib_worker::service::SERVED, expected);
+        // The Registry is the coordinator's: a worker does not answer it.
+        let mut registry = calib_proto::v1::registry_client::RegistryClient::new(channel.clone());
+        let status = registry
+            .register(proto::RegisterRequest::default())
+            .await
+            .unwrap_err();
+        assert_eq!(status.code(), Code::Unimplemented);
     });
 }

@@ -64,13 +64,16 @@ fn any_name() -> impl Strategy<Value = String> {
 }
 
 fn any_solver() -> impl Strategy<Value = Option<proto::SolverOptions>> {
-    proptest::option::of((any_float(), any_float(), any::<u64>()).prop_map(
-        |(rtol, atol, max_steps)| proto::SolverOptions {
-            rtol,
-            atol,
-            max_steps,
-        },
-    ))
+    use proptest::option::of;
+    of(
+        (of(any_float()), of(any_float()), of(any::<u64>())).prop_map(|(rtol, atol, max_steps)| {
+            proto::SolverOptions {
+                rtol,
+                atol,
+                max_steps,
+            }
+        }),
+    )
 }
 
 fn any_parameters() -> impl Strategy<Value = Vec<proto::ParameterValue>> {
@@ -229,14 +232,16 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 t.sort_by(f64::total_cmp);
                 t
             });
-            let solver =
-                proptest::option::of((1e-12..1e-2f64, 1e-12..1e-2f64, 1..1_000_000u64).prop_map(
+            use proptest::option::of;
+            let solver = of(
+                (of(1e-12..1e-2f64), of(1e-12..1e-2f64), of(1..1_000_000u64)).prop_map(
                     |(rtol, atol, max_steps)| proto::SolverOptions {
                         rtol,
                         atol,
                         max_steps,
                     },
-                ));
+                ),
+            );
             (Just(model), values, times, output_names, solver)
         })
         .prop_map(
@@ -290,9 +295,9 @@ fn any_mistake() -> impl Strategy<Value = Mistake> {
 fn make(mistake: &Mistake, r: &mut proto::SimulateRequest) -> &'static str {
     let solver = |r: &mut proto::SimulateRequest| {
         r.solver.get_or_insert(proto::SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 1000,
+            rtol: Some(1e-8),
+            atol: Some(1e-10),
+            max_steps: Some(1000),
         });
     };
     match mistake.clone() {
@@ -331,17 +336,17 @@ fn make(mistake: &Mistake, r: &mut proto::SimulateRequest) -> &'static str {
         }
         Mistake::Rtol(v) => {
             solver(r);
-            r.solver.as_mut().unwrap().rtol = v;
+            r.solver.as_mut().unwrap().rtol = Some(v);
             "solver.rtol"
         }
         Mistake::Atol(v) => {
             solver(r);
-            r.solver.as_mut().unwrap().atol = v;
+            r.solver.as_mut().unwrap().atol = Some(v);
             "solver.atol"
         }
         Mistake::MaxSteps(v) => {
             solver(r);
-            r.solver.as_mut().unwrap().max_steps = v;
+            r.solver.as_mut().unwrap().max_steps = Some(v);
             "solver.max_steps"
         }
     }
@@ -380,9 +385,15 @@ proptest! {
         prop_assert!(s.is_ok(), "{:?} refused: {}", r, s.err().unwrap());
         let s = s.unwrap();
         assert_sound(&s);
-        if r.solver.is_none() {
-            prop_assert_eq!(s.solver, s.model.default_options());
-        }
+        // Each option left unset is the model's own.
+        let own = s.model.default_options();
+        let given = r.solver.unwrap_or_default();
+        prop_assert_eq!(s.solver.rtol, given.rtol.unwrap_or(own.rtol));
+        prop_assert_eq!(s.solver.atol, given.atol.unwrap_or(own.atol));
+        prop_assert_eq!(
+            s.solver.max_steps as u64,
+            given.max_steps.unwrap_or(own.max_steps as u64)
+        );
     }
 
     #[test]

@@ -60,9 +60,9 @@ impl WireObjective {
             measurement: None,
             points: Vec::new(),
             solver: Some(proto::SolverOptions {
-                rtol: objective.solver.rtol,
-                atol: objective.solver.atol,
-                max_steps: objective.solver.max_steps as u64,
+                rtol: Some(objective.solver.rtol),
+                atol: Some(objective.solver.atol),
+                max_steps: Some(objective.solver.max_steps as u64),
             }),
         };
         let measurement = proto::Measurement {
@@ -110,9 +110,9 @@ impl WireSimulation {
                 .map(|&o| info.outputs[o].name.clone())
                 .collect(),
             solver: Some(proto::SolverOptions {
-                rtol: objective.solver.rtol,
-                atol: objective.solver.atol,
-                max_steps: objective.solver.max_steps as u64,
+                rtol: Some(objective.solver.rtol),
+                atol: Some(objective.solver.atol),
+                max_steps: Some(objective.solver.max_steps as u64),
             }),
         };
         Self {

@@ -29,6 +29,14 @@ use tonic::transport::server::TcpIncoming;
 
 pub use crate::limits;
 
+/// The services a worker answers, as reflection lists them.
+pub const SERVED: &[&str] = &[
+    "calib.v1.Simulator",
+    "grpc.health.v1.Health",
+    "grpc.reflection.v1.ServerReflection",
+    "grpc.reflection.v1alpha.ServerReflection",
+];
+
 /// How a worker runs.
 #[derive(Debug, Clone)]
 pub struct WorkerConfig {
@@ -119,10 +127,20 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
         cache::MeasurementCache::new(config.cache_bytes),
     ));
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1()
+    // Reflection lists exactly what this server answers (not the coordinator's services,
+    // whose descriptors share the file set), over both versions of the protocol.
+    let reflection = || {
+        let mut builder = tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET);
+        for name in SERVED {
+            builder = builder.with_service_name(*name);
+        }
+        builder
+    };
+    let reflection_v1 = reflection().build_v1().map_err(std::io::Error::other)?;
+    let reflection_v1alpha = reflection()
+        .build_v1alpha()
         .map_err(std::io::Error::other)?;
     let simulator = SimulatorServer::from_arc(service.clone())
         .max_decoding_message_size(limits::MAX_MESSAGE_BYTES)
@@ -143,7 +161,8 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
             .http2_keepalive_interval(Some(Duration::from_secs(10)))
             .http2_keepalive_timeout(Some(Duration::from_secs(20)))
             .add_service(health)
-            .add_service(reflection)
+            .add_service(reflection_v1)
+            .add_service(reflection_v1alpha)
             .add_service(simulator)
             .serve_with_incoming_shutdown(incoming, async {
                 let _ = shutdown_rx.await;

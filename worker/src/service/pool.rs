@@ -1,9 +1,12 @@
 //! Where simulations run: a bounded set of blocking threads, never the async runtime.
 //!
 //! `slots` simulations run at once (one per core by default); up to `queue_bound` more
-//! wait for a slot. A request that would push the queue past its bound is refused whole
+//! wait for a slot. A request arriving while the queue is full is refused whole
 //! (`RESOURCE_EXHAUSTED`) before anything runs, so a flood costs the worker nothing and the
-//! client learns at once to go elsewhere.
+//! client learns at once to go elsewhere. A request arriving while there is room is admitted
+//! whole, however many points it holds (up to [`crate::limits::MAX_POINTS`]): a batch larger
+//! than the queue is never refused by an idle worker, it fills the queue past its bound
+//! and the requests after it are refused until it drains.
 
 use super::error::{Error, Result};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
@@ -60,11 +63,12 @@ impl SimulationPool {
         }
     }
 
-    /// Reserve places for `n` simulations, or refuse them all when the queue would overflow.
+    /// Reserve places for `n` simulations, or refuse them all when the queue is full already
+    /// (every slot busy and `queue_bound` simulations waiting).
     pub fn admit(&self, n: usize) -> Result<Admission<'_>> {
         let capacity = self.slots + self.queue_bound;
         let before = self.admitted.fetch_add(n, Ordering::AcqRel);
-        if before + n > capacity {
+        if before >= capacity {
             self.admitted.fetch_sub(n, Ordering::AcqRel);
             return Err(Error::QueueFull {
                 queued: before.saturating_sub(self.slots),
@@ -130,5 +134,27 @@ impl SimulationPool {
             queued: admitted.saturating_sub(running),
             completed: self.completed.load(Ordering::Relaxed),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_batch_larger_than_the_queue_is_admitted_while_there_is_room() {
+        let pool = SimulationPool::new(2, 128);
+        let big = pool.admit(131).expect("an idle pool admits any batch");
+        assert_eq!(pool.load().queued, 131);
+        // The queue is full now: the next request is refused, whatever its size.
+        assert!(matches!(pool.admit(1), Err(Error::QueueFull { .. })));
+        drop(big);
+        assert_eq!(pool.load().queued, 0);
+        let small = pool.admit(129).unwrap();
+        // One place left: a request of any size takes it.
+        let last = pool.admit(5).unwrap();
+        assert!(pool.admit(1).is_err());
+        drop((small, last));
+        assert!(pool.admit(1).is_ok());
     }
 }

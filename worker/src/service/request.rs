@@ -8,9 +8,19 @@ use super::error::{Error, Result};
 use crate::{limits, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
-/// Reject any protocol version but ours.
+/// Reject any protocol version but ours: the check of requests that simulate.
 pub fn check_protocol(client: u32) -> Result<()> {
-    if client == calib_proto::PROTOCOL_VERSION {
+    check_protocol_among(client, &[calib_proto::PROTOCOL_VERSION])
+}
+
+/// Reject any protocol version but ours or unset (0): the check of read-only requests
+/// (ListModels, Describe, Status), which a client may send before it knows the version.
+pub fn check_read_protocol(client: u32) -> Result<()> {
+    check_protocol_among(client, &[0, calib_proto::PROTOCOL_VERSION])
+}
+
+fn check_protocol_among(client: u32, accepted: &[u32]) -> Result<()> {
+    if accepted.contains(&client) {
         Ok(())
     } else {
         Err(Error::ProtocolMismatch {
@@ -64,16 +74,16 @@ fn output_index(info: &ModelInfo, name: &str, field: &str) -> Result<usize> {
     validate::output(info, name).map_err(|e| at(field, e))
 }
 
-/// The request's solver options, or the model's own calibration tolerances when it sends
-/// none.
+/// The request's solver options field by field, the model's own calibration tolerances for
+/// every field it leaves unset.
 fn solver_options(
     model: &dyn Model,
     options: Option<proto::SolverOptions>,
 ) -> Result<SolverOptions> {
     let overrides = options.map_or_else(Default::default, |o| validate::SolverOverrides {
-        rtol: Some(o.rtol),
-        atol: Some(o.atol),
-        max_steps: Some(o.max_steps),
+        rtol: o.rtol,
+        atol: o.atol,
+        max_steps: o.max_steps,
     });
     validate::solver_options(model, overrides)
         .map_err(|(option, e)| at(&format!("solver.{option}"), e))
@@ -316,15 +326,39 @@ mod tests {
         let furuta = Simulation::try_from(simulate_request("furuta", None)).unwrap();
         assert_eq!(furuta.solver.rtol, 1e-8);
         let given = proto::SolverOptions {
-            rtol: 1e-4,
-            atol: 1e-6,
-            max_steps: 10,
+            rtol: Some(1e-4),
+            atol: Some(1e-6),
+            max_steps: Some(10),
         };
         let s = Simulation::try_from(simulate_request("hx_lowfi", Some(given))).unwrap();
         assert_eq!(
             (s.solver.rtol, s.solver.atol, s.solver.max_steps),
             (1e-4, 1e-6, 10)
         );
+    }
+
+    #[test]
+    fn each_solver_option_left_unset_is_the_models_own() {
+        let only_rtol = proto::SolverOptions {
+            rtol: Some(1e-5),
+            ..Default::default()
+        };
+        for model in ["furuta", "hx_lowfi"] {
+            let s = Simulation::try_from(simulate_request(model, Some(only_rtol))).unwrap();
+            let own = s.model.default_options();
+            assert_eq!(
+                (s.solver.rtol, s.solver.atol, s.solver.max_steps),
+                (1e-5, own.atol, own.max_steps)
+            );
+        }
+        let only_atol_zero = proto::SolverOptions {
+            atol: Some(0.0),
+            ..Default::default()
+        };
+        let e = Simulation::try_from(simulate_request("furuta", Some(only_atol_zero)))
+            .err()
+            .unwrap();
+        assert!(e.to_string().starts_with("solver.atol: "), "{e}");
     }
 
     #[test]
@@ -347,9 +381,9 @@ mod tests {
         let r = simulate_request(
             "furuta",
             Some(proto::SolverOptions {
-                rtol: 1e-8,
-                atol: 1e-10,
-                max_steps: 20_000_000,
+                rtol: Some(1e-8),
+                atol: Some(1e-10),
+                max_steps: Some(20_000_000),
             }),
         );
         let e = Simulation::try_from(r).err().unwrap();

@@ -6,7 +6,7 @@ use super::error::{Error, Result};
 use super::pool::{PoolLoad, SimulationPool};
 use super::request::{self, Evaluation, Simulation};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
-use crate::{models, ModelInfo, SimulationError};
+use crate::{models, Model, SimulationError};
 use calib_proto::v1 as proto;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -189,8 +189,15 @@ fn failure(e: &SimulationError) -> proto::SimulationFailure {
     }
 }
 
-pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
+pub fn describe(model: &dyn Model) -> proto::ModelDescription {
+    let info = model.info();
+    let solver = model.default_options();
     proto::ModelDescription {
+        default_solver: Some(proto::SolverOptions {
+            rtol: Some(solver.rtol),
+            atol: Some(solver.atol),
+            max_steps: Some(solver.max_steps as u64),
+        }),
         name: info.name.clone(),
         version: info.version,
         description: info.description.clone(),
@@ -204,6 +211,7 @@ pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
                 min: p.min,
                 max: p.max,
                 description: p.description.clone(),
+                alias_of: String::new(),
             })
             .collect(),
         outputs: info
@@ -218,13 +226,22 @@ pub fn describe(info: &ModelInfo) -> proto::ModelDescription {
         effects: info
             .effects
             .iter()
-            .map(|e| proto::ParameterDescription {
-                name: e.name.clone(),
-                unit: e.unit.clone(),
-                default_value: 0.0,
-                min: e.min,
-                max: e.max,
-                description: e.description.clone(),
+            .map(|e| {
+                // An effect that is a base parameter: its value is that parameter's.
+                let aliased = e
+                    .parameter
+                    .as_deref()
+                    .and_then(|name| info.parameters.iter().find(|p| p.name == name));
+                let (min, max) = aliased.map_or((e.min, e.max), |p| (p.min, p.max));
+                proto::ParameterDescription {
+                    name: e.name.clone(),
+                    unit: e.unit.clone(),
+                    default_value: aliased.map_or(0.0, |p| p.default),
+                    min,
+                    max,
+                    description: e.description.clone(),
+                    alias_of: aliased.map_or_else(String::new, |p| p.name.clone()),
+                }
             })
             .collect(),
     }
@@ -236,8 +253,8 @@ impl proto::simulator_server::Simulator for SimulatorService {
         &self,
         request: Request<proto::ListModelsRequest>,
     ) -> Result<Response<proto::ListModelsResponse>, Status> {
-        request::check_protocol(request.get_ref().protocol_version)?;
-        let models = models::all().iter().map(|m| describe(m.info())).collect();
+        request::check_read_protocol(request.get_ref().protocol_version)?;
+        let models = models::all().iter().map(|m| describe(m.as_ref())).collect();
         Ok(Response::new(proto::ListModelsResponse { models }))
     }
 
@@ -246,10 +263,10 @@ impl proto::simulator_server::Simulator for SimulatorService {
         request: Request<proto::DescribeRequest>,
     ) -> Result<Response<proto::DescribeResponse>, Status> {
         let request = request.into_inner();
-        request::check_protocol(request.protocol_version)?;
+        request::check_read_protocol(request.protocol_version)?;
         let model = request::hosted_model(&request.model)?;
         Ok(Response::new(proto::DescribeResponse {
-            model: Some(describe(model.info())),
+            model: Some(describe(model)),
         }))
     }
 
@@ -271,7 +288,66 @@ impl proto::simulator_server::Simulator for SimulatorService {
         &self,
         request: Request<proto::StatusRequest>,
     ) -> Result<Response<proto::StatusResponse>, Status> {
-        request::check_protocol(request.get_ref().protocol_version)?;
+        request::check_read_protocol(request.get_ref().protocol_version)?;
         Ok(Response::new(self.status()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::limits::{MAX_MESSAGE_BYTES, MAX_POINTS, MAX_TIMES};
+    use prost::Message;
+
+    /// The answer to a Simulate request of the longest grid and every output of `model`.
+    fn largest_simulate_response(model: &dyn Model) -> proto::SimulateResponse {
+        let times: Vec<f64> = (0..MAX_TIMES).map(|i| i as f64 * 1.1).collect();
+        proto::SimulateResponse {
+            series: model
+                .info()
+                .outputs
+                .iter()
+                .map(|o| proto::Series {
+                    output: o.name.clone(),
+                    values: times.iter().map(|t| t.sin()).collect(),
+                })
+                .collect(),
+            times,
+            failure: None,
+            statistics: Some(proto::SolverStatistics {
+                accepted_steps: u64::MAX,
+                rejected_steps: u64::MAX,
+                rhs_evaluations: u64::MAX,
+                events: u64::MAX,
+            }),
+        }
+    }
+
+    #[test]
+    fn the_largest_answers_fit_in_a_message_as_the_proto_says() {
+        let mut largest = 0;
+        for model in models::all() {
+            let outputs = model.info().outputs.len();
+            let len = largest_simulate_response(model.as_ref()).encoded_len();
+            // 8 bytes per time and per time and output, plus a few bytes of framing.
+            assert!(len >= 8 * MAX_TIMES * (1 + outputs), "{len}");
+            assert!(len < 8 * MAX_TIMES * (1 + outputs) + 1024, "{len}");
+            largest = largest.max(len);
+            let evaluate = proto::EvaluateResponse {
+                results: vec![
+                    proto::PointResult {
+                        objective: 1.5,
+                        sse: vec![0.25; outputs],
+                        failure: None,
+                    };
+                    MAX_POINTS
+                ],
+            };
+            let len = evaluate.encoded_len();
+            assert!(len <= MAX_POINTS * (14 + 8 * outputs), "{len}");
+            assert!(len < 1 << 20, "{len}");
+        }
+        assert!(largest < MAX_MESSAGE_BYTES);
+        assert!((43_000_000..45_000_000).contains(&largest), "{largest}");
     }
 }
