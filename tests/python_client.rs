@@ -130,5 +130,6 @@ fn a_python_client_lists_models_and_simulates() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.trim_end().ends_with("ok"));
-    assert_eq!(worker.simulations(), 2);
+    // Two Simulate calls, and two Evaluate calls of two points each.
+    assert_eq!(worker.simulations(), 6);
 }

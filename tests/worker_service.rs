@@ -344,6 +344,27 @@ fn every_bad_evaluate_request_names_its_field() {
     });
 }
 
+/// A client that never computes a hash: it sends the measurement once without one, and
+/// names it afterwards by the hash the worker answered with.
+#[test]
+fn the_worker_names_a_measurement_sent_without_a_hash() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        let (_, expected) = measurement();
+        let mut first = evaluate_request(3);
+        first.measurement_hash.clear();
+        let answered = c.evaluate(first).await.unwrap().into_inner();
+        assert_eq!(answered.measurement_hash, expected);
+        let mut later = evaluate_request(3);
+        later.measurement = None;
+        later.measurement_hash = answered.measurement_hash.clone();
+        let again = c.evaluate(later).await.unwrap().into_inner();
+        assert_eq!(again.results, answered.results);
+        assert_eq!(again.measurement_hash, expected);
+    });
+}
+
 #[test]
 fn a_failed_simulation_is_a_typed_answer() {
     use proto::simulation_failure::Kind;

@@ -140,6 +140,7 @@ impl Simulator for NappingSimulator {
                     failure: None,
                 })
                 .collect(),
+            measurement_hash: request.measurement_hash.clone(),
         }))
     }
 

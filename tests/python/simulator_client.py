@@ -85,4 +85,21 @@ with grpc.insecure_channel(address) as channel:
         assert e.details().startswith("times"), e.details()
         print("Simulate with an empty grid:", e.code().name, "-", e.details())
 
+    # Evaluate without computing a hash: the first request carries the measurement, the
+    # answer names it, later requests use that name.
+    grid = [0.1 * i for i in range(101)]
+    request = dict(
+        protocol_version=VERSION,
+        model="furuta",
+        free_parameters=["armFriction"],
+        outputs=[simulator_pb2.ComparedOutput(output="armJoint.phi", weight=1.0)],
+        points=[simulator_pb2.Point(values=[0.01]), simulator_pb2.Point(values=[0.02])],
+    )
+    measured = simulator_pb2.Measurement(times=grid, columns=[simulator_pb2.Column(values=[0.0] * len(grid))])
+    first = stub.Evaluate(simulator_pb2.EvaluateRequest(measurement=measured, **request))
+    assert len(first.measurement_hash) == 32
+    later = stub.Evaluate(simulator_pb2.EvaluateRequest(measurement_hash=first.measurement_hash, **request))
+    assert [r.objective for r in later.results] == [r.objective for r in first.results]
+    print(f"Evaluate: the worker named the measurement {first.measurement_hash.hex()[:12]}")
+
 print("ok")

@@ -234,14 +234,19 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
             }
             weights.push(o.weight);
         }
-        let measurement_hash: [u8; 32] =
-            r.measurement_hash.as_slice().try_into().map_err(|_| {
+        let measurement = r.measurement.map(MeasuredData::try_from).transpose()?;
+        // Without a hash, a request carrying the measurement lets the worker name it (the
+        // answer gives the name for later requests): clients need not compute it.
+        let named_here = r.measurement_hash.is_empty() && measurement.is_some();
+        let measurement_hash: [u8; 32] = match &measurement {
+            Some(m) if named_here => m.hash(),
+            _ => r.measurement_hash.as_slice().try_into().map_err(|_| {
                 Error::invalid(
                     "measurement_hash",
                     format!("{} bytes, expected 32 (BLAKE3)", r.measurement_hash.len()),
                 )
-            })?;
-        let measurement = r.measurement.map(MeasuredData::try_from).transpose()?;
+            })?,
+        };
         if let Some(m) = &measurement {
             if m.columns.len() != outputs.len() {
                 return Err(Error::invalid(

@@ -146,7 +146,10 @@ impl SimulatorService {
             });
         }
         self.evaluations.fetch_add(count as u64, Ordering::Relaxed);
-        Ok(proto::EvaluateResponse { results })
+        Ok(proto::EvaluateResponse {
+            results,
+            measurement_hash: evaluation.measurement_hash.to_vec(),
+        })
     }
 
     fn status(&self) -> proto::StatusResponse {
@@ -342,9 +345,10 @@ mod tests {
                     };
                     MAX_POINTS
                 ],
+                measurement_hash: vec![0xff; 32],
             };
             let len = evaluate.encoded_len();
-            assert!(len <= MAX_POINTS * (14 + 8 * outputs), "{len}");
+            assert!(len <= MAX_POINTS * (14 + 8 * outputs) + 34, "{len}");
             assert!(len < 1 << 20, "{len}");
         }
         assert!(largest < MAX_MESSAGE_BYTES);
