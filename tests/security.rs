@@ -225,10 +225,11 @@ fn a_scheme_that_does_not_match_the_server_says_which_to_dial() {
         &[secure.url().replace("https://", "http://")],
         pki.client(None),
     );
-    config.wait_for_workers = Duration::from_secs(1);
+    // Long enough for a probe to come back even on a loaded machine.
+    config.wait_for_workers = Duration::from_secs(5);
     let remote = RemoteWorkers::connect(config).unwrap();
     let error = remote
-        .wait_for_worker(Duration::from_secs(1), |_| {})
+        .wait_for_worker(Duration::from_secs(5), |_| {})
         .expect_err("a TLS server does not speak plain HTTP/2");
     assert!(error.contains("dial it with https://"), "{error}");
 }

@@ -49,9 +49,15 @@ fn find_tls_error<'a>(error: &'a (dyn Error + 'static)) -> Option<&'a rustls::Er
     None
 }
 
-/// A hint for a call over plain HTTP/2 that the server answered with something else,
-/// as a TLS server does; `None` for any other failure.
+/// A hint for a call over plain HTTP/2 that the server answered with something else, as a
+/// TLS server does. What the client sees depends on who is first: an HTTP/2 protocol error,
+/// a cancelled call or a bare transport error when the server closes the connection. The
+/// hint is worded as a condition, since the last two also have other causes; `None` for
+/// any other failure.
 pub fn plain_to_tls_hint(status: &tonic::Status) -> Option<&'static str> {
-    (status.code() == tonic::Code::Internal && status.message().contains("h2 protocol error"))
-        .then_some("if the server serves TLS, dial it with https://")
+    let garbled =
+        status.code() == tonic::Code::Internal && status.message().contains("h2 protocol error");
+    let closed = status.code() == tonic::Code::Cancelled
+        && status.message().contains("operation was canceled");
+    (garbled || closed).then_some("if the server serves TLS, dial it with https://")
 }
