@@ -407,8 +407,26 @@ fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
 
 /// `calib coordinator` on a store, in a process of its own; its address.
 fn spawn_coordinator(dir: &Path, workers: &str) -> (std::process::Child, String) {
+    let db = dir.join("db");
+    let api = dir.join("api");
+    let store = [
+        "--db",
+        db.to_str().unwrap(),
+        "--api-dir",
+        api.to_str().unwrap(),
+    ];
+    spawn_coordinator_in(dir, workers, &store)
+}
+
+/// `calib coordinator` started in the folder `cwd` with the store arguments `store`.
+fn spawn_coordinator_in(
+    cwd: &Path,
+    workers: &str,
+    store: &[&str],
+) -> (std::process::Child, String) {
     use std::io::{BufRead, BufReader};
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .current_dir(cwd)
         .args([
             "coordinator",
             "--listen",
@@ -416,10 +434,7 @@ fn spawn_coordinator(dir: &Path, workers: &str) -> (std::process::Child, String)
             "--workers",
             workers,
         ])
-        .arg("--db")
-        .arg(dir.join("db"))
-        .arg("--api-dir")
-        .arg(dir.join("api"))
+        .args(store)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::null())
         .spawn()
@@ -511,6 +526,42 @@ fn a_submitted_campaign_survives_a_killed_coordinator() {
         &[],
     );
     assert_eq!(runs_of(&result), runs_of(&local));
+}
+
+#[test]
+fn a_coordinator_on_a_relative_store_path_finds_the_data_uploaded_to_it() {
+    // `--db db` from the coordinator's working directory: the API folder defaults to
+    // `calib-api/` beside it, and a submitted campaign must find its dataset there.
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 1);
+    let (mut coordinator, url) =
+        spawn_coordinator_in(dir.path(), &cluster.workers_arg(), &["--db", "db"]);
+    let search = "methods = [\"nelder-mead\"]\nstarts = 1\nmax_evaluations = 40";
+    let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let out = calib(&[
+        "submit",
+        campaign.to_str().unwrap(),
+        "--coordinator",
+        &url,
+        "--out",
+        dir.path().join("submitted").to_str().unwrap(),
+        "--json",
+    ]);
+    coordinator.kill().unwrap();
+    coordinator.wait().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.path().join("calib-api/datasets").is_dir());
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("local-db"),
+        &dir.path().join("local"),
+        &[],
+    );
+    assert_eq!(runs_of(&json_of(&out)), runs_of(&local));
 }
 
 #[test]

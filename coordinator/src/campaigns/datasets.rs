@@ -39,9 +39,13 @@ impl Datasets {
             path: folder.to_path_buf(),
             source,
         })?;
-        Ok(Self {
-            folder: folder.to_path_buf(),
-        })
+        // Absolute, so that campaign files naming a dataset resolve it wherever they are
+        // parsed (a relative `--db` or `--api-dir` must not be joined twice).
+        let folder = std::fs::canonicalize(folder).map_err(|source| Error::Write {
+            path: folder.to_path_buf(),
+            source,
+        })?;
+        Ok(Self { folder })
     }
 
     /// Parse `bytes` as the file `file_name` with its time in `time_column` and keep it.
