@@ -38,18 +38,24 @@ enum Command {
     Diagnose(commands::diagnose::Args),
     /// Serve the hosted models to coordinators (gRPC Simulator, health, reflection).
     Worker(commands::worker::Args),
-    /// Serve the worker registry and keep a pool of workers (gRPC).
+    /// Serve the Calibration API (campaigns from `calib submit` and gRPC clients) and the
+    /// worker registry, and keep a pool of workers (gRPC).
     Coordinator(commands::coordinator::Args),
+    /// Ask a worker or coordinator whether it serves (gRPC health): exit 0 when it does, 1
+    /// otherwise; for container healthchecks and scripts.
+    Health(commands::health::Args),
     /// Measure simulation and calibration speed and print the figures.
     Bench(commands::bench::Args),
     /// Inspect, export or import an evaluation store (`calib calibrate --db`).
     Store(commands::store::Args),
-    /// Run a campaign on a coordinator: upload its data, submit it, follow it, and write
-    /// result.json and the plots as `calib calibrate` does.
+    /// Run a campaign on a coordinator: upload its data, submit it, follow it (through a
+    /// restart of the coordinator: it reconnects for up to 5 minutes), and write result.json
+    /// and the plots as `calib calibrate` does.
     Submit(commands::submit::SubmitArgs),
     /// The state of one campaign of a coordinator, or of all of them.
     Status(commands::submit::StatusArgs),
-    /// Follow a campaign on a coordinator until it ends.
+    /// Follow a campaign on a coordinator until it ends, reconnecting for up to 5 minutes
+    /// when the coordinator goes away.
     Watch(commands::submit::IdArgs),
     /// Stop a campaign on a coordinator.
     Cancel(commands::submit::IdArgs),
@@ -75,6 +81,9 @@ fn main() -> ExitCode {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn")),
         )
         .with_writer(std::io::stderr)
+        // Colour for a person at a terminal, plain text for log collectors (docker logs,
+        // journald, files).
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let outcome = match cli.command {
         Command::Models(args) => commands::models::run(args),
@@ -83,6 +92,7 @@ fn main() -> ExitCode {
         Command::Diagnose(args) => commands::diagnose::run(args),
         Command::Worker(args) => commands::worker::run(args),
         Command::Coordinator(args) => commands::coordinator::run(args),
+        Command::Health(args) => commands::health::run(args),
         Command::Bench(args) => commands::bench::run(args),
         Command::Store(args) => commands::store::run(args),
         Command::Submit(args) => commands::submit::submit(args),

@@ -52,7 +52,7 @@ pub fn run(args: Args) -> Outcome {
     runtime.block_on(async {
         let coordinator = server::start_coordinator(config).await?;
         println!("coordinator listening on {}", coordinator.address());
-        coordinator.wait().await?;
+        coordinator.serve_until(super::terminated()).await?;
         Ok(())
     })
 }

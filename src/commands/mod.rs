@@ -7,6 +7,7 @@ pub mod bench_store;
 pub mod calibrate;
 pub mod coordinator;
 pub mod diagnose;
+pub mod health;
 pub mod models;
 pub mod security;
 pub mod simulate;
@@ -60,4 +61,23 @@ pub fn runtime() -> Result<tokio::runtime::Runtime, Failure> {
         .enable_all()
         .build()
         .map_err(|e| Failure::internal(format!("cannot start the async runtime: {e}")))
+}
+
+/// Completes on SIGTERM (a container stopped, a pod evicted) or SIGINT (Ctrl-C), after
+/// logging it. A server in a container runs as PID 1, which the kernel never terminates on
+/// a signal it does not handle.
+pub async fn terminated() {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (Ok(mut term), Ok(mut int)) = (
+        signal(SignalKind::terminate()),
+        signal(SignalKind::interrupt()),
+    ) else {
+        return std::future::pending().await;
+    };
+    let name = tokio::select! {
+        _ = term.recv() => "SIGTERM",
+        _ = int.recv() => "SIGINT",
+    };
+    tracing::info!(signal = name, "shutting down");
+    eprintln!("{name}: shutting down");
 }

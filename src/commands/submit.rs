@@ -150,30 +150,90 @@ pub fn submit(args: SubmitArgs) -> Outcome {
             },
             submitted.id
         );
-        let last = follow(&mut client, &submitted.id).await?;
+        let last = follow(&args.coordinator, client, &submitted.id).await?;
         finish(&args, &campaign, &last)
     })
 }
 
-/// Print the campaign's progress until it ends; its last state.
-async fn follow(client: &mut Client, id: &str) -> Result<pb::CampaignState, Failure> {
-    let mut stream = client
-        .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
-        .await
-        .map_err(rpc)?
-        .into_inner();
-    let mut last = None;
-    let mut shown = std::time::Instant::now() - std::time::Duration::from_secs(1);
-    while let Some(state) = stream.message().await.map_err(rpc)? {
-        if shown.elapsed() >= std::time::Duration::from_millis(200) {
-            eprintln!("{}", line(&state));
-            shown = std::time::Instant::now();
+/// How long a follower keeps reconnecting to a coordinator it lost (restarted, rescheduled,
+/// cut off) before it gives up.
+const RECONNECT_FOR: std::time::Duration = std::time::Duration::from_secs(300);
+
+/// Print the campaign's progress until it ends; its last state. A lost connection (the
+/// coordinator restarted or the network cut) is dialed again for up to `RECONNECT_FOR`:
+/// every message is the whole state, so nothing is missed.
+async fn follow(
+    arg: &CoordinatorArg,
+    mut client: Client,
+    id: &str,
+) -> Result<pb::CampaignState, Failure> {
+    use std::time::{Duration, Instant};
+    let mut last: Option<pb::CampaignState> = None;
+    let mut shown = Instant::now() - Duration::from_secs(1);
+    let mut lost_since: Option<Instant> = None;
+    loop {
+        let lost = match client
+            .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
+            .await
+        {
+            Ok(stream) => {
+                let mut stream = stream.into_inner();
+                loop {
+                    match stream.message().await {
+                        Ok(Some(state)) => {
+                            lost_since = None;
+                            if shown.elapsed() >= Duration::from_millis(200) {
+                                eprintln!("{}", line(&state));
+                                shown = Instant::now();
+                            }
+                            last = Some(state);
+                        }
+                        // The stream ends with the campaign; one that ends while the
+                        // campaign runs was cut by a coordinator going down.
+                        Ok(None) if last.as_ref().is_some_and(|s| s.phase != running()) => {
+                            let last = last.expect("checked");
+                            eprintln!("{}", line(&last));
+                            return Ok(last);
+                        }
+                        Ok(None) => break "the coordinator ended the watch".to_string(),
+                        Err(status) if transient(&status) => break status.message().to_string(),
+                        Err(status) => return Err(rpc(status)),
+                    }
+                }
+            }
+            Err(status) if transient(&status) => status.message().to_string(),
+            Err(status) => return Err(rpc(status)),
+        };
+        let since = *lost_since.get_or_insert_with(Instant::now);
+        eprintln!("coordinator lost ({lost}); reconnecting");
+        loop {
+            if since.elapsed() > RECONNECT_FOR {
+                return Err(Failure::internal(format!(
+                    "coordinator {}: unreachable for {} s ({lost}); the campaign goes on \
+                     there: `calib watch {id}` follows it again",
+                    arg.coordinator,
+                    RECONNECT_FOR.as_secs()
+                )));
+            }
+            tokio::time::sleep(Duration::from_secs(1)).await;
+            if let Ok(fresh) = connect(arg).await {
+                client = fresh;
+                break;
+            }
         }
-        last = Some(state);
     }
-    let last = last.ok_or_else(|| Failure::internal("coordinator: the watch ended at once"))?;
-    eprintln!("{}", line(&last));
-    Ok(last)
+}
+
+fn running() -> i32 {
+    pb::CampaignPhase::Running as i32
+}
+
+/// A failure of the connection rather than an answer of the coordinator.
+fn transient(status: &tonic::Status) -> bool {
+    matches!(
+        status.code(),
+        tonic::Code::Unavailable | tonic::Code::Unknown | tonic::Code::Cancelled
+    ) && calib_security::failure::refusal(status).is_none()
 }
 
 fn phase_word(phase: i32) -> &'static str {
@@ -308,8 +368,10 @@ pub fn status(args: StatusArgs) -> Outcome {
 pub fn watch(args: IdArgs) -> Outcome {
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let mut client = connect(&args.coordinator).await?;
-        follow(&mut client, &args.id).await.map(|_| ())
+        let client = connect(&args.coordinator).await?;
+        follow(&args.coordinator, client, &args.id)
+            .await
+            .map(|_| ())
     })
 }
 

@@ -60,7 +60,7 @@ pub fn run(args: Args) -> Outcome {
             config.queue_bound
         );
         worker
-            .wait()
+            .serve_until(super::terminated())
             .await
             .map_err(|e| Failure::internal(format!("worker server failed: {e}")))
     })

@@ -32,6 +32,9 @@ pub const SERVED: &[&str] = &[
     "grpc.reflection.v1alpha.ServerReflection",
 ];
 
+/// How long a server stopped by a signal lets requests in flight finish.
+const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// How a coordinator runs.
 #[derive(Debug, Clone)]
 pub struct CoordinatorConfig {
@@ -109,6 +112,22 @@ impl RunningCoordinator {
             .await
             .map_err(|e| Error::Dispatch(format!("coordinator server task failed: {e}")))?
             .map_err(|e| Error::Dispatch(format!("coordinator server failed: {e}")))
+    }
+
+    /// Serve until the server fails, or until `stop` completes (a termination signal): then
+    /// stop resuming campaigns and serving, and let requests in flight finish.
+    pub async fn serve_until(mut self, stop: impl std::future::Future<Output = ()>) -> Result<()> {
+        tokio::select! {
+            outcome = &mut self.server => outcome
+                .map_err(|e| Error::Dispatch(format!("coordinator server task failed: {e}")))?
+                .map_err(|e| Error::Dispatch(format!("coordinator server failed: {e}"))),
+            () = stop => {
+                // Requests in flight get a few seconds; a stream that would outlive them
+                // (a client following a campaign) is cut, and reconnects elsewhere.
+                let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.shutdown()).await;
+                Ok(())
+            }
+        }
     }
 
     pub async fn shutdown(mut self) {

@@ -37,6 +37,9 @@ pub const SERVED: &[&str] = &[
     "grpc.reflection.v1alpha.ServerReflection",
 ];
 
+/// How long a server stopped by a signal lets requests in flight finish.
+const SHUTDOWN_GRACE: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// How a worker runs.
 #[derive(Debug, Clone)]
 pub struct WorkerConfig {
@@ -99,6 +102,25 @@ impl RunningWorker {
         (&mut self.server)
             .await
             .unwrap_or_else(|e| panic!("worker server task failed: {e}"))
+    }
+
+    /// Serve until the server fails, or until `stop` completes (a termination signal):
+    /// then stop accepting requests and finish those in flight.
+    pub async fn serve_until(
+        mut self,
+        stop: impl std::future::Future<Output = ()>,
+    ) -> Result<(), tonic::transport::Error> {
+        tokio::select! {
+            outcome = &mut self.server => {
+                outcome.unwrap_or_else(|e| panic!("worker server task failed: {e}"))
+            }
+            () = stop => {
+                // Requests in flight get a few seconds; a stream that would outlive them
+                // (a client following a campaign) is cut, and reconnects elsewhere.
+                let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.shutdown()).await;
+                Ok(())
+            }
+        }
     }
 
     /// Stop accepting requests and finish those in flight.
