@@ -69,21 +69,14 @@ impl Datasets {
         if let Some(info) = self.get(&id)? {
             return Ok(info);
         }
+        // Parsed under the name it was uploaded as, so that an error names the user's file
+        // (`rig.csv: line 7: …`), not the folder it would be kept in.
+        let uploaded = Path::new(file_name);
+        let columns = Measurement::column_names_of_bytes(uploaded, bytes, time_column)?;
+        let names: Vec<&str> = columns.iter().map(String::as_str).collect();
+        let m = Measurement::from_bytes(uploaded, bytes, time_column, &names)?;
         let path = self.folder.join(format!("{id}.{extension}"));
         write_atomically(&path, bytes)?;
-        let parsed = (|| {
-            let columns = Measurement::column_names(&path, time_column)?;
-            let names: Vec<&str> = columns.iter().map(String::as_str).collect();
-            let m = Measurement::load(&path, time_column, &names)?;
-            Ok::<_, Error>((columns, m))
-        })();
-        let (columns, m) = match parsed {
-            Ok(found) => found,
-            Err(e) => {
-                let _ = std::fs::remove_file(&path);
-                return Err(e);
-            }
-        };
         let info = DatasetInfo {
             id: id.clone(),
             file_name: file_name.to_string(),
