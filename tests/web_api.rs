@@ -318,3 +318,50 @@ fn a_coordinator_that_requires_a_token_does_not_serve_the_web_app() {
         "{message}"
     );
 }
+
+#[test]
+fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
+    use calib_coordinator::store::{CampaignStatus, SledStore, Store};
+    use calib_coordinator::web::local::{start_ui, UiConfig};
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\"]\nstarts = 2\nmax_evaluations = 60\nseed = 4";
+    let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let db = dir.path().join("db");
+    let done = calibrate_json(&campaign, &db, &dir.path().join("out"), &[]);
+    // As a killed run leaves it: the campaign still running in the store.
+    let id = {
+        let store = SledStore::open(&db).unwrap();
+        let (id, mut record) = store.campaigns().unwrap().pop().unwrap();
+        record.status = CampaignStatus::Running;
+        record.result = None;
+        store.put_campaign(&id, &record).unwrap();
+        calib_coordinator::store::hex(&id)
+    };
+
+    let runtime = runtime();
+    let ui = runtime
+        .block_on(start_ui(UiConfig {
+            listen: "127.0.0.1:0".parse().unwrap(),
+            store: db,
+            api: Some(dir.path().join("api")),
+        }))
+        .unwrap();
+    let web = ui.address();
+    // Until it has run, its objectives are +inf: `null` in JSON.
+    let mut state = serde_json::Value::Null;
+    await_condition(
+        "the campaign finished again",
+        std::time::Duration::from_secs(120),
+        || {
+            let (code, body) = post(web, "GetCampaign", serde_json::json!({ "id": id }));
+            assert_eq!(code, 200, "{body}");
+            state = serde_json::from_str(&body).unwrap();
+            state["phase"] == pb::CampaignPhase::Finished as i32
+        },
+    );
+    let result: serde_json::Value =
+        serde_json::from_str(state["result_json"].as_str().unwrap()).unwrap();
+    assert_eq!(result["best"], done["best"]);
+    assert_eq!(result["simulated"], 0, "replayed from the store");
+    runtime.block_on(ui.shutdown());
+}

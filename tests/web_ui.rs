@@ -239,6 +239,13 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
     ] {
         assert!(diagnosis_plots.contains(plot), "{diagnosis_plots}");
     }
+    // Reopened from the store's list (reached by keyboard), the same values.
+    for name in ["armFriction", "pendulumFriction"] {
+        assert_eq!(
+            page["reopened"][name], page["calibrated"][name]["value"],
+            "{name}"
+        );
+    }
     for tab in ["model", "measurement", "calibration", "diagnosis"] {
         let png = std::fs::read(shots.join(format!("{tab}.png"))).unwrap();
         assert!(
@@ -269,4 +276,6 @@ fn a_broken_csv_shows_the_parsers_message_on_the_page() {
         "{error}"
     );
     assert_eq!(page["status"], "", "{page}");
+    // The arrow key moved the focus to the next tab.
+    assert_eq!(page["focused_after_arrow"], "tab-measurement", "{page}");
 }

@@ -173,6 +173,16 @@ def workflow(url, data, shots, out):
         diagnosis_plots = [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#diagnosis-plots figcaption")]
         screenshot(driver, os.path.join(shots, "diagnosis.png"))
 
+        # Back to the Calibration tab by keyboard; reopen the campaign from the store's list.
+        by_id(driver, "tab-diagnosis").send_keys(Keys.ARROW_LEFT)
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "panel-calibration")))
+        driver.execute_script("document.getElementById('result-parameters').tBodies[0].replaceChildren()")
+        driver.find_element(By.CSS_SELECTOR, "#campaigns tbody tr button").send_keys(Keys.ENTER)
+        wait(driver).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#result-parameters td.calibrated"))
+        reopened = {row.get_attribute("data-parameter"):
+                    row.find_element(By.CSS_SELECTOR, "td.calibrated").get_attribute("data-value")
+                    for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr")}
+
         with open(out, "w") as f:
             json.dump({
                 "columns": columns,
@@ -186,6 +196,7 @@ def workflow(url, data, shots, out):
                 "verdict": verdict,
                 "candidates": candidates,
                 "diagnosis_plots": diagnosis_plots,
+                "reopened": reopened,
             }, f, indent=2)
     finally:
         driver.quit()
@@ -196,6 +207,10 @@ def broken(url, data, out):
     try:
         driver.get(url)
         wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        # To the Measurement tab by keyboard, as someone without a mouse would.
+        by_id(driver, "tab-model").send_keys(Keys.ARROW_RIGHT)
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "panel-measurement")))
+        focused = driver.switch_to.active_element.get_attribute("id")
         upload(driver, data, "time_s")
         wait(driver).until(lambda d: by_id(d, "measurement-error").is_displayed()
                            or "samples" in by_id(d, "measurement-status").text)
@@ -203,6 +218,7 @@ def broken(url, data, out):
             json.dump({
                 "error": by_id(driver, "measurement-error").text,
                 "status": by_id(driver, "measurement-status").text,
+                "focused_after_arrow": focused,
             }, f, indent=2)
     finally:
         driver.quit()

@@ -169,6 +169,14 @@ mod tests {
         assert!(err.contains("t"), "{err}");
         let err = d.put("rig.xlsx", "time", csv).unwrap_err().to_string();
         assert!(err.starts_with("file_name:"), "{err}");
+        // A file that does not parse is named as it was uploaded, and nothing is kept.
+        let err = d
+            .put("rig.csv", "time", b"time,a\n0,1\n1,one\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("rig.csv line 3"), "{err}");
+        let kept = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(kept, 2, "only the good dataset and its record");
         assert_eq!(d.get("not-an-id").unwrap(), None);
         assert_eq!(d.get(&"0".repeat(64)).unwrap(), None);
     }

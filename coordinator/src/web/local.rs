@@ -1,13 +1,15 @@
 //! `calib ui`: the web app in local single-node mode. Campaigns run in this process on all
 //! cores ([`LocalEvaluator`], as `calib calibrate` runs them) and keep their evaluations in
-//! a store on disk (as `calib calibrate --db`); simulations of the Model tab run on a
-//! Simulator service of this process.
+//! a store on disk (as `calib calibrate --db`), which finishes the campaigns it holds
+//! unfinished as a coordinator does; simulations of the Model tab run on a Simulator
+//! service of this process.
 
 use super::WebApp;
 use crate::campaigns::datasets::Datasets;
 use crate::campaigns::{self, Campaigns};
 use crate::error::{Error, Result};
 use crate::evaluator::LocalEvaluator;
+use crate::server::resume;
 use crate::store::SledStore;
 use calib_worker::service::cache::MeasurementCache;
 use calib_worker::service::pool::SimulationPool;
@@ -75,7 +77,7 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
         .clone()
         .unwrap_or_else(|| campaigns::default_folder(Some(&config.store)));
     let campaigns = Arc::new(Campaigns::new(
-        store,
+        store.clone(),
         Arc::new(LocalEvaluator),
         Datasets::open(&folder.join("datasets"))?,
         folder.join("results"),
@@ -83,6 +85,17 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
     let listener = TcpListener::bind(config.listen)
         .await
         .map_err(|e| Error::InvalidRequest(format!("cannot listen on {}: {e}", config.listen)))?;
+    // Campaigns a killed `calib ui` or `calib calibrate` left running on this store finish
+    // here, replayed from the store, their results where `calib calibrate` puts them.
+    let live = campaigns.clone();
+    tokio::task::spawn_blocking(move || {
+        let skip = |id: &_| live.is_live(id);
+        match resume::resume_campaigns_except(&*store, &LocalEvaluator, None, &skip) {
+            Ok(0) => {}
+            Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
+            Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
+        }
+    });
     serve_app(listener, WebApp::new(campaigns, simulator()))
 }
 
