@@ -152,3 +152,58 @@ pub async fn dataset_plot(
     .map_err(|e| ApiError(Status::internal(e.to_string())))??;
     Ok(svg(text))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series(label: &str, x: Vec<Option<f64>>, y: Vec<Option<f64>>) -> PlotSeries {
+        PlotSeries {
+            label: label.into(),
+            x,
+            y,
+        }
+    }
+
+    #[test]
+    fn a_plot_names_its_series_and_leaves_unknown_values_out() {
+        let request = PlotRequest {
+            title: "best objective of each run".into(),
+            x_label: "evaluations".into(),
+            y_label: "objective".into(),
+            series: vec![
+                series("run 1", vec![Some(1.0), Some(2.0)], vec![None, Some(3.0)]),
+                series(
+                    "run 2",
+                    vec![Some(1.0), Some(2.0)],
+                    vec![Some(5.0), Some(4.0)],
+                ),
+            ],
+            shade: None,
+        };
+        let svg = draw(&request).unwrap_or_else(|e| panic!("{}", e.0.message()));
+        assert!(svg.starts_with("<svg") && svg.contains("best objective of each run"));
+        assert!(svg.contains("run 1") && svg.contains("run 2"));
+    }
+
+    #[test]
+    fn series_of_unequal_lengths_are_refused_naming_the_series() {
+        let request = PlotRequest {
+            title: String::new(),
+            x_label: String::new(),
+            y_label: String::new(),
+            series: vec![
+                series("ok", vec![Some(0.0)], vec![Some(1.0)]),
+                series("bad", vec![Some(0.0), Some(1.0)], vec![Some(1.0)]),
+            ],
+            shade: None,
+        };
+        let refused = draw(&request).err().expect("refused");
+        assert_eq!(refused.0.code(), tonic::Code::InvalidArgument);
+        assert!(
+            refused.0.message().starts_with("series[1]:"),
+            "{}",
+            refused.0.message()
+        );
+    }
+}
