@@ -34,7 +34,8 @@ function fmt(v, digits = 6) {
   if (v === null || v === undefined || !Number.isFinite(v)) return "—";
   if (v === 0) return "0";
   const a = Math.abs(v);
-  return a >= 1e-3 && a < 1e6 ? String(Number(v.toPrecision(digits))) : v.toExponential(digits - 1);
+  const rounded = Number(v.toPrecision(digits));
+  return a >= 1e-3 && a < 1e6 ? String(rounded) : rounded.toExponential();
 }
 
 function showError(id, message) {
