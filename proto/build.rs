@@ -6,7 +6,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // SAFETY: build scripts run single-threaded; prost-build reads PROTOC from the environment.
     unsafe { std::env::set_var("PROTOC", protoc) };
     let out = std::path::PathBuf::from(std::env::var("OUT_DIR")?);
+    // JSON for the web app's routes (`calib-coordinator`'s `web` module transcodes each
+    // RPC to a route taking and answering its messages as JSON, with the proto's field
+    // names); absent fields take their proto3 defaults.
     tonic_prost_build::configure()
+        .message_attribute(
+            ".calib.v1",
+            "#[derive(serde::Serialize, serde::Deserialize)] #[serde(default)]",
+        )
+        .enum_attribute(
+            ".calib.v1",
+            "#[derive(serde::Serialize, serde::Deserialize)]",
+        )
         .file_descriptor_set_path(out.join("calib_descriptor.bin"))
         .compile_protos(
             &[

@@ -59,6 +59,9 @@ enum Command {
     Watch(commands::submit::IdArgs),
     /// Stop a campaign on a coordinator.
     Cancel(commands::submit::IdArgs),
+    /// The web app: Model, Measurement, Calibration and Diagnosis tabs in a browser, with
+    /// campaigns running in this process.
+    Ui(commands::ui::Args),
 }
 
 fn main() -> ExitCode {
@@ -99,6 +102,7 @@ fn main() -> ExitCode {
         Command::Status(args) => commands::submit::status(args),
         Command::Watch(args) => commands::submit::watch(args),
         Command::Cancel(args) => commands::submit::cancel(args),
+        Command::Ui(args) => commands::ui::run(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,6 +1,6 @@
 //! calib's coordinator: campaigns, their objective, the optimisers that search it, the
 //! evaluators that run it (in this process or on remote workers), the reports that show
-//! the result, and the coordinator's gRPC server.
+//! the result, the coordinator's gRPC server and the web app.
 
 pub mod api;
 pub mod calibration;
@@ -16,5 +16,6 @@ pub mod optim;
 pub mod report;
 pub mod server;
 pub mod store;
+pub mod web;
 
 pub use error::{Error, Result};

@@ -31,6 +31,11 @@ pub struct Args {
     /// directory].
     #[arg(long, value_name = "DIR")]
     api_dir: Option<PathBuf>,
+    /// Also serve the web app (Model, Measurement, Calibration and Diagnosis tabs) on this
+    /// address, over the same campaigns and workers. Plain HTTP without a login: not with a
+    /// token.
+    #[arg(long, value_name = "ADDR")]
+    http: Option<SocketAddr>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -48,10 +53,14 @@ pub fn run(args: Args) -> Outcome {
     config.store = args.db;
     config.results = args.out;
     config.api = args.api_dir;
+    config.http = args.http;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let coordinator = server::start_coordinator(config).await?;
         println!("coordinator listening on {}", coordinator.address());
+        if let Some(http) = coordinator.http_address() {
+            println!("calib ui at http://{http}/");
+        }
         coordinator.serve_until(super::terminated()).await?;
         Ok(())
     })

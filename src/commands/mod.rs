@@ -13,6 +13,7 @@ pub mod security;
 pub mod simulate;
 pub mod store;
 pub mod submit;
+pub mod ui;
 pub mod worker;
 pub mod workers;
 

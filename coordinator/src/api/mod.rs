@@ -28,6 +28,37 @@ impl CalibrationApi {
     pub fn new(campaigns: Arc<Campaigns>) -> Self {
         Self { campaigns }
     }
+
+    /// The end of `UploadDataset`, once the chunks are joined: check the file's name, parse
+    /// and keep it. The web app's upload route, which receives the file whole, calls it too.
+    pub async fn upload(
+        &self,
+        file_name: String,
+        mut time_column: String,
+        bytes: Vec<u8>,
+    ) -> Result<pb::Dataset, Status> {
+        if file_name.is_empty() {
+            return Err(Status::invalid_argument(
+                "file_name: the first chunk must name the file (its extension picks the parser)",
+            ));
+        }
+        if bytes.is_empty() {
+            return Err(Status::invalid_argument("data: the file is empty"));
+        }
+        if time_column.is_empty() {
+            time_column = "time".into();
+        }
+        let campaigns = self.campaigns.clone();
+        let info =
+            blocking(move || campaigns.datasets().put(&file_name, &time_column, &bytes)).await?;
+        Ok(pb::Dataset {
+            id: info.id,
+            columns: info.columns,
+            samples: info.samples as u64,
+            start_time: info.start_time,
+            stop_time: info.stop_time,
+        })
+    }
 }
 
 /// How an error of the domain reads to a client.
@@ -138,27 +169,9 @@ impl Calibration for CalibrationApi {
             }
             bytes.extend_from_slice(&chunk.data);
         }
-        if file_name.is_empty() {
-            return Err(Status::invalid_argument(
-                "file_name: the first chunk must name the file (its extension picks the parser)",
-            ));
-        }
-        if bytes.is_empty() {
-            return Err(Status::invalid_argument("data: the file is empty"));
-        }
-        if time_column.is_empty() {
-            time_column = "time".into();
-        }
-        let campaigns = self.campaigns.clone();
-        let info =
-            blocking(move || campaigns.datasets().put(&file_name, &time_column, &bytes)).await?;
-        Ok(Response::new(pb::Dataset {
-            id: info.id,
-            columns: info.columns,
-            samples: info.samples as u64,
-            start_time: info.start_time,
-            stop_time: info.stop_time,
-        }))
+        self.upload(file_name, time_column, bytes)
+            .await
+            .map(Response::new)
     }
 
     async fn submit_campaign(

@@ -73,21 +73,14 @@ impl Datasets {
         if let Some(info) = self.get(&id)? {
             return Ok(info);
         }
+        // Parsed under the name it was uploaded as, so that an error names the user's file
+        // (`rig.csv: line 7: …`), not the folder it would be kept in.
+        let uploaded = Path::new(file_name);
+        let columns = Measurement::column_names_of_bytes(uploaded, bytes, time_column)?;
+        let names: Vec<&str> = columns.iter().map(String::as_str).collect();
+        let m = Measurement::from_bytes(uploaded, bytes, time_column, &names)?;
         let path = self.folder.join(format!("{id}.{extension}"));
         write_atomically(&path, bytes)?;
-        let parsed = (|| {
-            let columns = Measurement::column_names(&path, time_column)?;
-            let names: Vec<&str> = columns.iter().map(String::as_str).collect();
-            let m = Measurement::load(&path, time_column, &names)?;
-            Ok::<_, Error>((columns, m))
-        })();
-        let (columns, m) = match parsed {
-            Ok(found) => found,
-            Err(e) => {
-                let _ = std::fs::remove_file(&path);
-                return Err(e);
-            }
-        };
         let info = DatasetInfo {
             id: id.clone(),
             file_name: file_name.to_string(),
@@ -180,6 +173,14 @@ mod tests {
         assert!(err.contains("t"), "{err}");
         let err = d.put("rig.xlsx", "time", csv).unwrap_err().to_string();
         assert!(err.starts_with("file_name:"), "{err}");
+        // A file that does not parse is named as it was uploaded, and nothing is kept.
+        let err = d
+            .put("rig.csv", "time", b"time,a\n0,1\n1,one\n")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("rig.csv line 3"), "{err}");
+        let kept = std::fs::read_dir(dir.path()).unwrap().count();
+        assert_eq!(kept, 2, "only the good dataset and its record");
         assert_eq!(d.get("not-an-id").unwrap(), None);
         assert_eq!(d.get(&"0".repeat(64)).unwrap(), None);
     }

@@ -319,6 +319,14 @@ impl Campaigns {
             .map(|record| Snapshot::from_record(&key, &record)))
     }
 
+    /// The campaign file campaign `id` was run from, if the store holds it.
+    pub fn spec(&self, id: &str) -> Result<Option<String>> {
+        let Some(key) = Self::parse_id(id) else {
+            return Ok(None);
+        };
+        Ok(self.store.campaign(&key)?.map(|record| record.spec))
+    }
+
     /// Follow the campaign `id`: a receiver of its state while this coordinator runs it,
     /// else its state from the store.
     pub fn watch(&self, id: &str) -> Result<Option<Watched>> {

@@ -107,6 +107,7 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "selected": d.selected,
         "final": fit_json(d, &d.final_fit),
         "verdict": d.verdict,
+        "verdict_sentence": verdict_text(d),
         "explained": d.explained(),
         "partial": d.verdict == Verdict::Partial,
         "explained_fraction": d.explained_fraction,

@@ -88,8 +88,30 @@ impl Measurement {
     /// file order, as the loader finds them: it is asked for a column no file can hold and
     /// lists the ones there are. The time column is checked on the way.
     pub fn column_names(path: &Path, time_column: &str) -> Result<Vec<String>, MeasurementError> {
+        let bytes = std::fs::read(path).map_err(|source| {
+            if source.kind() == std::io::ErrorKind::NotFound {
+                MeasurementError::NotFound {
+                    path: path.to_owned(),
+                }
+            } else {
+                MeasurementError::Unreadable {
+                    path: path.to_owned(),
+                    source,
+                }
+            }
+        })?;
+        Self::column_names_of_bytes(path, &bytes, time_column)
+    }
+
+    /// [`Measurement::column_names`] of the content `bytes` of the file `path`, as
+    /// [`Measurement::from_bytes`] reads it.
+    pub fn column_names_of_bytes(
+        path: &Path,
+        bytes: &[u8],
+        time_column: &str,
+    ) -> Result<Vec<String>, MeasurementError> {
         const NONE: &str = "\u{0}no such column\u{0}";
-        match Self::load(path, time_column, &[NONE]) {
+        match Self::from_bytes(path, bytes, time_column, &[NONE]) {
             Err(MeasurementError::MissingColumn {
                 available, column, ..
             })

@@ -40,6 +40,25 @@ pub fn line_plot(
     series: &[Series],
     shade: Option<(f64, f64)>,
 ) -> Result<()> {
+    let text = line_plot_svg(title, x_label, y_label, series, shade).map_err(|e| Error::Write {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    })?;
+    std::fs::write(path, text).map_err(|source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The SVG text of [`line_plot`], or why it could not be drawn: the web app serves it
+/// as it is.
+pub fn line_plot_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    shade: Option<(f64, f64)>,
+) -> std::result::Result<String, String> {
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
         f64::NEG_INFINITY,
@@ -68,8 +87,9 @@ pub fn line_plot(
     }
     let pad = 0.05 * (y1 - y0);
     let (y0, y1) = (y0 - pad, y1 + pad);
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = SVGBackend::new(path, (1000, 500)).into_drawing_area();
+    let mut text = String::new();
+    let draw = |text: &mut String| -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = SVGBackend::with_string(text, (1000, 500)).into_drawing_area();
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 20))
@@ -116,10 +136,8 @@ pub fn line_plot(
         root.present()?;
         Ok(())
     };
-    draw().map_err(|e| Error::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e.to_string()),
-    })
+    draw(&mut text).map_err(|e| e.to_string())?;
+    Ok(text)
 }
 
 /// A uniform grid over `[0, stop]`.

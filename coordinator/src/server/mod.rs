@@ -12,6 +12,8 @@ use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
 use crate::error::{Error, Result};
 use crate::store::{MemoryStore, SledStore, Store};
+use crate::web::local::{serve_app, RunningUi};
+use crate::web::{self, WebApp};
 use calib_proto::v1::calibration_server::CalibrationServer;
 use calib_proto::v1::registry_server::RegistryServer;
 use calib_security::ServerSecurity;
@@ -51,6 +53,9 @@ pub struct CoordinatorConfig {
     pub api: Option<PathBuf>,
     /// TLS and the token this coordinator's server requires.
     pub security: ServerSecurity,
+    /// Serve the web app ([`crate::web`]) on this address too, over the same campaigns.
+    /// Plain HTTP without a login: refused beside a token.
+    pub http: Option<SocketAddr>,
 }
 
 impl CoordinatorConfig {
@@ -63,6 +68,7 @@ impl CoordinatorConfig {
             results: None,
             api: None,
             security: ServerSecurity::default(),
+            http: None,
         }
     }
 }
@@ -75,11 +81,17 @@ pub struct RunningCoordinator {
     server: JoinHandle<std::result::Result<(), tonic::transport::Error>>,
     resume: Option<JoinHandle<Result<usize>>>,
     control: Arc<resume::ResumeControl>,
+    web: Option<RunningUi>,
 }
 
 impl RunningCoordinator {
     pub fn address(&self) -> SocketAddr {
         self.address
+    }
+
+    /// Where the web app is served (`--http`).
+    pub fn http_address(&self) -> Option<SocketAddr> {
+        self.web.as_ref().map(RunningUi::address)
     }
 
     /// The workers this coordinator dispatches to.
@@ -137,6 +149,9 @@ impl RunningCoordinator {
         if let Some(tx) = self.shutdown.take() {
             let _ = tx.send(());
         }
+        if let Some(web) = self.web.take() {
+            web.shutdown().await;
+        }
         let _ = (&mut self.server).await;
     }
 }
@@ -157,6 +172,23 @@ pub fn serve_coordinator(
     let address = listener
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
+    if config.http.is_some() && config.security.token.is_some() {
+        return Err(Error::InvalidRequest(
+            "--http: the web app has no login, so a coordinator that requires a token cannot \
+             serve it; serve it without --token-file, on an address only trusted users reach"
+                .into(),
+        ));
+    }
+    let web_listener = match config.http {
+        Some(http) => {
+            let bound = std::net::TcpListener::bind(http)
+                .and_then(|l| l.set_nonblocking(true).map(|_| l))
+                .and_then(TcpListener::from_std)
+                .map_err(|e| Error::InvalidRequest(format!("--http {http}: cannot listen: {e}")))?;
+            Some(bound)
+        }
+        None => None,
+    };
     // Open the store first: one held by another process stops the coordinator at once.
     let store = match &config.store {
         Some(path) => Some(Arc::new(SledStore::open(path)?)),
@@ -180,6 +212,13 @@ pub fn serve_coordinator(
         Datasets::open(&api_folder.join("datasets"))?,
         api_folder.join("results"),
     ));
+    let web = match web_listener {
+        Some(listener) => Some(serve_app(
+            listener,
+            WebApp::new(campaigns.clone(), web::local::simulator()),
+        )?),
+        None => None,
+    };
     let calibration = CalibrationServer::new(CalibrationApi::new(campaigns.clone()))
         .max_decoding_message_size(64 << 20)
         .max_encoding_message_size(64 << 20);
@@ -264,5 +303,6 @@ pub fn serve_coordinator(
         server,
         resume,
         control,
+        web,
     })
 }

@@ -1,0 +1,658 @@
+// calib web app. Every call goes to the Calibration and Simulator APIs over HTTP JSON
+// (/api/v1/<Method>, the RPC's request and answer messages); plots are SVG drawn by the
+// server's plotting code (/ui/...). No framework, no build step.
+"use strict";
+
+const PHASES = { 0: "unknown", 1: "running", 2: "finished", 3: "failed", 4: "cancelled" };
+const BEST_TOLERANCE = 0.01; // a run within 1% of the best objective has reached it
+
+const app = {
+  model: null,        // ModelDescription of the chosen model
+  dataset: null,      // Dataset answered by UploadDataset (with file_name)
+  campaignId: null,   // the campaign shown on the Calibration tab
+  campaign: null,     // its CampaignState
+  history: [],        // [{evaluations, run_best}] while it is watched
+  watching: null,     // AbortController of the watch
+  plotting: false,
+  plotDue: false,
+};
+
+const $ = (id) => document.getElementById(id);
+
+function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === "class") node.className = v;
+    else if (k === "text") node.textContent = v;
+    else if (v !== undefined && v !== null && v !== false) node.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children) node.append(c);
+  return node;
+}
+
+function fmt(v, digits = 6) {
+  if (v === null || v === undefined || !Number.isFinite(v)) return "—";
+  if (v === 0) return "0";
+  const a = Math.abs(v);
+  const rounded = Number(v.toPrecision(digits));
+  return a >= 1e-3 && a < 1e6 ? String(rounded) : rounded.toExponential();
+}
+
+function showError(id, message) {
+  const box = $(id);
+  if (message) {
+    box.textContent = message;
+    box.hidden = false;
+  } else {
+    box.textContent = "";
+    box.hidden = true;
+  }
+}
+
+// ---- the APIs ---------------------------------------------------------------------------
+
+async function call(method, request, init = {}) {
+  const response = await fetch(`/api/v1/${method}`, {
+    method: "POST",
+    headers: init.headers || { "Content-Type": "application/json" },
+    body: init.body !== undefined ? init.body : JSON.stringify(request || {}),
+  });
+  const text = await response.text();
+  let answer;
+  try { answer = JSON.parse(text); } catch { answer = { message: text }; }
+  if (!response.ok) throw new Error(answer.message || `${method}: HTTP ${response.status}`);
+  return answer;
+}
+
+// A server stream (Server-Sent Events, one whole state each) until it ends.
+async function follow(url, onState, signal) {
+  const response = await fetch(url, { signal });
+  if (!response.ok) {
+    const text = await response.text();
+    let message = text;
+    try { message = JSON.parse(text).message; } catch { /* plain text */ }
+    throw new Error(message);
+  }
+  const reader = response.body.getReader();
+  const decoder = new TextDecoder();
+  let buffer = "";
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done) return;
+    buffer += decoder.decode(value, { stream: true });
+    let cut;
+    while ((cut = buffer.indexOf("\n\n")) >= 0) {
+      const block = buffer.slice(0, cut);
+      buffer = buffer.slice(cut + 2);
+      let event = "message";
+      const data = [];
+      for (const line of block.split("\n")) {
+        if (line.startsWith("event:")) event = line.slice(6).trim();
+        else if (line.startsWith("data:")) data.push(line.slice(5).replace(/^ /, ""));
+      }
+      if (!data.length) continue; // keep-alive comment
+      if (event === "error") throw new Error(data.join("\n"));
+      onState(JSON.parse(data.join("\n")));
+    }
+  }
+}
+
+// SVG text in a figure, scaled to its column.
+function figure(svgText, caption) {
+  const fig = el("figure", { class: "plot" });
+  const holder = el("div", { role: "img", "aria-label": caption });
+  holder.innerHTML = svgText;
+  const svg = holder.querySelector("svg");
+  if (svg && !svg.getAttribute("viewBox")) {
+    const w = parseFloat(svg.getAttribute("width")), h = parseFloat(svg.getAttribute("height"));
+    if (w && h) svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
+    svg.removeAttribute("width");
+    svg.removeAttribute("height");
+  }
+  fig.append(holder, el("figcaption", { text: caption }));
+  return fig;
+}
+
+async function plot(request) {
+  const response = await fetch("/ui/plot", {
+    method: "POST",
+    headers: { "Content-Type": "application/json" },
+    body: JSON.stringify(request),
+  });
+  const text = await response.text();
+  if (!response.ok) throw new Error(JSON.parse(text).message);
+  return text;
+}
+
+// ---- tabs -------------------------------------------------------------------------------
+
+function selectTab(tab, focus = false) {
+  for (const t of document.querySelectorAll('[role="tab"]')) {
+    const on = t === tab;
+    t.setAttribute("aria-selected", String(on));
+    t.tabIndex = on ? 0 : -1;
+    $(t.getAttribute("aria-controls")).hidden = !on;
+  }
+  if (focus) tab.focus();
+  if (tab.id === "tab-diagnosis") refreshCampaigns();
+}
+
+function setUpTabs() {
+  const tabs = [...document.querySelectorAll('[role="tab"]')];
+  for (const [i, tab] of tabs.entries()) {
+    tab.addEventListener("click", () => selectTab(tab));
+    tab.addEventListener("keydown", (e) => {
+      const step = { ArrowRight: 1, ArrowLeft: -1 }[e.key];
+      if (step) {
+        e.preventDefault();
+        selectTab(tabs[(i + step + tabs.length) % tabs.length], true);
+      } else if (e.key === "Home") {
+        selectTab(tabs[0], true);
+      } else if (e.key === "End") {
+        selectTab(tabs[tabs.length - 1], true);
+      }
+    });
+  }
+}
+
+// ---- Model tab --------------------------------------------------------------------------
+
+async function loadModels() {
+  try {
+    const { models } = await call("ListModels", {});
+    const select = $("model-select");
+    for (const m of models) select.append(el("option", { value: m.name, text: m.name }));
+    select.addEventListener("change", () => describe(select.value));
+    if (models.length) await describe(models[0].name);
+  } catch (e) {
+    showError("model-error", e.message);
+  }
+}
+
+async function describe(name) {
+  showError("model-error", "");
+  const { model } = await call("Describe", { model: name });
+  app.model = model;
+  $("model-description").textContent = `${model.name} (version ${model.version}): ${model.description}`;
+  const body = $("model-parameters").tBodies[0];
+  body.replaceChildren();
+  for (const p of model.parameters) {
+    const input = el("input", {
+      type: "number", step: "any", value: String(p.default_value),
+      id: `value-${p.name}`, "aria-label": `value of ${p.name} [${p.unit}]`,
+      min: String(p.min), max: String(p.max),
+    });
+    input.addEventListener("change", renderCalibration);
+    body.append(el("tr", {},
+      el("th", { scope: "row", text: p.name }),
+      el("td", {}, input),
+      el("td", { text: p.unit }),
+      el("td", { class: "num", text: fmt(p.default_value, 8) }),
+      el("td", { text: `[${fmt(p.min)}, ${fmt(p.max)}]` }),
+      el("td", { text: p.description })));
+  }
+  const outputs = $("model-outputs").querySelector(".choices");
+  outputs.replaceChildren();
+  for (const [i, o] of model.outputs.entries()) {
+    outputs.append(el("label", {},
+      el("input", { type: "checkbox", name: "model-output", value: o.name, checked: i < 2 }),
+      `${o.name} [${o.unit}]`));
+  }
+  $("model-plots").replaceChildren();
+  renderCalibration();
+}
+
+function modelValue(p) {
+  const v = parseFloat($(`value-${p.name}`).value);
+  return Number.isFinite(v) ? v : p.default_value;
+}
+
+async function simulate() {
+  showError("model-error", "");
+  const model = app.model;
+  const stop = parseFloat($("model-stop").value), step = parseFloat($("model-step").value);
+  if (!(stop > 0 && step > 0) || stop / step > 200000) {
+    showError("model-error", "stop time and step: both positive, at most 200,000 steps");
+    return;
+  }
+  const times = [];
+  for (let i = 0; i * step <= stop * (1 + 1e-12); i++) times.push(i * step);
+  const outputs = [...document.querySelectorAll('input[name="model-output"]:checked')].map((i) => i.value);
+  if (!outputs.length) { showError("model-error", "pick at least one output to plot"); return; }
+  const parameters = model.parameters
+    .filter((p) => modelValue(p) !== p.default_value)
+    .map((p) => ({ name: p.name, value: modelValue(p) }));
+  $("model-status").textContent = "simulating…";
+  try {
+    const answer = await call("Simulate", { protocol_version: 1, model: model.name, parameters, times, outputs });
+    if (answer.failure) throw new Error(`simulation failed: ${answer.failure.message}`);
+    const plots = $("model-plots");
+    plots.replaceChildren();
+    for (const s of answer.series) {
+      const unit = (model.outputs.find((o) => o.name === s.output) || {}).unit || "";
+      const svg = await plot({
+        title: `${model.name}: ${s.output}`, x_label: "time [s]", y_label: `${s.output} [${unit}]`,
+        series: [{ label: "simulated", x: answer.times, y: s.values }],
+      });
+      plots.append(figure(svg, `${s.output} simulated over ${fmt(stop)} s`));
+    }
+    const st = answer.statistics || {};
+    $("model-status").textContent = `simulated ${fmt(stop)} s: ${st.accepted_steps} steps, ${st.events} events`;
+  } catch (e) {
+    $("model-status").textContent = "";
+    showError("model-error", e.message);
+  }
+}
+
+// ---- Measurement tab --------------------------------------------------------------------
+
+async function upload() {
+  showError("measurement-error", "");
+  const file = $("measurement-file").files[0];
+  if (!file) { showError("measurement-error", "choose a file first"); return; }
+  const time = $("measurement-time").value.trim() || "time";
+  $("measurement-status").textContent = `uploading ${file.name}…`;
+  try {
+    const query = `file_name=${encodeURIComponent(file.name)}&time_column=${encodeURIComponent(time)}`;
+    const dataset = await call(`UploadDataset?${query}`, null, {
+      headers: { "Content-Type": "application/octet-stream" },
+      body: await file.arrayBuffer(),
+    });
+    dataset.file_name = file.name;
+    app.dataset = dataset;
+    $("measurement-status").textContent =
+      `${file.name}: ${dataset.samples} samples from ${fmt(dataset.start_time)} s to ${fmt(dataset.stop_time)} s; ` +
+      `columns ${dataset.columns.join(", ")}`;
+    const box = $("measurement-columns").querySelector(".choices");
+    box.replaceChildren();
+    for (const c of dataset.columns) {
+      box.append(el("label", {}, el("input", { type: "checkbox", name: "measured-column", value: c, checked: true }), c));
+    }
+    $("measurement-columns").hidden = false;
+    $("window-start").value = String(dataset.start_time);
+    $("window-stop").value = String(dataset.stop_time);
+    renderCalibration();
+    plotColumns();
+  } catch (e) {
+    app.dataset = null;
+    $("measurement-status").textContent = "";
+    $("measurement-columns").hidden = true;
+    $("measurement-plots").replaceChildren();
+    showError("measurement-error", e.message);
+    renderCalibration();
+  }
+}
+
+function plotColumns() {
+  const plots = $("measurement-plots");
+  plots.replaceChildren();
+  for (const input of document.querySelectorAll('input[name="measured-column"]:checked')) {
+    const c = input.value;
+    const img = el("img", {
+      src: `/ui/datasets/${app.dataset.id}/plot/${encodeURIComponent(c)}`,
+      alt: `plot of the measured column ${c} over time`,
+    });
+    plots.append(el("figure", { class: "plot" }, img, el("figcaption", { text: `measured ${c}` })));
+  }
+}
+
+// ---- Calibration tab --------------------------------------------------------------------
+
+function renderCalibration() {
+  const model = app.model, dataset = app.dataset;
+  $("calibration-context").textContent =
+    `Model ${model ? model.name : "(choose one on the Model tab)"}; measurement ` +
+    (dataset ? `${dataset.file_name} (${dataset.samples} samples)` : "(upload one on the Measurement tab)");
+  if (!model) return;
+  const outputs = $("output-map").tBodies[0];
+  const keep = {};
+  for (const row of outputs.rows) keep[row.dataset.output] = row;
+  outputs.replaceChildren();
+  for (const o of model.outputs) {
+    const old = keep[o.name];
+    const column = el("select", { id: `measured-${o.name}`, "aria-label": `measured column for ${o.name}` },
+      el("option", { value: "", text: "—" }));
+    for (const c of dataset ? dataset.columns : []) column.append(el("option", { value: c, text: c }));
+    const fit = el("input", { type: "checkbox", id: `fit-${o.name}`, "aria-label": `fit ${o.name}` });
+    const weight = el("input", { type: "number", step: "any", min: "0", value: "1", id: `weight-${o.name}`, "aria-label": `weight of ${o.name}` });
+    const scale = el("select", { id: `scale-${o.name}`, "aria-label": `scaling of ${o.name}` },
+      el("option", { value: "none", text: "none" }), el("option", { value: "variance", text: "by the measured variance" }));
+    if (old) {
+      fit.checked = old.querySelector(`#fit-${CSS.escape(o.name)}`).checked;
+      const was = old.querySelector("select").value;
+      if ([...column.options].some((x) => x.value === was)) column.value = was;
+      weight.value = old.querySelector('input[type="number"]').value;
+      scale.value = old.querySelectorAll("select")[1].value;
+    }
+    column.addEventListener("change", () => { fit.checked = column.value !== ""; });
+    const row = el("tr", {}, el("td", {}, fit), el("th", { scope: "row", text: `${o.name} [${o.unit}]` }),
+      el("td", {}, column), el("td", {}, weight), el("td", {}, scale));
+    row.dataset.output = o.name;
+    outputs.append(row);
+  }
+  const params = $("parameter-pick").tBodies[0];
+  const kept = {};
+  for (const row of params.rows) kept[row.dataset.parameter] = row;
+  params.replaceChildren();
+  for (const p of model.parameters) {
+    const old = kept[p.name];
+    const free = el("input", { type: "checkbox", id: `free-${p.name}`, "aria-label": `calibrate ${p.name}` });
+    const num = (id, value, label) => el("input", { type: "number", step: "any", id, value: String(value), "aria-label": label });
+    const nominal = num(`nominal-${p.name}`, modelValue(p), `nominal ${p.name}`);
+    const min = num(`min-${p.name}`, p.min, `min ${p.name}`);
+    const max = num(`max-${p.name}`, p.max, `max ${p.name}`);
+    const scale = el("select", { id: `pscale-${p.name}`, "aria-label": `scale of ${p.name}` },
+      el("option", { value: "lin", text: "lin" }), el("option", { value: "log10", text: "log10" }));
+    if (old) {
+      free.checked = old.querySelector("input").checked;
+      const inputs = old.querySelectorAll('input[type="number"]');
+      nominal.value = inputs[0].value; min.value = inputs[1].value; max.value = inputs[2].value;
+      scale.value = old.querySelector("select").value;
+    }
+    const row = el("tr", {}, el("td", {}, free), el("th", { scope: "row", text: `${p.name} [${p.unit}]` }),
+      el("td", {}, nominal), el("td", {}, min), el("td", {}, max), el("td", {}, scale));
+    row.dataset.parameter = p.name;
+    params.append(row);
+  }
+}
+
+function number(id) {
+  const v = parseFloat($(id).value);
+  if (!Number.isFinite(v)) throw new Error(`${$(id).getAttribute("aria-label") || id}: not a number`);
+  return v;
+}
+
+// The Campaign message of the form: field for field a campaign file.
+function campaignMessage() {
+  const model = app.model, dataset = app.dataset;
+  if (!model) throw new Error("choose a model on the Model tab");
+  if (!dataset) throw new Error("upload a measurement on the Measurement tab");
+  const outputs = model.outputs
+    .filter((o) => $(`fit-${o.name}`).checked)
+    .map((o) => {
+      const measured = $(`measured-${o.name}`).value;
+      if (!measured) throw new Error(`${o.name}: pick the measured column it is compared with`);
+      return { model: o.name, measured, weight: number(`weight-${o.name}`), scale: $(`scale-${o.name}`).value };
+    });
+  const free = model.parameters.filter((p) => $(`free-${p.name}`).checked);
+  const parameters = free.map((p) => ({
+    name: p.name, nominal: number(`nominal-${p.name}`), min: number(`min-${p.name}`),
+    max: number(`max-${p.name}`), scale: $(`pscale-${p.name}`).value,
+  }));
+  const fixed = {};
+  for (const p of model.parameters) {
+    if (!free.includes(p) && modelValue(p) !== p.default_value) fixed[p.name] = modelValue(p);
+  }
+  const methods = [...document.querySelectorAll('input[name="method"]:checked')].map((m) => m.value);
+  const windowStop = number("window-stop");
+  return {
+    name: $("campaign-name").value.trim(),
+    model: model.name,
+    stop_time: windowStop,
+    model_parameters: fixed,
+    dataset_id: dataset.id,
+    outputs,
+    parameters,
+    window_start: number("window-start"),
+    window_stop: windowStop,
+    search: {
+      methods,
+      starts: Math.round(number("starts")),
+      max_evaluations: Math.round(number("max-evaluations")),
+      seed: Math.round(number("seed")),
+    },
+  };
+}
+
+async function start() {
+  showError("calibration-error", "");
+  let campaign;
+  try { campaign = campaignMessage(); } catch (e) { showError("calibration-error", e.message); return; }
+  try {
+    const { id, started } = await call("SubmitCampaign", { campaign });
+    $("calibration-status").textContent = started ? "started" : "known already: showing it";
+    watch(id);
+  } catch (e) {
+    showError("calibration-error", e.message);
+  }
+}
+
+function runsAtBest(runBest) {
+  const finite = runBest.filter((v) => Number.isFinite(v));
+  if (!finite.length) return [0, runBest.length];
+  const best = Math.min(...finite);
+  const threshold = best + BEST_TOLERANCE * Math.abs(best);
+  return [finite.filter((v) => v <= threshold).length, runBest.length];
+}
+
+function describeState(s) {
+  const runBest = (s.run_best || []).map((v) => (v === null ? Infinity : v));
+  const [k, n] = runsAtBest(runBest);
+  let text = `${s.name}: ${PHASES[s.phase] || s.phase}, ${s.evaluations} evaluations, best objective ${fmt(s.best_objective)}`;
+  if (n) text += `, ${k} of ${n} runs at the best`;
+  if (s.failure) text += ` (${s.failure})`;
+  return text;
+}
+
+function watch(id) {
+  if (app.watching) app.watching.abort();
+  app.campaignId = id;
+  app.history = [];
+  $("result").hidden = true;
+  $("progress-plot").replaceChildren();
+  $("cancel").disabled = false;
+  $("start").disabled = true;
+  const controller = new AbortController();
+  app.watching = controller;
+  follow(`/api/v1/WatchCampaign/${id}`, (s) => {
+    app.campaign = s;
+    $("calibration-status").textContent = describeState(s);
+    if (s.phase === 1 || app.history.length) {
+      app.history.push({ evaluations: s.evaluations, run_best: s.run_best || [] });
+      drawProgress();
+    }
+    if (s.phase !== 1) finish(s);
+  }, controller.signal).catch((e) => {
+    if (e.name !== "AbortError") showError("calibration-error", e.message);
+  }).finally(() => {
+    if (app.watching === controller) {
+      $("cancel").disabled = true;
+      $("start").disabled = false;
+    }
+  });
+}
+
+// Best objective per run over the campaign's evaluations, redrawn at most one at a time.
+async function drawProgress() {
+  if (app.plotting) { app.plotDue = true; return; }
+  app.plotting = true;
+  try {
+    const runs = Math.max(0, ...app.history.map((h) => h.run_best.length));
+    const x = app.history.map((h) => h.evaluations);
+    const series = [];
+    for (let r = 0; r < runs; r++) {
+      series.push({
+        label: `run ${r + 1}`, x,
+        y: app.history.map((h) => {
+          const v = h.run_best[r];
+          return v === null || v === undefined || !(v > 0) ? null : Math.log10(v);
+        }),
+      });
+    }
+    const svg = await plot({
+      title: "best objective of each run", x_label: "evaluations (all runs)",
+      y_label: "log10 of the best objective", series,
+    });
+    $("progress-plot").replaceChildren(figure(svg, "progress: best objective of each run over the evaluations"));
+  } catch (e) {
+    showError("calibration-error", e.message);
+  } finally {
+    app.plotting = false;
+    if (app.plotDue) { app.plotDue = false; drawProgress(); }
+  }
+}
+
+function finish(s) {
+  $("cancel").disabled = true;
+  $("start").disabled = false;
+  if (s.phase === 2 && s.result_json) showResult(s);
+  refreshCampaigns();
+}
+
+function showResult(s) {
+  const r = JSON.parse(s.result_json);
+  const best = r.best;
+  $("result-summary").textContent =
+    `objective ${fmt(r.nominal_objective)} at the nominal point, ${fmt(best.objective)} calibrated ` +
+    `(${best.method}, start ${best.start}); ${r.runs_at_best.count} of ${r.runs_at_best.of} runs reached the best; ` +
+    `${r.evaluations} evaluations (${r.simulated} simulated, ${r.cached} from the store).`;
+  const body = $("result-parameters").tBodies[0];
+  body.replaceChildren();
+  for (const p of r.free_parameters) {
+    const value = best.parameters[p.name];
+    const bound = best.at_bound[p.name];
+    body.append(el("tr", { "data-parameter": p.name },
+      el("th", { scope: "row", text: p.name }),
+      el("td", { class: "num", text: fmt(p.nominal, 8) }),
+      el("td", { class: "num calibrated", "data-value": String(value), text: fmt(value, 8) }),
+      el("td", { class: "num", text: fmt(p.min) }),
+      el("td", { class: "num", text: fmt(p.max) }),
+      el("td", { class: "flag", text: bound ? `at its ${bound === "min" ? "lower" : "upper"} bound` : "inside" })));
+  }
+  $("download-toml").href = `/ui/campaigns/${s.id}/campaign.toml`;
+  const json = $("download-json");
+  if (json.href.startsWith("blob:")) URL.revokeObjectURL(json.href);
+  json.href = URL.createObjectURL(new Blob([s.result_json], { type: "application/json" }));
+  const plots = $("result-plots");
+  plots.replaceChildren();
+  const names = Object.keys(s.plots || {}).sort((a, b) =>
+    (a === "waterfall.svg") - (b === "waterfall.svg") || a.localeCompare(b));
+  for (const name of names) {
+    const caption = name === "waterfall.svg"
+      ? "waterfall: final objective of each run, best first"
+      : `${name.replace(/\.svg$/, "")}: measured, nominal and calibrated`;
+    plots.append(figure(s.plots[name], caption));
+  }
+  $("result").hidden = false;
+}
+
+async function cancel() {
+  if (!app.campaignId) return;
+  try {
+    await call("CancelCampaign", { id: app.campaignId });
+  } catch (e) {
+    showError("calibration-error", e.message);
+  }
+}
+
+async function refreshCampaigns() {
+  try {
+    const all = [];
+    let token = "";
+    do {
+      const page = await call("ListCampaigns", { page_token: token });
+      all.push(...page.campaigns);
+      token = page.next_page_token;
+    } while (token);
+    const body = $("campaigns").tBodies[0];
+    body.replaceChildren();
+    const select = $("diagnosis-campaign");
+    const chosen = select.value || app.campaignId;
+    select.replaceChildren();
+    for (const s of all) {
+      const open = el("button", { type: "button", text: "Open", "aria-label": `open campaign ${s.name} ${s.id.slice(0, 8)}` });
+      open.addEventListener("click", () => openCampaign(s.id));
+      body.append(el("tr", {},
+        el("td", { text: s.name }), el("td", { text: PHASES[s.phase] || String(s.phase) }),
+        el("td", { class: "num", text: String(s.evaluations) }),
+        el("td", { class: "num", text: fmt(s.best_objective) }),
+        el("td", {}, el("code", { text: s.id.slice(0, 12) })), el("td", {}, open)));
+      if (s.phase === 2) select.append(el("option", { value: s.id, text: `${s.name} (${s.id.slice(0, 8)}), best ${fmt(s.best_objective)}` }));
+    }
+    if ([...select.options].some((o) => o.value === chosen)) select.value = chosen;
+  } catch (e) {
+    showError("calibration-error", e.message);
+  }
+}
+
+async function openCampaign(id) {
+  showError("calibration-error", "");
+  try {
+    const s = await call("GetCampaign", { id });
+    if (s.phase === 1) { watch(id); return; }
+    if (app.watching) app.watching.abort();
+    app.campaignId = id;
+    app.campaign = s;
+    $("progress-plot").replaceChildren();
+    $("calibration-status").textContent = describeState(s);
+    $("result").hidden = true;
+    if (s.phase === 2 && s.result_json) showResult(s);
+    $("result").scrollIntoView({ block: "nearest" });
+  } catch (e) {
+    showError("calibration-error", e.message);
+  }
+}
+
+// ---- Diagnosis tab ----------------------------------------------------------------------
+
+async function diagnose() {
+  showError("diagnosis-error", "");
+  const id = $("diagnosis-campaign").value;
+  if (!id) { showError("diagnosis-error", "no finished campaign: run one on the Calibration tab"); return; }
+  $("verdict").hidden = true;
+  $("candidates").hidden = true;
+  $("diagnosis-plots").replaceChildren();
+  $("diagnose").disabled = true;
+  $("diagnosis-status").textContent = "diagnosing…";
+  try {
+    await follow(`/api/v1/Diagnose/${id}`, (d) => {
+      $("diagnosis-status").textContent = `${PHASES[d.phase] || d.phase}, ${d.evaluations} evaluations` + (d.failure ? ` (${d.failure})` : "");
+      if (d.phase === 2 && d.report_json) showDiagnosis(d);
+      if (d.phase === 3) showError("diagnosis-error", d.failure);
+    });
+  } catch (e) {
+    showError("diagnosis-error", e.message);
+  } finally {
+    $("diagnose").disabled = false;
+  }
+}
+
+function showDiagnosis(d) {
+  const report = JSON.parse(d.report_json);
+  $("verdict").textContent = report.verdict_sentence;
+  $("verdict").hidden = false;
+  const body = $("candidates").tBodies[0];
+  body.replaceChildren();
+  for (const [i, c] of report.candidates.entries()) {
+    const selected = (report.selected || []).includes(c.effect);
+    body.append(el("tr", {},
+      el("td", { class: "num", text: String(i + 1) }),
+      el("th", { scope: "row", text: c.effect + (selected ? " (selected)" : "") }),
+      el("td", { class: "num", text: fmt(c.score, 4) }),
+      el("td", { class: "num", text: fmt(c.estimate, 4) }),
+      el("td", { class: "num", text: Number.isFinite(c.objective) ? fmt(c.objective, 4) : "not refitted" })));
+  }
+  $("candidates").hidden = false;
+  const plots = $("diagnosis-plots");
+  plots.replaceChildren();
+  const files = d.files || {};
+  const order = (n) => (n.startsWith("fit_") ? 0 : n.startsWith("residual_") ? 1 : 2);
+  for (const name of Object.keys(files).filter((n) => n.endsWith(".svg")).sort((a, b) => order(a) - order(b) || a.localeCompare(b))) {
+    const what = name.startsWith("fit_") ? "before and after"
+      : name.startsWith("residual_") ? "residual" : name.startsWith("autocorrelation") ? "autocorrelation of the residuals" : "";
+    plots.append(figure(files[name], `${name.replace(/\.svg$/, "")}${what ? `: ${what}` : ""}`));
+  }
+}
+
+// ---- start ------------------------------------------------------------------------------
+
+setUpTabs();
+$("simulate").addEventListener("click", simulate);
+$("upload").addEventListener("click", upload);
+$("plot-columns").addEventListener("click", plotColumns);
+$("start").addEventListener("click", start);
+$("cancel").addEventListener("click", cancel);
+$("refresh-campaigns").addEventListener("click", refreshCampaigns);
+$("diagnose").addEventListener("click", diagnose);
+loadModels();
+refreshCampaigns();

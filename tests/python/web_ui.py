@@ -1,0 +1,234 @@
+"""Drives calib's web app in headless Chromium (selenium + chromedriver), as a user would.
+
+    python3 web_ui.py workflow URL DATA.csv SCREENSHOTS_DIR OUT.json
+    python3 web_ui.py broken URL BROKEN.csv OUT.json
+
+`workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
+angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
+two angles, free the two frictions, three methods x four starts, run, read the calibrated
+values off the page), the Diagnosis tab (run it, read the verdict); a screenshot of each
+tab. `broken`: upload a CSV that does not parse and read the message the page shows.
+Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
+"""
+
+import json
+import os
+import shutil
+import sys
+
+from selenium import webdriver
+from selenium.webdriver.chrome.service import Service
+from selenium.webdriver.common.by import By
+from selenium.webdriver.common.keys import Keys
+from selenium.webdriver.support import expected_conditions as EC
+from selenium.webdriver.support.ui import Select, WebDriverWait
+
+# The campaign of examples/furuta.toml, typed into the page.
+THETA0 = "0.5235987755983"
+LONG = 900  # seconds a campaign or a diagnosis may take on a loaded machine
+
+
+def browser():
+    options = webdriver.ChromeOptions()
+    for binary in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(binary)
+        if path:
+            options.binary_location = path
+            break
+    for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
+                "--window-size=1366,900", "--force-device-scale-factor=1", "--lang=en-US"):
+        options.add_argument(arg)
+    driver_path = shutil.which("chromedriver")
+    service = Service(executable_path=driver_path) if driver_path else Service()
+    driver = webdriver.Chrome(options=options, service=service)
+    driver.set_window_size(1366, 900)
+    return driver
+
+
+def wait(driver, seconds=60):
+    return WebDriverWait(driver, seconds, poll_frequency=0.2)
+
+
+def by_id(driver, id_):
+    return driver.find_element(By.ID, id_)
+
+
+def type_into(driver, id_, text):
+    field = by_id(driver, id_)
+    field.clear()
+    field.send_keys(text)
+    field.send_keys(Keys.TAB)  # fires `change`
+
+
+def tab(driver, name):
+    by_id(driver, f"tab-{name}").click()
+    wait(driver).until(EC.visibility_of_element_located((By.ID, f"panel-{name}")))
+
+
+def screenshot(driver, path):
+    """The whole page, at a laptop's width."""
+    height = driver.execute_script(
+        "return Math.max(document.body.scrollHeight, document.documentElement.scrollHeight)")
+    driver.set_window_size(1366, max(900, min(int(height) + 40, 6000)))
+    driver.execute_script("window.scrollTo(0, 0)")
+    driver.save_screenshot(path)
+    driver.set_window_size(1366, 900)
+
+
+def no_error(driver, id_):
+    box = by_id(driver, id_)
+    if box.is_displayed():
+        raise SystemExit(f"{id_}: {box.text}")
+
+
+def upload(driver, path, time_column):
+    tab(driver, "measurement")
+    type_into(driver, "measurement-time", time_column)
+    by_id(driver, "measurement-file").send_keys(os.path.abspath(path))
+    by_id(driver, "upload").click()
+
+
+def workflow(url, data, shots, out):
+    driver = browser()
+    try:
+        driver.get(url)
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        Select(by_id(driver, "model-select")).select_by_value("furuta")
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+
+        # Model: the record's start angle, 40 s, both angles plotted.
+        type_into(driver, "value-theta0", THETA0)
+        type_into(driver, "model-stop", "40")
+        by_id(driver, "simulate").click()
+        wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#model-plots figure")) >= 2
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        screenshot(driver, os.path.join(shots, "model.png"))
+
+        # Measurement: upload the record, its columns plotted.
+        upload(driver, data, "time_s")
+        wait(driver).until(lambda d: "samples" in by_id(d, "measurement-status").text
+                           or by_id(d, "measurement-error").is_displayed())
+        no_error(driver, "measurement-error")
+        columns = [e.get_attribute("value") for e in
+                   driver.find_elements(By.CSS_SELECTOR, 'input[name="measured-column"]')]
+        wait(driver).until(lambda d: d.execute_script(
+            "return [...document.querySelectorAll('#measurement-plots img')]"
+            ".every(i => i.complete && i.naturalWidth > 0)"))
+        screenshot(driver, os.path.join(shots, "measurement.png"))
+
+        # Calibration: the campaign of examples/furuta.toml.
+        tab(driver, "calibration")
+        Select(by_id(driver, "measured-armJoint.phi")).select_by_value("arm_angle_rad")
+        Select(by_id(driver, "measured-pendulumJoint.phi")).select_by_value("pendulum_angle_rad")
+        for name, nominal in (("armFriction", "0.012"), ("pendulumFriction", "0.002")):
+            by_id(driver, f"free-{name}").click()
+            type_into(driver, f"nominal-{name}", nominal)
+            type_into(driver, f"min-{name}", "0")
+            type_into(driver, f"max-{name}", "0.9")
+        for method in ("powell", "differential-evolution"):
+            driver.find_element(By.CSS_SELECTOR, f'input[name="method"][value="{method}"]').click()
+        type_into(driver, "campaign-name", "furuta")
+        type_into(driver, "window-start", "0")
+        type_into(driver, "window-stop", "40")
+        type_into(driver, "starts", "4")
+        type_into(driver, "max-evaluations", "2500")
+        type_into(driver, "seed", "1")
+        by_id(driver, "start").click()
+        live = set()
+
+        def done(d):
+            status = by_id(d, "calibration-status").text
+            if "running" in status and d.find_elements(By.CSS_SELECTOR, "#progress-plot svg"):
+                live.add(status)
+            return by_id(d, "result").is_displayed() or by_id(d, "calibration-error").is_displayed()
+
+        wait(driver, LONG).until(done)
+        no_error(driver, "calibration-error")
+        calibrated = {}
+        for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr"):
+            cell = row.find_element(By.CSS_SELECTOR, "td.calibrated")
+            calibrated[row.get_attribute("data-parameter")] = {
+                "value": cell.get_attribute("data-value"),
+                "text": cell.text,
+                "bound": row.find_element(By.CSS_SELECTOR, "td.flag").text,
+            }
+        plots = [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#result-plots figcaption")]
+        status = by_id(driver, "calibration-status").text
+        progress_runs = driver.execute_script(
+            "return document.querySelectorAll('#progress-plot svg path, #progress-plot svg polyline').length")
+        toml_link = by_id(driver, "download-toml").get_attribute("href")
+        listed = [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#campaigns tbody tr")]
+        screenshot(driver, os.path.join(shots, "calibration.png"))
+
+        # Diagnosis of the finished campaign.
+        tab(driver, "diagnosis")
+        wait(driver).until(lambda d: Select(by_id(d, "diagnosis-campaign")).options)
+        by_id(driver, "diagnose").click()
+        wait(driver, LONG).until(lambda d: by_id(d, "verdict").is_displayed()
+                                 or by_id(d, "diagnosis-error").is_displayed())
+        no_error(driver, "diagnosis-error")
+        verdict = by_id(driver, "verdict").text
+        candidates = [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#candidates tbody tr")]
+        diagnosis_plots = [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#diagnosis-plots figcaption")]
+        screenshot(driver, os.path.join(shots, "diagnosis.png"))
+
+        # Back to the Calibration tab by keyboard; reopen the campaign from the store's list.
+        by_id(driver, "tab-diagnosis").send_keys(Keys.ARROW_LEFT)
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "panel-calibration")))
+        driver.execute_script("document.getElementById('result-parameters').tBodies[0].replaceChildren()")
+        driver.find_element(By.CSS_SELECTOR, "#campaigns tbody tr button").send_keys(Keys.ENTER)
+        wait(driver).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#result-parameters td.calibrated"))
+        reopened = {row.get_attribute("data-parameter"):
+                    row.find_element(By.CSS_SELECTOR, "td.calibrated").get_attribute("data-value")
+                    for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr")}
+
+        with open(out, "w") as f:
+            json.dump({
+                "columns": columns,
+                "calibrated": calibrated,
+                "status": status,
+                "live_statuses": len(live),
+                "progress_plot_lines": progress_runs,
+                "plots": plots,
+                "toml_link": toml_link,
+                "campaigns_listed": listed,
+                "verdict": verdict,
+                "candidates": candidates,
+                "diagnosis_plots": diagnosis_plots,
+                "reopened": reopened,
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
+def broken(url, data, out):
+    driver = browser()
+    try:
+        driver.get(url)
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        # To the Measurement tab by keyboard, as someone without a mouse would.
+        by_id(driver, "tab-model").send_keys(Keys.ARROW_RIGHT)
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "panel-measurement")))
+        focused = driver.switch_to.active_element.get_attribute("id")
+        upload(driver, data, "time_s")
+        wait(driver).until(lambda d: by_id(d, "measurement-error").is_displayed()
+                           or "samples" in by_id(d, "measurement-status").text)
+        with open(out, "w") as f:
+            json.dump({
+                "error": by_id(driver, "measurement-error").text,
+                "status": by_id(driver, "measurement-status").text,
+                "focused_after_arrow": focused,
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
+if __name__ == "__main__":
+    mode, args = sys.argv[1], sys.argv[2:]
+    if mode == "workflow":
+        workflow(*args)
+    elif mode == "broken":
+        broken(*args)
+    else:
+        raise SystemExit(f"unknown mode {mode}")

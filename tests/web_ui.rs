@@ -1,0 +1,286 @@
+//! The web app in a real browser: `calib ui` drives headless Chromium through selenium
+//! (`tests/python/web_ui.py`). The whole workflow on the Furuta record gives the values
+//! `calib calibrate examples/furuta.toml` gives, read off the page, and leaves a screenshot
+//! of each tab (in `docs/screenshots/` with `CALIB_SCREENSHOTS=docs/screenshots`); a CSV that does not parse shows the parser's message.
+//! Skipped (with the reason printed) where Chromium, chromedriver or selenium is missing,
+//! except under `CI=true`, where that fails the test.
+
+mod common;
+
+use common::repo;
+use serde_json::Value;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::process::{Child, Command, Stdio};
+
+/// Why a browser cannot be driven here, if it cannot.
+fn browser_missing() -> Option<String> {
+    let found = |name: &str| {
+        std::env::var_os("PATH")
+            .is_some_and(|path| std::env::split_paths(&path).any(|dir| dir.join(name).is_file()))
+    };
+    if !["chromium", "chromium-browser", "google-chrome"]
+        .iter()
+        .any(|b| found(b))
+    {
+        return Some("no chromium on the PATH (apt-get install chromium)".into());
+    }
+    if !found("chromedriver") {
+        return Some("no chromedriver on the PATH (apt-get install chromium-driver)".into());
+    }
+    match Command::new("python3")
+        .args(["-c", "import selenium"])
+        .output()
+    {
+        Err(e) => Some(format!("python3 cannot run: {e}")),
+        Ok(out) if !out.status.success() => Some(format!(
+            "selenium missing (pip install selenium): {}",
+            String::from_utf8_lossy(&out.stderr).trim()
+        )),
+        Ok(_) => None,
+    }
+}
+
+/// `calib ui` serving on a port of its choosing; killed when dropped.
+struct Ui {
+    child: Child,
+    url: String,
+}
+
+impl Ui {
+    fn start(db: &std::path::Path) -> Ui {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_calib"))
+            .args(["ui", "--no-open", "--listen", "127.0.0.1:0", "--db"])
+            .arg(db)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::inherit())
+            .spawn()
+            .expect("start calib ui");
+        let mut first = String::new();
+        BufReader::new(child.stdout.take().expect("stdout"))
+            .read_line(&mut first)
+            .expect("first line");
+        let url = first
+            .trim()
+            .strip_prefix("calib ui at ")
+            .unwrap_or_else(|| panic!("first line `{first}` does not say where the app is"))
+            .to_string();
+        assert!(
+            url.starts_with("http://127.0.0.1:") && url.ends_with('/'),
+            "{url}"
+        );
+        Ui { child, url }
+    }
+
+    /// `GET path` over plain HTTP/1.1: the status code and the body.
+    fn get(&self, path: &str) -> (u16, String) {
+        let host = self.url.trim_start_matches("http://").trim_end_matches('/');
+        let mut stream = std::net::TcpStream::connect(host).expect("connect");
+        write!(
+            stream,
+            "GET {path} HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        )
+        .unwrap();
+        let mut answer = String::new();
+        stream.read_to_string(&mut answer).unwrap();
+        let (head, body) = answer.split_once("\r\n\r\n").unwrap_or((&answer, ""));
+        let code = head
+            .split_whitespace()
+            .nth(1)
+            .and_then(|c| c.parse().ok())
+            .unwrap_or(0);
+        (code, body.to_string())
+    }
+}
+
+impl Drop for Ui {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// Run the page script in `mode` with `args`; what it read off the page.
+fn drive(mode: &str, args: &[&str], dir: &std::path::Path) -> Value {
+    let out = dir.join(format!("{mode}.json"));
+    let run = Command::new("python3")
+        .arg(repo().join("tests/python/web_ui.py"))
+        .arg(mode)
+        .args(args)
+        .arg(&out)
+        .output()
+        .expect("run python3");
+    assert!(
+        run.status.success(),
+        "web_ui.py {mode} failed:\n{}\n{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&std::fs::read(&out).expect("page report")).expect("page report JSON")
+}
+
+/// The best value of parameter `name` in `calib calibrate --json`'s output, read from its
+/// digits (shortest round-trip, as the page's are) with Rust's correctly rounded parser.
+fn best_parameter(json: &str, name: &str) -> f64 {
+    let best = &json[json.find("\"best\": {").expect("a best point")..];
+    let key = format!("\"{name}\": ");
+    let value = &best[best.find(&key).expect("the parameter") + key.len()..];
+    let end = value.find([',', '\n', '}']).unwrap();
+    value[..end].trim().parse().expect("a number")
+}
+
+#[test]
+fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
+    if let Some(reason) = browser_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+
+    // The reference: the same campaign from its file, in its own store.
+    let reference = common::calib(&[
+        "calibrate",
+        repo().join("examples/furuta.toml").to_str().unwrap(),
+        "--json",
+        "--out",
+        dir.path().join("out").to_str().unwrap(),
+        "--db",
+        dir.path().join("cli-db").to_str().unwrap(),
+    ]);
+    assert!(
+        reference.status.success(),
+        "{}",
+        String::from_utf8_lossy(&reference.stderr)
+    );
+    let reference_text = String::from_utf8(reference.stdout).unwrap();
+    let reference: Value = serde_json::from_str(&reference_text).unwrap();
+
+    let ui = Ui::start(&dir.path().join("ui-db"));
+    // Screenshots land in the build folder, so a test run leaves the tree clean;
+    // `CALIB_SCREENSHOTS=docs/screenshots` refreshes README's.
+    let shots = match std::env::var_os("CALIB_SCREENSHOTS") {
+        Some(folder) => repo().join(folder),
+        None => std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("screenshots"),
+    };
+    std::fs::create_dir_all(&shots).unwrap();
+    let data = repo().join("examples/data/furuta_clean.csv");
+    let page = drive(
+        "workflow",
+        &[&ui.url, data.to_str().unwrap(), shots.to_str().unwrap()],
+        dir.path(),
+    );
+
+    // The columns of the record, found by the upload.
+    assert_eq!(
+        page["columns"],
+        serde_json::json!(["arm_angle_rad", "pendulum_angle_rad"])
+    );
+    // The calibrated values on the page are calib calibrate's, bit for bit (the same
+    // campaign gives the same runs); the text shows them to 8 significant digits.
+    for name in ["armFriction", "pendulumFriction"] {
+        let expected = best_parameter(&reference_text, name);
+        let shown = &page["calibrated"][name];
+        let value: f64 = shown["value"].as_str().unwrap().parse().unwrap();
+        assert_eq!(
+            value, expected,
+            "{name}: page {shown} vs calibrate {expected}"
+        );
+        let text: f64 = shown["text"].as_str().unwrap().parse().unwrap();
+        assert!(
+            ((text - expected) / expected).abs() < 1e-7,
+            "{name}: shown {text} vs {expected}"
+        );
+        assert_eq!(shown["bound"], "inside", "{name}");
+    }
+    let at_best = &reference["runs_at_best"];
+    let status = page["status"].as_str().unwrap();
+    assert!(
+        status.contains("finished")
+            && status.contains(&format!(
+                "{} of {} runs at the best",
+                at_best["count"], at_best["of"]
+            )),
+        "{status}"
+    );
+    // Followed live: states of the running campaign, and a line per run in the progress plot.
+    assert!(page["live_statuses"].as_u64().unwrap() >= 1, "{page}");
+    assert!(
+        page["progress_plot_lines"].as_u64().unwrap() >= 12,
+        "{page}"
+    );
+    // A plot per output and the waterfall.
+    let plots = page["plots"].to_string();
+    for plot in ["armJoint.phi", "pendulumJoint.phi", "waterfall"] {
+        assert!(plots.contains(plot), "{plots}");
+    }
+    // The campaign lists in the store, and its file downloads.
+    assert!(
+        page["campaigns_listed"]
+            .to_string()
+            .contains("furuta finished"),
+        "{page}"
+    );
+    let link = page["toml_link"].as_str().unwrap();
+    let (code, toml) = ui.get(&link[link.find("/ui/").unwrap()..]);
+    assert_eq!(code, 200, "{toml}");
+    assert!(
+        toml.contains("armFriction")
+            && toml.contains("pendulumFriction")
+            && toml.contains("[search]"),
+        "{toml}"
+    );
+    // The diagnosis of the clean record: nothing missing, said in a sentence, with the
+    // candidates ranked and the plots before and after.
+    let verdict = page["verdict"].as_str().unwrap();
+    assert!(
+        verdict.contains("Nothing is missing from the model"),
+        "{verdict}"
+    );
+    assert_eq!(page["candidates"].as_array().unwrap().len(), 16, "{page}");
+    let diagnosis_plots = page["diagnosis_plots"].to_string();
+    for plot in [
+        "fit_armJoint.phi",
+        "residual_pendulumJoint.phi",
+        "autocorrelation",
+    ] {
+        assert!(diagnosis_plots.contains(plot), "{diagnosis_plots}");
+    }
+    // Reopened from the store's list (reached by keyboard), the same values.
+    for name in ["armFriction", "pendulumFriction"] {
+        assert_eq!(
+            page["reopened"][name], page["calibrated"][name]["value"],
+            "{name}"
+        );
+    }
+    for tab in ["model", "measurement", "calibration", "diagnosis"] {
+        let png = std::fs::read(shots.join(format!("{tab}.png"))).unwrap();
+        assert!(
+            png.starts_with(b"\x89PNG") && png.len() > 10_000,
+            "{tab}.png"
+        );
+    }
+}
+
+#[test]
+fn a_broken_csv_shows_the_parsers_message_on_the_page() {
+    if let Some(reason) = browser_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let broken = dir.path().join("broken_rig.csv");
+    std::fs::write(
+        &broken,
+        "time_s,arm_angle_rad\n0,0.1\n0.01,0.2\n0.02,zero\n",
+    )
+    .unwrap();
+    let ui = Ui::start(&dir.path().join("db"));
+    let page = drive("broken", &[&ui.url, broken.to_str().unwrap()], dir.path());
+    let error = page["error"].as_str().unwrap();
+    assert!(
+        error.contains("broken_rig.csv") && error.contains("line 4") && error.contains("zero"),
+        "{error}"
+    );
+    assert_eq!(page["status"], "", "{page}");
+    // The arrow key moved the focus to the next tab.
+    assert_eq!(page["focused_after_arrow"], "tab-measurement", "{page}");
+}
