@@ -223,7 +223,7 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::store::CampaignStatus;
+    use crate::store::{CampaignStatus, RunBest};
 
     #[test]
     fn evaluations_round_trip_bit_for_bit() {
@@ -316,5 +316,46 @@ mod tests {
         let bytes = encode_campaign(&record);
         assert_eq!(bytes[0], 1);
         assert_eq!(decode_campaign(&bytes).unwrap(), record);
+    }
+
+    #[test]
+    fn campaign_records_keep_every_number_bit_for_bit() {
+        // Values a result holds (a run's best point and objective) whose shortest decimal
+        // text a fast but inexact float parser reads back one ulp off: a campaign resumed
+        // from the store reported them so, unlike the one that never stopped.
+        let values = [
+            f64::from_bits(0x3fed_bb10_e952_1f72),
+            f64::from_bits(0x405d_522e_7e12_48c8),
+            0.1 + 0.2,
+            1e-300,
+            f64::MAX,
+        ];
+        let record = CampaignRecord {
+            name: "c".into(),
+            spec: String::new(),
+            source: PathBuf::new(),
+            dataset: "00".repeat(32),
+            status: CampaignStatus::Finished,
+            runs: vec![RunBest {
+                method: "nelder-mead".into(),
+                start: 0,
+                point: values.to_vec(),
+                objective: values[1],
+                evaluations: 1,
+            }],
+            result: Some(serde_json::json!({ "values": values })),
+            failure: None,
+        };
+        let back = decode_campaign(&encode_campaign(&record)).unwrap();
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&back.runs[0].point), bits(&values));
+        assert_eq!(back.runs[0].objective.to_bits(), values[1].to_bits());
+        let result: Vec<f64> = back.result.unwrap()["values"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(bits(&result), bits(&values));
     }
 }
