@@ -451,6 +451,24 @@ fn spawn_coordinator_in(
     (child, format!("http://{address}"))
 }
 
+/// Every state of a campaign's watch on the coordinator at `url`, to its end.
+fn watch_url(url: &str, id: &str) -> Vec<pb::CampaignState> {
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    runtime.block_on(async {
+        let mut client = CalibrationClient::connect(url.to_string()).await.unwrap();
+        let mut stream = client
+            .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut states = Vec::new();
+        while let Some(s) = stream.message().await.unwrap() {
+            states.push(s);
+        }
+        states
+    })
+}
+
 fn get(url: &str, id: &str) -> pb::CampaignState {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     runtime.block_on(async {
@@ -503,18 +521,18 @@ fn a_submitted_campaign_survives_a_killed_coordinator() {
     );
     first.wait().unwrap();
 
-    // A new coordinator on the same store finishes it; submitted again, it is the same
-    // campaign and starts nothing.
+    // A new coordinator on the same store finishes it, live: a client watching it sees it
+    // run and end. Submitted again, it is the same campaign and starts nothing.
     let (mut second, url) = spawn_coordinator(dir.path(), &cluster.workers_arg());
     assert_eq!(submit(&url), id);
-    let mut last = get(&url, &id);
-    await_condition(
-        "the resumed campaign to finish",
-        std::time::Duration::from_secs(300),
-        || {
-            last = get(&url, &id);
-            last.phase() == pb::CampaignPhase::Finished
-        },
+    let states = watch_url(&url, &id);
+    let last = states.last().unwrap().clone();
+    assert_eq!(last.phase(), pb::CampaignPhase::Finished, "{last:?}");
+    assert!(
+        states
+            .iter()
+            .any(|s| s.phase() == pb::CampaignPhase::Running && s.evaluations > 0),
+        "the watch saw no progress of the resumed campaign: {states:?}"
     );
     second.kill().unwrap();
     second.wait().unwrap();

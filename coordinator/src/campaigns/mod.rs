@@ -184,22 +184,65 @@ impl Campaigns {
         }
         if self.store.campaign(&id)?.is_some() {
             // Finished, failed or cancelled before; or left running by an earlier
-            // coordinator, which this one's resume of the store finishes.
+            // coordinator, which `resume_submitted` started again when this one started.
             return Ok((hex(&id), false));
         }
+        self.start(&mut live, id, campaign)?;
+        Ok((hex(&id), true))
+    }
+
+    /// Start again every campaign submitted to this API that an earlier coordinator left
+    /// running, as live campaigns: replayed from the store, they simulate only what it
+    /// lacks, and clients watching them see their progress and result as for any campaign.
+    /// (Other campaigns the store holds unfinished, from `calib calibrate`, are finished by
+    /// the server's resume of the store.) How many were started.
+    pub fn resume_submitted(self: &Arc<Self>) -> Result<usize> {
+        let mut started = 0;
+        for (id, record) in self.store.campaigns()? {
+            if record.status != CampaignStatus::Running || record.source != self.source() {
+                continue;
+            }
+            // A campaign that no longer resolves to its id (its data gone, a model of
+            // another version) is left to the store's resume, which says why and closes it.
+            let Ok(campaign) = Campaign::parse(&record.spec, &record.source) else {
+                continue;
+            };
+            let Ok(measurement) = calibration::load_measurement(&campaign) else {
+                continue;
+            };
+            if campaign.identity(&measurement.content_hash()) != id {
+                continue;
+            }
+            let mut live = self.live.lock().expect("live lock");
+            if live.contains_key(&id) {
+                continue;
+            }
+            tracing::info!(campaign = %campaign.name, id = %hex(&id), "resuming submitted campaign");
+            self.start(&mut live, id, campaign)?;
+            started += 1;
+        }
+        Ok(started)
+    }
+
+    /// Run `campaign` as a live campaign, on a thread of its own.
+    fn start(
+        self: &Arc<Self>,
+        live: &mut HashMap<CampaignId, Arc<Live>>,
+        id: CampaignId,
+        campaign: Campaign,
+    ) -> Result<()> {
         let (state, _) = watch::channel(Snapshot::running(&hex(&id), &campaign.name));
         let entry = Arc::new(Live {
             cancel: AtomicBool::new(false),
             state,
         });
         live.insert(id, entry.clone());
-        drop(live);
         let this = self.clone();
         std::thread::Builder::new()
             .name(format!("campaign {}", campaign.name))
             .spawn(move || this.run(id, campaign, entry))
             .map_err(|e| Error::Dispatch(format!("cannot start a campaign thread: {e}")))?;
-        Ok((hex(&id), true))
+        Ok(())
     }
 
     /// Run a campaign to its end, retrying while no worker can serve it.

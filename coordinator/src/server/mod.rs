@@ -273,6 +273,15 @@ pub fn serve_coordinator(
         token = config.security.token.is_some(),
         "coordinator serving"
     );
+    // Campaigns submitted to the API and left running go on as live campaigns, so their
+    // clients follow them; the store's resume below skips them.
+    if store.is_some() {
+        match campaigns.resume_submitted() {
+            Ok(0) => {}
+            Ok(count) => tracing::info!(campaigns = count, "submitted campaigns resumed"),
+            Err(e) => tracing::error!(error = %e, "cannot resume submitted campaigns"),
+        }
+    }
     let control = Arc::new(resume::ResumeControl::default());
     let resume = store.map(|store| {
         let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
