@@ -68,7 +68,8 @@ docker_up() {
     export CALIB_IMAGE="$tag" CALIB_PUBLISH="127.0.0.1:$port" CALIB_WORKER_SLOTS=1
     compose=(docker-compose -p "$project" -f "$repo/deploy/compose/docker-compose.yml")
     deploy/build-image.sh --binary "$binary" --tag "$tag" | sed 's/^/fault-test: /'
-    "${compose[@]}" up -d --scale worker=3 2>&1 | grep -v '\.\.\. $' | sed 's/^/fault-test: /'
+    local out
+    out="$("${compose[@]}" up -d --scale worker=3 2>&1)" || { echo "$out" >&2; fail "docker-compose up"; }
     network="${project}_default"
     coordinator="$("${compose[@]}" ps -q coordinator)"
     mapfile -t workers < <("${compose[@]}" ps -q worker)
@@ -79,6 +80,7 @@ docker_up() {
     where="containers on network $network"
 }
 docker_logs() { "${compose[@]}" logs --no-color "$@"; }
+docker_coordinator_log() { docker logs "$coordinator" 2>&1; }
 docker_kill_worker() { docker kill "${workers[$1]}" >/dev/null; victim="${workers[$1]:0:12}"; }
 docker_cut_worker() { docker network disconnect "$network" "${workers[$1]}"; victim="${workers[$1]:0:12}"; }
 docker_heal_worker() { docker network connect --alias worker --alias "${workers[$1]:0:12}" "$network" "${workers[$1]}"; }
@@ -122,6 +124,7 @@ netns_up() {
     where="network namespaces $ns-*"
 }
 netns_logs() { tail -n 20 "$work"/c.log "$work"/w*.log; }
+netns_coordinator_log() { cat "$work/c.log"; }
 netns_kill_worker() {
     kill -9 "${pids[$1]}"; wait "${pids[$1]}" 2>/dev/null || true
     victim="w$1 (10.231.0.$(($1 + 2)))"
@@ -252,4 +255,7 @@ print(f"fault-test: {len(local['runs'])} runs identical to the local run's, best
 PY
 [ "$evaluated" = "$total" ] || fail "evaluations: $evaluated on the cluster, $total locally (lost or extra)"
 [ "$repeated" = 0 ] || fail "$repeated simulations repeated after the restart"
+# What the coordinator saw of each fault, with its times.
+"${on}_coordinator_log" | grep -E 'worker taken out|registration expired|worker up|worker added|resuming|resumed|coordinator serving' \
+    | sed -E 's/^[^|]*\| //; s/^([0-9T:.-]+)Z? +[A-Z]+ +[a-z_:]+: /\1 /' | sed 's/^/fault-test:   /' || true
 say "PASSED on $on"

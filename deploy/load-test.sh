@@ -54,7 +54,7 @@ up() { # workers
 }
 
 if [ "$scaling" = 1 ]; then
-    sed -e 's/^name = .*/name = "load_scaling"/' \
+    sed -e '0,/^name = .*/s//name = "load_scaling"/' \
         -e 's#^file = .*#file = "'"$repo"'/examples/data/hx_highfi.csv"#' \
         -e 's/^methods = .*/methods = ["differential-evolution"]/' \
         -e 's/^starts = .*/starts = 1/' -e 's/^max_evaluations = .*/max_evaluations = 400/' \
@@ -79,7 +79,7 @@ coordinator="$(compose ps -q coordinator)"
 pid="$(docker inspect -f '{{.State.Pid}}' "$coordinator")"
 ids=()
 for i in $(seq "$campaigns"); do
-    sed -e "s/^name = .*/name = \"load_$i\"/" \
+    sed -e "0,/^name = .*/s//name = \"load_$i\"/" \
         -e 's#^file = .*#file = "'"$repo"'/examples/data/furuta_clean.csv"#' \
         -e 's/^methods = .*/methods = ["nelder-mead", "powell"]/' \
         -e 's/^starts = .*/starts = 8/' -e 's/^max_evaluations = .*/max_evaluations = 400/' \
