@@ -27,7 +27,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// List the hosted models: parameters (unit, default, bounds), outputs and effects.
+    /// List the hosted models, or an FMU's: parameters (unit, default, bounds), outputs and
+    /// effects.
     Models(commands::models::Args),
     /// Simulate a model and write its outputs over time as CSV.
     Simulate(commands::simulate::Args),
@@ -53,6 +54,9 @@ enum Command {
     Watch(commands::submit::IdArgs),
     /// Stop a campaign on a coordinator.
     Cancel(commands::submit::IdArgs),
+    /// Run the instances of one FMU for a parent process (internal).
+    #[command(hide = true)]
+    FmuHost(commands::fmu::HostArgs),
 }
 
 fn main() -> ExitCode {
@@ -76,6 +80,10 @@ fn main() -> ExitCode {
         )
         .with_writer(std::io::stderr)
         .init();
+    // FMU instances run in child processes of this binary, never in this one.
+    if !matches!(cli.command, Command::FmuHost(_)) {
+        commands::fmu::isolate();
+    }
     let outcome = match cli.command {
         Command::Models(args) => commands::models::run(args),
         Command::Simulate(args) => commands::simulate::run(args),
@@ -89,6 +97,7 @@ fn main() -> ExitCode {
         Command::Status(args) => commands::submit::status(args),
         Command::Watch(args) => commands::submit::watch(args),
         Command::Cancel(args) => commands::submit::cancel(args),
+        Command::FmuHost(args) => commands::fmu::host(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -7,6 +7,7 @@ pub mod bench_store;
 pub mod calibrate;
 pub mod coordinator;
 pub mod diagnose;
+pub mod fmu;
 pub mod models;
 pub mod security;
 pub mod simulate;
