@@ -362,3 +362,178 @@ fn an_fmu_that_hangs_is_stopped_at_its_deadline() {
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("did not finish within 1 s"), "{stderr}");
 }
+
+/// `calib worker` in a child process on a free port of 127.0.0.1.
+struct WorkerProcess {
+    child: std::process::Child,
+    url: String,
+}
+
+impl WorkerProcess {
+    fn start(extra: &[&str]) -> Self {
+        use std::io::BufRead;
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+            .args(["worker", "--listen", "127.0.0.1:0", "--slots", "2"])
+            .args(extra)
+            .stdout(std::process::Stdio::piped())
+            .spawn()
+            .expect("start calib worker");
+        let mut line = String::new();
+        std::io::BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let address = line
+            .strip_prefix("worker listening on ")
+            .and_then(|rest| rest.split_whitespace().next())
+            .unwrap_or_else(|| panic!("unexpected first line: {line}"));
+        Self {
+            child,
+            url: format!("http://{address}"),
+        }
+    }
+}
+
+impl Drop for WorkerProcess {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn fmus_in(dir: &Path) -> usize {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .filter(|e| {
+            e.as_ref()
+                .unwrap()
+                .path()
+                .extension()
+                .is_some_and(|x| x == "fmu")
+        })
+        .count()
+}
+
+#[test]
+fn a_campaign_on_a_worker_allowed_fmus_gives_the_local_runs() {
+    let Some(path) = fmu(2, "VanDerPol") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("fmu-cache");
+    let worker = WorkerProcess::start(&["--allow-fmu", "--fmu-cache", cache.to_str().unwrap()]);
+    let data = record(
+        &path,
+        dir.path(),
+        "mu=1.7",
+        "20",
+        "0.05",
+        &["x0=0.02", "x1=0.02"],
+        "x0,x1",
+    );
+    let campaign = write(
+        dir.path(),
+        "vanderpol.toml",
+        &van_der_pol_campaign(&path, &data),
+    );
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("db-local"),
+        &dir.path().join("out"),
+        &[],
+    );
+    let remote = calibrate_json(
+        &campaign,
+        &dir.path().join("db-remote"),
+        &dir.path().join("out"),
+        &["--workers", &worker.url],
+    );
+    assert_eq!(remote["simulated"], local["simulated"]);
+    assert_eq!(
+        remote["best"], local["best"],
+        "the same best point, bit for bit"
+    );
+    assert_eq!(remote["runs"], local["runs"], "the same runs");
+    assert_eq!(fmus_in(&cache), 1, "the FMU is kept once, by its hash");
+}
+
+#[test]
+fn a_worker_without_allow_fmu_refuses_fmus() {
+    let Some(path) = fmu(2, "VanDerPol") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let worker = WorkerProcess::start(&[]);
+    let data = record(
+        &path,
+        dir.path(),
+        "mu=1.7",
+        "20",
+        "0.05",
+        &["x0=0.02"],
+        "x0,x1",
+    );
+    let campaign = write(
+        dir.path(),
+        "vanderpol.toml",
+        &van_der_pol_campaign(&path, &data),
+    );
+    let out = calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--out",
+        dir.path().join("out").to_str().unwrap(),
+        "--workers",
+        &worker.url,
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("start it with --allow-fmu"), "{stderr}");
+}
+
+#[test]
+fn a_crashing_fmu_leaves_the_worker_serving_and_the_campaign_finishing() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some(path) = crash_fmu(dir.path()) else {
+        return;
+    };
+    let cache = dir.path().join("fmu-cache");
+    let worker = WorkerProcess::start(&["--allow-fmu", "--fmu-cache", cache.to_str().unwrap()]);
+    let rows: String = (0..=20)
+        .map(|i| format!("{},{}\n", i as f64 * 0.5, i as f64 * 0.5))
+        .collect();
+    let data = write(dir.path(), "record.csv", &format!("time,y\n{rows}"));
+    let text = format!(
+        "[model]\nfmu = \"{}\"\n[measurement]\nfile = \"{}\"\n[[outputs]]\nmodel = \"y\"\nmeasured = \"y\"\n\
+         [[parameters]]\nname = \"p\"\nnominal = 1.3\nmin = 0.5\nmax = 2.0\n[window]\nstart = 0.0\nstop = 10.0\n\
+         [search]\nmethods = [\"nelder-mead\"]\nstarts = 4\nmax_evaluations = 60\n",
+        path.display(),
+        data.display()
+    );
+    let campaign = write(dir.path(), "crash.toml", &text);
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("db-local"),
+        &dir.path().join("out"),
+        &[],
+    );
+    let remote = calibrate_json(
+        &campaign,
+        &dir.path().join("db-remote"),
+        &dir.path().join("out"),
+        &["--workers", &worker.url],
+    );
+    assert!(remote["failed"].as_u64().unwrap() > 0);
+    assert_eq!(
+        remote["failed"], local["failed"],
+        "the same points crash on the worker"
+    );
+    assert_eq!(remote["best"], local["best"]);
+    // The worker is still serving: a second campaign on it finishes.
+    let again = calibrate_json(
+        &campaign,
+        &dir.path().join("db-again"),
+        &dir.path().join("out"),
+        &["--workers", &worker.url],
+    );
+    assert_eq!(again["best"], local["best"]);
+}

@@ -319,6 +319,7 @@ pub(crate) fn host_command() -> Option<&'static HostCommand> {
 struct Registered {
     hash: [u8; 32],
     interface: Interface,
+    archive: Arc<Vec<u8>>,
     model: &'static dyn Model,
 }
 
@@ -351,13 +352,54 @@ pub fn open_bytes(
     let dir = unpack(bytes, &hash, &unpack_root())?;
     let model = FmuModel::new(dir, &hash, interface, host_command().is_some())?;
     let interface = model.interface;
+    let archive = registry
+        .iter()
+        .find(|r| r.hash == hash)
+        .map_or_else(|| Arc::new(bytes.to_vec()), |r| Arc::clone(&r.archive));
     let model: &'static dyn Model = Box::leak(Box::new(WithOutputEffects::new(model)));
     registry.push(Registered {
         hash,
         interface,
+        archive,
         model,
     });
     Ok(model)
+}
+
+/// Every interface the FMU whose archive is `bytes` offers, opened (see [`open_bytes`]).
+pub fn open_all(bytes: &[u8]) -> Result<Vec<&'static dyn Model>, FmuError> {
+    let first = open_bytes(bytes, None)?;
+    let mut models = vec![first];
+    if first.info().name.contains(".me@") {
+        // Model Exchange is the default; Co-Simulation may be there too.
+        if let Ok(cs) = open_bytes(bytes, Some(Interface::CoSimulation)) {
+            models.push(cs);
+        }
+    }
+    Ok(models)
+}
+
+/// The archive and content hash of the FMU model registered under `name`, to send it to a
+/// worker.
+pub fn archive_of(name: &str) -> Option<([u8; 32], Arc<Vec<u8>>)> {
+    registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|r| r.model.info().name == name)
+        .map(|r| (r.hash, Arc::clone(&r.archive)))
+}
+
+/// The interface an FMU model's name says it runs through (`….me@…` or `….cs@…`).
+pub fn interface_in_name(name: &str) -> Option<Interface> {
+    let (head, _) = name.rsplit_once('@')?;
+    if head.ends_with(".me") {
+        Some(Interface::ModelExchange)
+    } else if head.ends_with(".cs") {
+        Some(Interface::CoSimulation)
+    } else {
+        None
+    }
 }
 
 /// The FMU model registered under `name` (see the module documentation).
