@@ -205,10 +205,87 @@ extern "C" {
 }
 
 /// The loaded shared library of one interface of an FMU.
+/// Every FMI function calib calls; a library resolves them once, when it is loaded.
+const FUNCTIONS: [&str; 39] = [
+    "fmi2DoStep",
+    "fmi2EnterContinuousTimeMode",
+    "fmi2EnterEventMode",
+    "fmi2EnterInitializationMode",
+    "fmi2ExitInitializationMode",
+    "fmi2FreeInstance",
+    "fmi2GetBoolean",
+    "fmi2GetBooleanStatus",
+    "fmi2GetContinuousStates",
+    "fmi2GetDerivatives",
+    "fmi2GetEventIndicators",
+    "fmi2GetInteger",
+    "fmi2GetReal",
+    "fmi2Instantiate",
+    "fmi2NewDiscreteStates",
+    "fmi2Reset",
+    "fmi2SetContinuousStates",
+    "fmi2SetReal",
+    "fmi2SetTime",
+    "fmi2SetupExperiment",
+    "fmi3DoStep",
+    "fmi3EnterContinuousTimeMode",
+    "fmi3EnterEventMode",
+    "fmi3EnterInitializationMode",
+    "fmi3ExitInitializationMode",
+    "fmi3FreeInstance",
+    "fmi3GetBoolean",
+    "fmi3GetContinuousStateDerivatives",
+    "fmi3GetContinuousStates",
+    "fmi3GetEventIndicators",
+    "fmi3GetFloat64",
+    "fmi3GetInt32",
+    "fmi3InstantiateCoSimulation",
+    "fmi3InstantiateModelExchange",
+    "fmi3Reset",
+    "fmi3SetContinuousStates",
+    "fmi3SetFloat64",
+    "fmi3SetTime",
+    "fmi3UpdateDiscreteStates",
+];
+
+/// Index of `name` in [`FUNCTIONS`] (evaluated at compile time at every call site);
+/// `usize::MAX` for "" (no such function in this FMI version).
+const fn slot(name: &str) -> usize {
+    let name = name.as_bytes();
+    if name.is_empty() {
+        return usize::MAX;
+    }
+    let mut i = 0;
+    while i < FUNCTIONS.len() {
+        let f = FUNCTIONS[i].as_bytes();
+        if f.len() == name.len() {
+            let mut j = 0;
+            while j < f.len() && f[j] == name[j] {
+                j += 1;
+            }
+            if j == f.len() {
+                return i;
+            }
+        }
+        i += 1;
+    }
+    panic!("an FMI function missing from FUNCTIONS")
+}
+
+/// The function `name` of a library, resolved when it was loaded.
+macro_rules! sym {
+    ($lib:expr, $name:literal) => {
+        $lib.symbol(const { slot($name) }, $name)
+    };
+}
+
 pub struct Library {
     version: FmiVersion,
+    /// Address of each of [`FUNCTIONS`] in the library (0: absent).
+    functions: [usize; FUNCTIONS.len()],
     interface: Interface,
-    lib: libloading::Library,
+    /// Keeps the shared library loaded while its functions may be called.
+    _lib: libloading::Library,
     identifier: String,
     token: CString,
     resource_location: CString,
@@ -247,23 +324,37 @@ impl Library {
             FmiVersion::V2 => format!("file://{}", resources.display()),
             FmiVersion::V3 => format!("{}/", resources.display()),
         };
+        let mut functions = [0usize; FUNCTIONS.len()];
+        for (address, name) in functions.iter_mut().zip(FUNCTIONS) {
+            // SAFETY: only the address is read; it is called with its standard signature.
+            if let Ok(f) = unsafe { lib.get::<unsafe extern "C" fn()>(name.as_bytes()) } {
+                *address = *f as usize;
+            }
+        }
         Ok(Self {
             version,
+            functions,
             interface,
-            lib,
+            _lib: lib,
             identifier: identifier.to_string(),
             token: CString::new(token).unwrap_or_default(),
             resource_location: CString::new(resource_location).unwrap_or_default(),
         })
     }
 
-    fn symbol<T: Copy>(&self, name: &str) -> Result<T, FmuError> {
-        // SAFETY: the type is the standard's signature of the function called `name`.
-        unsafe {
-            self.lib
-                .get::<T>(name.as_bytes())
-                .map(|s| *s)
-                .map_err(|_| FmuError::Binary(format!("{}.so lacks `{name}`", self.identifier)))
+    /// The function at `slot` of [`FUNCTIONS`] (called `name`), as type `T`.
+    fn symbol<T: Copy>(&self, slot: usize, name: &str) -> Result<T, FmuError> {
+        match self.functions.get(slot) {
+            Some(&address) if address != 0 => {
+                assert_eq!(std::mem::size_of::<T>(), std::mem::size_of::<usize>());
+                // SAFETY: `T` is the standard's signature of the function called `name`,
+                // a function pointer the size of an address.
+                Ok(unsafe { std::mem::transmute_copy::<usize, T>(&address) })
+            }
+            _ => Err(FmuError::Binary(format!(
+                "{}.so lacks `{name}`",
+                self.identifier
+            ))),
         }
     }
 
@@ -277,7 +368,7 @@ impl Library {
         let mut callbacks = None;
         let handle = match self.version {
             FmiVersion::V2 => {
-                let instantiate: Fmi2Instantiate = self.symbol("fmi2Instantiate")?;
+                let instantiate: Fmi2Instantiate = sym!(self, "fmi2Instantiate")?;
                 let cb = Box::new(Fmi2Callbacks {
                     logger: fmi2_logger,
                     allocate: fmi2_calloc,
@@ -307,7 +398,7 @@ impl Library {
             FmiVersion::V3 => match self.interface {
                 Interface::ModelExchange => {
                     let instantiate: Fmi3InstantiateME =
-                        self.symbol("fmi3InstantiateModelExchange")?;
+                        sym!(self, "fmi3InstantiateModelExchange")?;
                     // SAFETY: arguments as fmi3InstantiateModelExchange declares them.
                     unsafe {
                         instantiate(
@@ -322,8 +413,7 @@ impl Library {
                     }
                 }
                 Interface::CoSimulation => {
-                    let instantiate: Fmi3InstantiateCS =
-                        self.symbol("fmi3InstantiateCoSimulation")?;
+                    let instantiate: Fmi3InstantiateCS = sym!(self, "fmi3InstantiateCoSimulation")?;
                     // SAFETY: arguments as fmi3InstantiateCoSimulation declares them.
                     unsafe {
                         instantiate(
@@ -376,11 +466,11 @@ pub struct Instance {
 
 macro_rules! call {
     ($self:ident, $ty:ty, $name2:literal, $name3:literal, |$f:ident| $call:expr) => {{
-        let name = match $self.lib.version {
-            FmiVersion::V2 => $name2,
-            FmiVersion::V3 => $name3,
+        let (slot, name) = match $self.lib.version {
+            FmiVersion::V2 => (const { slot($name2) }, $name2),
+            FmiVersion::V3 => (const { slot($name3) }, $name3),
         };
-        let $f: $ty = $self.lib.symbol(name)?;
+        let $f: $ty = $self.lib.symbol(slot, name)?;
         // SAFETY: a live instance and arguments as the standard declares them.
         let status = unsafe { $call };
         $self.check(name, status)
@@ -435,7 +525,7 @@ impl Instance {
         let (stop_defined, stop) = (stop.is_some(), stop.unwrap_or(0.0));
         match self.lib.version {
             FmiVersion::V2 => {
-                let setup: Fmi2SetupExperiment = self.lib.symbol("fmi2SetupExperiment")?;
+                let setup: Fmi2SetupExperiment = sym!(self.lib, "fmi2SetupExperiment")?;
                 // SAFETY: as above.
                 let status = unsafe {
                     setup(
@@ -687,12 +777,12 @@ impl Instance {
         let h = self.handle;
         match self.lib.version {
             FmiVersion::V2 => {
-                let step: Fmi2DoStep = self.lib.symbol("fmi2DoStep")?;
+                let step: Fmi2DoStep = sym!(self.lib, "fmi2DoStep")?;
                 // SAFETY: a live instance and arguments as the standard declares them.
                 let status = unsafe { step(h, t, dt, 1) };
                 if status == 2 {
                     // Discard: the FMU may have stopped because it asked to terminate.
-                    let get: Fmi2BooleanStatus = self.lib.symbol("fmi2GetBooleanStatus")?;
+                    let get: Fmi2BooleanStatus = sym!(self.lib, "fmi2GetBooleanStatus")?;
                     let mut terminated: c_int = 0;
                     // SAFETY: as above; 3 is fmi2Terminated.
                     let asked = unsafe { get(h, 3, &mut terminated) };
@@ -727,11 +817,11 @@ impl Drop for Instance {
         if self.handle.is_null() {
             return;
         }
-        let name = match self.lib.version {
-            FmiVersion::V2 => "fmi2FreeInstance",
-            FmiVersion::V3 => "fmi3FreeInstance",
+        let free: Result<Fmi2FreeInstance, _> = match self.lib.version {
+            FmiVersion::V2 => sym!(self.lib, "fmi2FreeInstance"),
+            FmiVersion::V3 => sym!(self.lib, "fmi3FreeInstance"),
         };
-        if let Ok(free) = self.lib.symbol::<Fmi2FreeInstance>(name) {
+        if let Ok(free) = free {
             // SAFETY: the instance is live and freed once.
             unsafe { free(self.handle) }
         }

@@ -217,6 +217,39 @@ impl FmuModel {
         self.interface
     }
 
+    /// Median cost of a fresh instance (instantiate and free) and of a reset, over `repeat`
+    /// tries each, in this process: why instances are reused with a reset.
+    pub fn instance_costs(
+        &self,
+        repeat: usize,
+    ) -> Result<(std::time::Duration, std::time::Duration), FmuError> {
+        let library = Arc::new(ffi::Library::load(
+            &self.dir,
+            self.description.version,
+            self.interface,
+            &self.identifier,
+            &self.description.token,
+        )?);
+        let median = |mut v: Vec<std::time::Duration>| {
+            v.sort();
+            v[v.len() / 2]
+        };
+        let mut fresh = Vec::with_capacity(repeat);
+        for _ in 0..repeat.max(1) {
+            let start = std::time::Instant::now();
+            drop(library.instantiate()?);
+            fresh.push(start.elapsed());
+        }
+        let mut instance = library.instantiate()?;
+        let mut reset = Vec::with_capacity(repeat);
+        for _ in 0..repeat.max(1) {
+            let start = std::time::Instant::now();
+            instance.reset()?;
+            reset.push(start.elapsed());
+        }
+        Ok((median(fresh), median(reset)))
+    }
+
     /// Simulate in this process, whatever the runner (the child process's side).
     fn simulate_here(
         &self,
@@ -410,6 +443,16 @@ pub fn find(name: &str) -> Option<&'static dyn Model> {
         .iter()
         .find(|r| r.model.info().name == name)
         .map(|r| r.model)
+}
+
+/// The FMU at `path` with its instances in this process whatever [`isolate_with`] says, and
+/// not registered (for benchmarks).
+pub fn open_local(path: &Path, interface: Option<Interface>) -> Result<FmuModel, FmuError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| FmuError::Archive(format!("{}: {e}", path.display())))?;
+    let hash = content_hash(&bytes);
+    let dir = unpack(&bytes, &hash, &unpack_root())?;
+    FmuModel::new(dir, &hash, interface, false)
 }
 
 /// Open an FMU already unpacked at `dir`, in this process (the child process's side).
