@@ -110,7 +110,28 @@ fn record(
     noise: &[&str],
     outputs: &str,
 ) -> PathBuf {
-    let csv = dir.join("record.csv");
+    record_to(
+        fmu,
+        &dir.join("record.csv"),
+        set,
+        stop,
+        step,
+        noise,
+        outputs,
+    )
+}
+
+/// [`record`] into `csv`.
+fn record_to(
+    fmu: &Path,
+    csv: &Path,
+    set: &str,
+    stop: &str,
+    step: &str,
+    noise: &[&str],
+    outputs: &str,
+) -> PathBuf {
+    let csv = csv.to_path_buf();
     let mut args = vec![
         "simulate",
         fmu.to_str().unwrap(),
@@ -134,37 +155,25 @@ fn record(
     csv
 }
 
-/// The campaign of README's "Your own model (FMU)" section.
-pub fn van_der_pol_campaign(fmu: &Path, record: &Path) -> String {
-    format!(
-        r#"
-name = "vanderpol"
-[model]
-fmu = "{}"
-[measurement]
-file = "{}"
-[[outputs]]
-model = "x0"
-measured = "x0"
-[[outputs]]
-model = "x1"
-measured = "x1"
-[[parameters]]
-name = "mu"
-nominal = 1.0
-min = 0.2
-max = 3.0
-[window]
-start = 0.0
-stop = 20.0
-[search]
-methods = ["nelder-mead"]
-starts = 2
-max_evaluations = 200
-"#,
-        fmu.display(),
-        record.display()
-    )
+/// `examples/vanderpol.toml` in `dir`, with the FMU and the record its comments make.
+fn van_der_pol_example(fmu: &Path, dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir.join("fmus/fmi2")).unwrap();
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    let copy = dir.join("fmus/fmi2/VanDerPol.fmu");
+    std::fs::copy(fmu, &copy).unwrap();
+    let noise = ["x0=0.02", "x1=0.02"];
+    record_to(
+        &copy,
+        &dir.join("data/vanderpol.csv"),
+        "mu=1.7",
+        "20",
+        "0.05",
+        &noise,
+        "x0,x1",
+    );
+    let campaign = dir.join("vanderpol.toml");
+    std::fs::copy(repo().join("examples/vanderpol.toml"), &campaign).unwrap();
+    campaign
 }
 
 #[test]
@@ -173,20 +182,7 @@ fn a_campaign_on_the_van_der_pol_fmu_recovers_mu_from_a_noisy_record() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let data = record(
-        &path,
-        dir.path(),
-        "mu=1.7",
-        "20",
-        "0.05",
-        &["x0=0.02", "x1=0.02"],
-        "x0,x1",
-    );
-    let campaign = write(
-        dir.path(),
-        "vanderpol.toml",
-        &van_der_pol_campaign(&path, &data),
-    );
+    let campaign = van_der_pol_example(&path, dir.path());
     let result = calibrate_json(
         &campaign,
         &dir.path().join("db"),
@@ -421,20 +417,7 @@ fn a_campaign_on_a_worker_allowed_fmus_gives_the_local_runs() {
     let dir = tempfile::tempdir().unwrap();
     let cache = dir.path().join("fmu-cache");
     let worker = WorkerProcess::start(&["--allow-fmu", "--fmu-cache", cache.to_str().unwrap()]);
-    let data = record(
-        &path,
-        dir.path(),
-        "mu=1.7",
-        "20",
-        "0.05",
-        &["x0=0.02", "x1=0.02"],
-        "x0,x1",
-    );
-    let campaign = write(
-        dir.path(),
-        "vanderpol.toml",
-        &van_der_pol_campaign(&path, &data),
-    );
+    let campaign = van_der_pol_example(&path, dir.path());
     let local = calibrate_json(
         &campaign,
         &dir.path().join("db-local"),
@@ -463,20 +446,7 @@ fn a_worker_without_allow_fmu_refuses_fmus() {
     };
     let dir = tempfile::tempdir().unwrap();
     let worker = WorkerProcess::start(&[]);
-    let data = record(
-        &path,
-        dir.path(),
-        "mu=1.7",
-        "20",
-        "0.05",
-        &["x0=0.02"],
-        "x0,x1",
-    );
-    let campaign = write(
-        dir.path(),
-        "vanderpol.toml",
-        &van_der_pol_campaign(&path, &data),
-    );
+    let campaign = van_der_pol_example(&path, dir.path());
     let out = calib(&[
         "calibrate",
         campaign.to_str().unwrap(),
@@ -536,4 +506,59 @@ fn a_crashing_fmu_leaves_the_worker_serving_and_the_campaign_finishing() {
         &["--workers", &worker.url],
     );
     assert_eq!(again["best"], local["best"]);
+}
+
+#[test]
+fn a_diagnosis_of_the_van_der_pol_fmu_finds_an_offset_on_its_output() {
+    let Some(path) = fmu(2, "VanDerPol") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = van_der_pol_example(&path, dir.path());
+    // The record again, its x0 read through a sensor 0.3 off.
+    ok(&calib(&[
+        "simulate",
+        path.to_str().unwrap(),
+        "--set",
+        "mu=1.7",
+        "--set",
+        "offset(x0)=0.3",
+        "--stop",
+        "20",
+        "--step",
+        "0.05",
+        "--outputs",
+        "x0,x1",
+        "--noise",
+        "x0=0.02",
+        "--noise",
+        "x1=0.02",
+        "--seed",
+        "7",
+        "--out",
+        dir.path().join("data/vanderpol.csv").to_str().unwrap(),
+    ]));
+    let mut text = std::fs::read_to_string(&campaign).unwrap();
+    text.push_str(
+        "\n[diagnosis]\nrefit = 1\ncandidates = [\"offset(x0)\", \"gain(x0)\", \"lag(x0)\"]\n",
+    );
+    std::fs::write(&campaign, text).unwrap();
+    let diagnosis = json_of(&calib(&[
+        "diagnose",
+        campaign.to_str().unwrap(),
+        "--db",
+        dir.path().join("db").to_str().unwrap(),
+        "--out",
+        dir.path().join("out").to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(
+        diagnosis["selected"],
+        serde_json::json!(["offset(x0)"]),
+        "{diagnosis}"
+    );
+    let offset = diagnosis["final"]["parameters"]["offset(x0)"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!((offset - 0.3).abs() < 0.01, "offset {offset}");
 }

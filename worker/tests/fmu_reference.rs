@@ -16,13 +16,12 @@ fn options() -> SolverOptions {
     }
 }
 
+/// The largest difference per column (name, value), the grid, and the simulated series.
+type Compared = (Vec<(String, f64)>, Vec<f64>, Vec<Vec<f64>>);
+
 /// Simulate `model` of FMI `version` on its reference result's grid; the largest absolute
 /// difference per column, and the simulated series.
-fn against_reference(
-    version: u32,
-    model: &str,
-    interface: Interface,
-) -> Option<(Vec<(String, f64)>, Vec<f64>, Vec<Vec<f64>>)> {
+fn against_reference(version: u32, model: &str, interface: Interface) -> Option<Compared> {
     let dir = reference_fmus()?.join(format!("fmi{version}"));
     let m = fmu::open(&dir.join(format!("{model}.fmu")), Some(interface)).unwrap();
     let (header, rows) = read_reference(&dir.join(format!("{model}_ref.csv")));
