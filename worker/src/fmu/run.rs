@@ -12,6 +12,7 @@
 //! each event the FMU enters event mode, iterates its discrete states and gives back its
 //! continuous states. A model without continuous states (a pure time-event model) is
 //! integrated with one dummy state. When the FMU asks to terminate, its outputs are held.
+//! Step events are not supported: `fmi*CompletedIntegratorStep` is not called.
 //!
 //! Any call that returns Discard, Error or Fatal ends the simulation with
 //! [`SimulationError::Failed`] carrying the function, the status and the FMU's messages.
