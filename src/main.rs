@@ -27,7 +27,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// List the hosted models: parameters (unit, default, bounds), outputs and effects.
+    /// List the hosted models, or an FMU's: parameters (unit, default, bounds), outputs and
+    /// effects.
     Models(commands::models::Args),
     /// Simulate a model and write its outputs over time as CSV.
     Simulate(commands::simulate::Args),
@@ -62,6 +63,9 @@ enum Command {
     /// The web app: Model, Measurement, Calibration and Diagnosis tabs in a browser, with
     /// campaigns running in this process.
     Ui(commands::ui::Args),
+    /// Run the instances of one FMU for a parent process (internal).
+    #[command(hide = true)]
+    FmuHost(commands::fmu::HostArgs),
 }
 
 fn main() -> ExitCode {
@@ -88,6 +92,10 @@ fn main() -> ExitCode {
         // journald, files).
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
+    // FMU instances run in child processes of this binary, never in this one.
+    if !matches!(cli.command, Command::FmuHost(_)) {
+        commands::fmu::isolate();
+    }
     let outcome = match cli.command {
         Command::Models(args) => commands::models::run(args),
         Command::Simulate(args) => commands::simulate::run(args),
@@ -103,6 +111,7 @@ fn main() -> ExitCode {
         Command::Watch(args) => commands::submit::watch(args),
         Command::Cancel(args) => commands::submit::cancel(args),
         Command::Ui(args) => commands::ui::run(args),
+        Command::FmuHost(args) => commands::fmu::host(args),
     };
     match outcome {
         Ok(()) => ExitCode::SUCCESS,

@@ -42,6 +42,7 @@ fn simulate_request() -> proto::SimulateRequest {
         times: grid(1.0, 0.01),
         outputs: vec!["armJoint.phi".into()],
         solver: None,
+        fmu_hash: Vec::new(),
     }
 }
 
@@ -78,6 +79,7 @@ fn evaluate_request(points: usize) -> proto::EvaluateRequest {
             })
             .collect(),
         solver: None,
+        fmu_hash: Vec::new(),
     }
 }
 
@@ -410,6 +412,7 @@ fn a_flood_beyond_the_queue_is_refused() {
             times: grid(300.0, 1.0),
             outputs: Vec::new(),
             solver: None,
+            fmu_hash: Vec::new(),
         };
         let mut calls = tokio::task::JoinSet::new();
         for _ in 0..24 {
@@ -501,6 +504,7 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 times: grid(2.0, 0.1),
                 outputs: Vec::new(),
                 solver: None,
+                fmu_hash: Vec::new(),
             };
             let untouched = c
                 .simulate(described(Vec::new()))

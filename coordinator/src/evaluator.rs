@@ -133,4 +133,6 @@ pub struct CacheStats {
     pub simulated: u64,
     /// Points answered from the cache (including repeats within one batch).
     pub cached: u64,
+    /// Points simulated here whose simulation failed (scored with the penalty).
+    pub failed: u64,
 }

@@ -144,6 +144,13 @@ impl Simulator for NappingSimulator {
         }))
     }
 
+    async fn upload_fmu(
+        &self,
+        _: Request<proto::UploadFmuRequest>,
+    ) -> Result<Response<proto::UploadFmuResponse>, Status> {
+        unimplemented()
+    }
+
     async fn status(
         &self,
         _: Request<proto::StatusRequest>,

@@ -48,6 +48,8 @@ enum Suite {
     Store(super::bench_store::Args),
     /// A whole diagnosis (calibrate, rank, refit, select), single node.
     Diagnose(super::bench_diagnose::Args),
+    /// The cost of a model run as an FMU against the same equations built in.
+    Fmu(super::bench_fmu::Args),
 }
 
 fn median(mut samples: Vec<Duration>) -> Duration {
@@ -77,6 +79,7 @@ pub fn run(args: Args) -> Outcome {
     match args.suite {
         Some(Suite::Store(store)) => return super::bench_store::run(store),
         Some(Suite::Diagnose(diagnose)) => return super::bench_diagnose::run(diagnose),
+        Some(Suite::Fmu(fmu)) => return super::bench_fmu::run(fmu),
         None => {}
     }
     let model = models::find("furuta").expect("furuta is hosted");

@@ -3,10 +3,12 @@
 pub mod bench;
 pub mod bench_cluster;
 pub mod bench_diagnose;
+pub mod bench_fmu;
 pub mod bench_store;
 pub mod calibrate;
 pub mod coordinator;
 pub mod diagnose;
+pub mod fmu;
 pub mod health;
 pub mod models;
 pub mod security;

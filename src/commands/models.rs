@@ -6,19 +6,19 @@ pub struct Args {
     /// Print the descriptions as JSON.
     #[arg(long)]
     json: bool,
-    /// Only this model.
+    /// Only this model: a hosted model's name, or the path of an FMU (`Model.fmu`).
     model: Option<String>,
+    /// For an FMU: describe it as run through this interface (default: Model Exchange when
+    /// it has it).
+    #[arg(long, value_enum)]
+    interface: Option<super::fmu::InterfaceArg>,
 }
 
 pub fn run(args: Args) -> Outcome {
-    let selected: Vec<_> = models::all()
-        .iter()
-        .map(|m| m.info())
-        .filter(|i| args.model.as_ref().is_none_or(|n| *n == i.name))
-        .collect();
-    if let Some(name) = &args.model {
-        calib_worker::validate::model(name).map_err(|e| super::Failure::input(e.message))?;
-    }
+    let selected: Vec<_> = match &args.model {
+        Some(name) => vec![super::fmu::model(name, args.interface)?.info()],
+        None => models::all().iter().map(|m| m.info()).collect(),
+    };
     if args.json {
         println!(
             "{}",

@@ -9,8 +9,12 @@ use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Model to simulate (see `calib models`).
+    /// Model to simulate (see `calib models`), or the path of an FMU (`Model.fmu`).
     model: String,
+    /// For an FMU: Model Exchange (calib integrates it; the default when the FMU has it) or
+    /// Co-Simulation (the FMU steps itself).
+    #[arg(long, value_enum)]
+    interface: Option<super::fmu::InterfaceArg>,
     /// Set a parameter or effect: NAME=VALUE (repeatable). Others keep their defaults.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
@@ -39,7 +43,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> Outcome {
-    let model = validate::model(&args.model).map_err(|e| Failure::input(e.message))?;
+    let model = super::fmu::model(&args.model, args.interface)?;
     let info = model.info();
     let mut params = info.default_vector();
     for assignment in &args.set {

@@ -93,6 +93,13 @@ fn rpc(status: tonic::Status) -> Failure {
 
 pub fn submit(args: SubmitArgs) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
+    if calib_worker::fmu::archive_of(&campaign.model.info().name).is_some() {
+        return Err(Failure::input(format!(
+            "{}: `model.fmu`: the Calibration API does not take FMUs yet; run the campaign \
+             with `calib calibrate` (here, or on workers with --workers)",
+            args.campaign.display()
+        )));
+    }
     let text = std::fs::read_to_string(&args.campaign)
         .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
     let bytes = std::fs::read(&campaign.measurement_file)

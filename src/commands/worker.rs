@@ -25,6 +25,18 @@ pub struct Args {
     /// name when listening on every interface; https:// with --tls-cert].
     #[arg(long, value_name = "URL")]
     advertise: Option<String>,
+    /// Accept FMUs (models users bring). Loading one runs its native code: each FMU
+    /// instance then runs in a child process per slot, with a deadline. Without this flag
+    /// FMUs are refused with PERMISSION_DENIED.
+    #[arg(long)]
+    allow_fmu: bool,
+    /// Folder of the cache of uploaded FMUs [default: calib-fmu-cache in the temporary
+    /// folder].
+    #[arg(long, value_name = "DIR", requires = "allow_fmu")]
+    fmu_cache: Option<std::path::PathBuf>,
+    /// Bound of the FMU cache [MiB]; the least recently used go first.
+    #[arg(long, default_value_t = 1024, requires = "allow_fmu")]
+    fmu_cache_mib: u64,
     #[command(flatten)]
     serve: super::security::ServeArgs,
     #[command(flatten)]
@@ -44,6 +56,12 @@ pub fn run(args: Args) -> Outcome {
         config.queue_bound = queue;
     }
     config.cache_bytes = args.cache_mib << 20;
+    if args.allow_fmu {
+        let dir = args
+            .fmu_cache
+            .unwrap_or_else(|| std::env::temp_dir().join("calib-fmu-cache"));
+        config.fmu_cache = Some((dir, args.fmu_cache_mib << 20));
+    }
     config.register = args.register;
     config.advertise = args.advertise;
     config.security = args.serve.server(&args.dial)?;

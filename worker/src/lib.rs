@@ -6,6 +6,7 @@
 
 pub mod content_hash;
 pub mod effects;
+pub mod fmu;
 pub mod limits;
 pub mod model;
 pub mod models;

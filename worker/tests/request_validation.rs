@@ -105,6 +105,7 @@ fn any_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                     times,
                     outputs,
                     solver,
+                    fmu_hash: Vec::new(),
                 }
             },
         )
@@ -163,6 +164,7 @@ fn any_evaluate_request() -> impl Strategy<Value = proto::EvaluateRequest> {
                 measurement,
                 points,
                 solver,
+                fmu_hash: Vec::new(),
             },
         )
 }
@@ -252,6 +254,7 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 times,
                 outputs,
                 solver,
+                fmu_hash: Vec::new(),
             },
         )
 }

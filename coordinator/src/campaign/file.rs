@@ -29,7 +29,12 @@ pub(super) struct CampaignFile {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct ModelSection {
-    pub(super) name: Spanned<String>,
+    /// A hosted model; or else `fmu`.
+    pub(super) name: Option<Spanned<String>>,
+    /// The path of an FMU, relative to the campaign file or absolute.
+    pub(super) fmu: Option<Spanned<String>>,
+    /// How the FMU is run: `"model-exchange"` (default when it has it) or `"co-simulation"`.
+    pub(super) interface: Option<Spanned<String>>,
     pub(super) stop_time: Option<Spanned<f64>>,
     #[serde(default)]
     pub(super) parameters: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,

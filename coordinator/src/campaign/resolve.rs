@@ -9,6 +9,7 @@ use super::{
     Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, OutputScale, Scale,
     Search,
 };
+use calib_worker::fmu::{self, Interface};
 use calib_worker::validate::{self, SolverOverrides};
 use calib_worker::{Model, ModelInfo, SolverOptions};
 use std::path::{Path, PathBuf};
@@ -108,9 +109,55 @@ fn resolve_model(
     section: &ModelSection,
     at: &Locator,
 ) -> Result<&'static dyn Model, CampaignError> {
-    match validate::model(section.name.get_ref()) {
-        Ok(model) => Ok(model),
-        Err(e) => at.error(section.name.span(), "model.name", e.message),
+    let interface = match &section.interface {
+        None => None,
+        Some(i) => match i.get_ref().as_str() {
+            "model-exchange" => Some(Interface::ModelExchange),
+            "co-simulation" => Some(Interface::CoSimulation),
+            other => {
+                return at.error(
+                    i.span(),
+                    "model.interface",
+                    format!("unknown interface `{other}`: \"model-exchange\" or \"co-simulation\""),
+                )
+            }
+        },
+    };
+    match (&section.name, &section.fmu) {
+        (Some(name), None) => {
+            if let Some(i) = &section.interface {
+                return at.error(
+                    i.span(),
+                    "model.interface",
+                    "applies to an FMU (`fmu = \"...\"`), not to a hosted model".into(),
+                );
+            }
+            match validate::model(name.get_ref()) {
+                Ok(model) => Ok(model),
+                Err(e) => at.error(name.span(), "model.name", e.message),
+            }
+        }
+        (None, Some(fmu)) => {
+            let path = Path::new(fmu.get_ref());
+            let path = if path.is_absolute() {
+                path.to_path_buf()
+            } else {
+                at.path.parent().unwrap_or(Path::new(".")).join(path)
+            };
+            match fmu::open(&path, interface) {
+                Ok(model) => Ok(model),
+                Err(e) => at.error(fmu.span(), "model.fmu", format!("{}: {e}", path.display())),
+            }
+        }
+        (Some(name), Some(_)) => at.error(
+            name.span(),
+            "model",
+            "name a hosted model (`name`) or an FMU (`fmu`), not both".into(),
+        ),
+        (None, None) => at.unlocated(
+            "model",
+            "name a hosted model (`name = \"furuta\"`) or an FMU (`fmu = \"Model.fmu\"`)",
+        ),
     }
 }
 

@@ -8,6 +8,7 @@ use calib_proto::v1::simulator_client::SimulatorClient;
 use calib_security::{ClientSecurity, SecureChannel};
 use calib_worker::scoring;
 use calib_worker::service::limits::MAX_MESSAGE_BYTES;
+use std::sync::Arc;
 use std::time::Duration;
 use tonic_health::pb::health_client::HealthClient;
 
@@ -23,11 +24,22 @@ pub struct WireObjective {
     pub template: proto::EvaluateRequest,
     pub measurement: proto::Measurement,
     pub outputs: usize,
+    /// The archive of an FMU model, uploaded to a worker that lacks it.
+    pub fmu: Option<Arc<Vec<u8>>>,
+}
+
+/// The content hash and archive of `model` when it is an FMU.
+fn fmu_of(model: &str) -> (Vec<u8>, Option<Arc<Vec<u8>>>) {
+    match calib_worker::fmu::archive_of(model) {
+        Some((hash, archive)) => (hash.to_vec(), Some(archive)),
+        None => (Vec::new(), None),
+    }
 }
 
 impl WireObjective {
     pub fn new(objective: &Objective) -> Self {
         let info = objective.model.info();
+        let (fmu_hash, fmu) = fmu_of(&info.name);
         let parameters = objective
             .base
             .iter()
@@ -64,6 +76,7 @@ impl WireObjective {
                 atol: Some(objective.solver.atol),
                 max_steps: Some(objective.solver.max_steps as u64),
             }),
+            fmu_hash,
         };
         let measurement = proto::Measurement {
             times: objective.grid.clone(),
@@ -79,6 +92,7 @@ impl WireObjective {
             template,
             measurement,
             outputs: objective.outputs.len(),
+            fmu,
         }
     }
 }
@@ -89,6 +103,8 @@ impl WireObjective {
 pub struct WireSimulation {
     /// Everything but the parameters.
     pub template: proto::SimulateRequest,
+    /// The archive of an FMU model, uploaded to a worker that lacks it.
+    fmu: Option<Arc<Vec<u8>>>,
     /// Name of each entry of the full parameter vector.
     names: Vec<String>,
     /// The full parameter vector and where the free entries go, as in the objective.
@@ -99,6 +115,7 @@ pub struct WireSimulation {
 impl WireSimulation {
     pub fn new(objective: &Objective) -> Self {
         let info = objective.model.info();
+        let (fmu_hash, fmu) = fmu_of(&info.name);
         let template = proto::SimulateRequest {
             protocol_version: calib_proto::PROTOCOL_VERSION,
             model: info.name.clone(),
@@ -114,9 +131,11 @@ impl WireSimulation {
                 atol: Some(objective.solver.atol),
                 max_steps: Some(objective.solver.max_steps as u64),
             }),
+            fmu_hash,
         };
         Self {
             template,
+            fmu,
             names: (0..objective.base.len())
                 .map(|i| info.name_at(i).to_string())
                 .collect(),
@@ -226,13 +245,21 @@ impl WorkerClient {
             .into_iter()
             .map(|values| proto::Point { values })
             .collect();
-        let answer = match self.call(message.clone(), deadline).await {
-            Err(WorkerError::MeasurementMissing) => {
-                tracing::debug!(worker = %self.url, "uploading the measurement");
-                message.measurement = Some(objective.measurement.clone());
-                self.call(message, deadline).await?
+        // At most one FMU upload and one measurement upload, in whichever order they are
+        // asked for.
+        let mut tries = 0;
+        let answer = loop {
+            tries += 1;
+            match self.call(message.clone(), deadline).await {
+                Err(WorkerError::MeasurementMissing) if message.measurement.is_none() => {
+                    tracing::debug!(worker = %self.url, "uploading the measurement");
+                    message.measurement = Some(objective.measurement.clone());
+                }
+                Err(WorkerError::FmuMissing) if tries <= 2 => {
+                    self.upload_fmu(objective.fmu.as_deref(), deadline).await?;
+                }
+                other => break other?,
             }
-            other => other?,
         };
         if answer.results.len() != count {
             return Err(WorkerError::Malformed(format!(
@@ -262,9 +289,20 @@ impl WorkerClient {
         point: &[f64],
         deadline: Duration,
     ) -> Result<Outputs, WorkerError> {
-        let mut request = tonic::Request::new(simulation.request(point));
-        request.set_timeout(deadline);
-        let answer = self.simulator.clone().simulate(request).await?.into_inner();
+        let call = || {
+            let mut request = tonic::Request::new(simulation.request(point));
+            request.set_timeout(deadline);
+            let mut simulator = self.simulator.clone();
+            async move { simulator.simulate(request).await }
+        };
+        let answer = match call().await.map_err(WorkerError::from) {
+            Err(WorkerError::FmuMissing) => {
+                self.upload_fmu(simulation.fmu.as_deref(), deadline).await?;
+                call().await?
+            }
+            other => other?,
+        }
+        .into_inner();
         if let Some(failure) = answer.failure {
             return Ok(Err(failure.message));
         }
@@ -279,6 +317,27 @@ impl WorkerClient {
             )));
         }
         Ok(Ok(answer.series.into_iter().map(|s| s.values).collect()))
+    }
+
+    /// Send an FMU to the worker (which asked for it).
+    async fn upload_fmu(
+        &self,
+        fmu: Option<&Vec<u8>>,
+        deadline: Duration,
+    ) -> Result<(), WorkerError> {
+        let Some(fmu) = fmu else {
+            return Err(WorkerError::Malformed(
+                "the worker asks for an FMU the request does not name".into(),
+            ));
+        };
+        tracing::debug!(worker = %self.url, bytes = fmu.len(), "uploading the FMU");
+        let mut request = tonic::Request::new(proto::UploadFmuRequest {
+            protocol_version: calib_proto::PROTOCOL_VERSION,
+            fmu: fmu.clone(),
+        });
+        request.set_timeout(deadline);
+        self.simulator.clone().upload_fmu(request).await?;
+        Ok(())
     }
 
     async fn call(

@@ -10,6 +10,9 @@ pub enum WorkerError {
     /// The worker does not hold the measurement: send it along.
     #[error("measurement not cached on the worker")]
     MeasurementMissing,
+    /// The worker does not hold the FMU the request names: upload it.
+    #[error("FMU not cached on the worker")]
+    FmuMissing,
     /// The worker's queue is full (`RESOURCE_EXHAUSTED`).
     #[error("worker busy: {0}")]
     Busy(String),
@@ -52,7 +55,9 @@ impl From<tonic::Status> for WorkerError {
             return WorkerError::Refused(message);
         }
         match status.code() {
-            Code::InvalidArgument => WorkerError::Rejected(message),
+            // A worker that runs no FMUs (`PERMISSION_DENIED`) refuses them every time.
+            Code::InvalidArgument | Code::PermissionDenied => WorkerError::Rejected(message),
+            Code::NotFound if message.starts_with("fmu_hash") => WorkerError::FmuMissing,
             Code::NotFound => WorkerError::MeasurementMissing,
             Code::ResourceExhausted => WorkerError::Busy(message),
             Code::FailedPrecondition | Code::Unimplemented => WorkerError::Incompatible(message),

@@ -122,6 +122,7 @@ pub fn result_json(c: &Calibration) -> Value {
         "evaluations": evaluations,
         "simulated": c.stats.simulated,
         "cached": c.stats.cached,
+        "failed": c.stats.failed,
         "runs": runs,
         "clusters": clusters,
         "runs_at_best": at_best,

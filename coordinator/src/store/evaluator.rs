@@ -20,6 +20,7 @@ pub struct StoredEvaluator<'s, E> {
     in_flight: Mutex<HashMap<EvaluationKey, Arc<Slot>>>,
     requested: AtomicU64,
     simulated: AtomicU64,
+    failed: AtomicU64,
     error: Mutex<Option<StoreError>>,
 }
 
@@ -47,6 +48,7 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
             in_flight: Mutex::new(HashMap::new()),
             requested: AtomicU64::new(0),
             simulated: AtomicU64::new(0),
+            failed: AtomicU64::new(0),
             error: Mutex::new(None),
         }
     }
@@ -59,6 +61,7 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
             requested,
             simulated,
             cached: requested - simulated,
+            failed: self.failed.load(Ordering::Relaxed),
         }
     }
 
@@ -151,6 +154,13 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                     self.simulated
                         .fetch_add(to_simulate.len() as u64, Ordering::Relaxed);
                     simulated_here += to_simulate.len() as u64;
+                    let failed: Vec<&String> =
+                        fresh.iter().filter_map(|e| e.failure.as_ref()).collect();
+                    if let Some(first) = failed.first() {
+                        tracing::info!(failed = failed.len(), first = %first, "simulations failed");
+                        self.failed
+                            .fetch_add(failed.len() as u64, Ordering::Relaxed);
+                    }
                     let entries: Vec<(EvaluationKey, Evaluation)> = to_simulate
                         .iter()
                         .zip(fresh)

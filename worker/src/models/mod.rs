@@ -20,10 +20,12 @@ pub fn all() -> &'static [Box<dyn Model>] {
     })
 }
 
-/// The hosted model called `name`.
+/// The hosted model called `name`, or an FMU opened in this process under that name
+/// ([`crate::fmu`]).
 pub fn find(name: &str) -> Option<&'static dyn Model> {
     all()
         .iter()
         .find(|m| m.info().name == name)
         .map(|m| m.as_ref())
+        .or_else(|| crate::fmu::find(name))
 }

@@ -14,6 +14,14 @@ pub enum Error {
     /// The worker does not hold the measurement the request names.
     #[error("measurement_hash: measurement {hash} is not cached here; repeat the request with `measurement` set")]
     MeasurementMissing { hash: String },
+    /// The worker does not hold the FMU the request names.
+    #[error(
+        "fmu_hash: FMU {hash} is not cached here; upload it with UploadFmu and repeat the request"
+    )]
+    FmuMissing { hash: String },
+    /// The worker was not started with `--allow-fmu`.
+    #[error("{field}: this worker runs no FMUs (they run native code); start it with --allow-fmu")]
+    FmuRefused { field: String },
     /// Too many simulations are waiting already.
     #[error("the worker's queue is full ({queued} simulations wait, bound {bound}); retry later or elsewhere")]
     QueueFull { queued: usize, bound: usize },
@@ -38,7 +46,10 @@ impl From<Error> for tonic::Status {
         match e {
             Error::InvalidArgument { .. } => tonic::Status::invalid_argument(message),
             Error::ProtocolMismatch { .. } => tonic::Status::failed_precondition(message),
-            Error::MeasurementMissing { .. } => tonic::Status::not_found(message),
+            Error::MeasurementMissing { .. } | Error::FmuMissing { .. } => {
+                tonic::Status::not_found(message)
+            }
+            Error::FmuRefused { .. } => tonic::Status::permission_denied(message),
             Error::QueueFull { .. } => tonic::Status::resource_exhausted(message),
             Error::Internal(_) => tonic::Status::internal(message),
         }

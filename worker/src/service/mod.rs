@@ -9,6 +9,7 @@
 
 pub mod cache;
 pub mod error;
+pub mod fmu_cache;
 pub mod pool;
 pub mod registration;
 pub mod request;
@@ -20,6 +21,7 @@ pub use pool::PoolLoad;
 use calib_proto::v1::simulator_server::SimulatorServer;
 use calib_security::{ClientSecurity, ServerSecurity};
 use std::net::SocketAddr;
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::net::TcpListener;
@@ -58,6 +60,9 @@ pub struct WorkerConfig {
     pub security: ServerSecurity,
     /// The CA this worker trusts and the token it presents when registering.
     pub register_security: ClientSecurity,
+    /// Accept FMUs (their native code runs in child processes): the folder of the FMU
+    /// cache and its bound [bytes]. `None`: FMUs are refused with `PERMISSION_DENIED`.
+    pub fmu_cache: Option<(PathBuf, u64)>,
 }
 
 impl WorkerConfig {
@@ -73,6 +78,7 @@ impl WorkerConfig {
             advertise: None,
             security: ServerSecurity::default(),
             register_security: ClientSecurity::default(),
+            fmu_cache: None,
         }
     }
 }
@@ -144,10 +150,17 @@ pub async fn start_worker(config: WorkerConfig) -> std::io::Result<RunningWorker
 /// Serve on an already bound listener (tests bind `127.0.0.1:0` first).
 pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Result<RunningWorker> {
     let address = listener.local_addr()?;
-    let service = Arc::new(simulator::SimulatorService::new(
-        pool::SimulationPool::new(config.slots, config.queue_bound),
-        cache::MeasurementCache::new(config.cache_bytes),
-    ));
+    let fmus = match &config.fmu_cache {
+        Some((dir, bound)) => Some(fmu_cache::FmuCache::new(dir.clone(), *bound)?),
+        None => None,
+    };
+    let service = Arc::new(
+        simulator::SimulatorService::new(
+            pool::SimulationPool::new(config.slots, config.queue_bound),
+            cache::MeasurementCache::new(config.cache_bytes),
+        )
+        .with_fmus(fmus),
+    );
     let (health_reporter, health) = tonic_health::server::health_reporter();
     // Reflection lists exactly what this server answers (not the coordinator's services,
     // whose descriptors share the file set), over both versions of the protocol.

@@ -320,6 +320,7 @@ mod tests {
             times: vec![0.0, 1.0],
             outputs: vec![],
             solver,
+            fmu_hash: Vec::new(),
         }
     }
 

@@ -3,10 +3,11 @@
 
 use super::cache::MeasurementCache;
 use super::error::{Error, Result};
+use super::fmu_cache::FmuCache;
 use super::pool::{PoolLoad, SimulationPool};
 use super::request::{self, Evaluation, Simulation};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
-use crate::{models, Model, SimulationError};
+use crate::{fmu, models, Model, SimulationError};
 use calib_proto::v1 as proto;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -16,6 +17,8 @@ pub struct SimulatorService {
     pool: SimulationPool,
     cache: MeasurementCache,
     evaluations: AtomicU64,
+    /// Uploaded FMUs, on a worker that accepts them (`--allow-fmu`).
+    fmus: Option<FmuCache>,
 }
 
 impl SimulatorService {
@@ -24,7 +27,75 @@ impl SimulatorService {
             pool,
             cache,
             evaluations: AtomicU64::new(0),
+            fmus: None,
         }
+    }
+
+    /// Accept FMUs, kept in `fmus` (`None`: refuse them with `PERMISSION_DENIED`).
+    pub fn with_fmus(mut self, fmus: Option<FmuCache>) -> Self {
+        self.fmus = fmus;
+        self
+    }
+
+    /// Make the FMU a request names by `fmu_hash` known under its model name: from this
+    /// process's models, or from the FMU cache. Nothing to do for a hosted model.
+    fn resolve_fmu(&self, model: &str, hash: &[u8]) -> Result<()> {
+        if hash.is_empty() {
+            return Ok(());
+        }
+        let Some(cache) = &self.fmus else {
+            return Err(Error::FmuRefused {
+                field: "fmu_hash".into(),
+            });
+        };
+        let hash: [u8; 32] = hash
+            .try_into()
+            .map_err(|_| Error::invalid("fmu_hash", format!("{} bytes, not 32", hash.len())))?;
+        if fmu::archive_of(model).is_some_and(|(known, _)| known == hash) {
+            return Ok(());
+        }
+        let interface = fmu::interface_in_name(model).ok_or_else(|| {
+            Error::invalid(
+                "model",
+                format!("`{model}` is not an FMU's model name (as UploadFmu answers them)"),
+            )
+        })?;
+        let bytes = cache
+            .get(&hash)
+            .ok_or_else(|| Error::FmuMissing { hash: hex(&hash) })?;
+        let opened = fmu::open_bytes(&bytes, Some(interface))
+            .map_err(|e| Error::invalid("fmu_hash", e.to_string()))?;
+        if opened.info().name != model {
+            return Err(Error::invalid(
+                "model",
+                format!(
+                    "the FMU {} is `{}`, not `{model}`",
+                    hex(&hash),
+                    opened.info().name
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    fn upload_fmu(&self, request: proto::UploadFmuRequest) -> Result<proto::UploadFmuResponse> {
+        request::check_protocol(request.protocol_version)?;
+        let Some(cache) = &self.fmus else {
+            return Err(Error::FmuRefused {
+                field: "fmu".into(),
+            });
+        };
+        let hash = fmu::content_hash(&request.fmu);
+        let models =
+            fmu::open_all(&request.fmu).map_err(|e| Error::invalid("fmu", e.to_string()))?;
+        cache
+            .put(&hash, &request.fmu)
+            .map_err(|e| Error::Internal(format!("cannot keep the FMU: {e}")))?;
+        tracing::info!(fmu = %hex(&hash), bytes = request.fmu.len(), "fmu uploaded");
+        Ok(proto::UploadFmuResponse {
+            fmu_hash: hash.to_vec(),
+            models: models.iter().map(|m| m.info().name.clone()).collect(),
+        })
     }
 
     pub fn load(&self) -> PoolLoad {
@@ -32,6 +103,7 @@ impl SimulatorService {
     }
 
     async fn simulate(&self, request: proto::SimulateRequest) -> Result<proto::SimulateResponse> {
+        self.resolve_fmu(&request.model, &request.fmu_hash)?;
         let Simulation {
             model,
             params,
@@ -81,6 +153,7 @@ impl SimulatorService {
     }
 
     async fn evaluate(&self, request: proto::EvaluateRequest) -> Result<proto::EvaluateResponse> {
+        self.resolve_fmu(&request.model, &request.fmu_hash)?;
         let mut evaluation = Evaluation::try_from(request)?;
         let measured = match evaluation.measurement.take() {
             Some(data) => self.cache.insert(evaluation.measurement_hash, data),
@@ -293,6 +366,13 @@ impl proto::simulator_server::Simulator for SimulatorService {
     ) -> Result<Response<proto::StatusResponse>, Status> {
         request::check_read_protocol(request.get_ref().protocol_version)?;
         Ok(Response::new(self.status()))
+    }
+
+    async fn upload_fmu(
+        &self,
+        request: Request<proto::UploadFmuRequest>,
+    ) -> Result<Response<proto::UploadFmuResponse>, Status> {
+        Ok(Response::new(self.upload_fmu(request.into_inner())?))
     }
 }
 

@@ -1,0 +1,500 @@
+//! FMU instances in child processes: a crash, an abort or a hang of the FMU's native code
+//! is a failed simulation, never the end of the process that asked for it.
+//!
+//! The parent starts children as `HOST DIR INTERFACE` (the `calib` binary's hidden
+//! `fmu-host` subcommand, see [`super::isolate_with`]), at most one per simulation running
+//! at once (so one per worker slot), and keeps idle ones for the next simulation. Each child
+//! opens the unpacked FMU in its own process and answers requests on its stdin with replies
+//! on its stdout, framed as a 4-byte little-endian length and a body of little-endian
+//! numbers (values travel as their bits: results are those of an in-process run, bit for
+//! bit). The FMU's log messages go to the child's stderr, which the parent keeps (the last
+//! lines) to explain a crash.
+//!
+//! A child that dies (a signal, an exit) or does not answer within the deadline
+//! ([`deadline`]: `CALIB_FMU_DEADLINE` seconds, default 60) is killed and forgotten; the
+//! simulation is [`SimulationError::Failed`] with what happened and the FMU's last
+//! messages, and the next simulation starts a fresh child.
+
+use super::{FmuError, Interface};
+use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
+use std::collections::VecDeque;
+use std::io::{BufRead, BufReader, Read, Write};
+use std::path::{Path, PathBuf};
+use std::process::{ChildStdin, Command, Stdio};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+/// Lines of a child's stderr kept to explain its failure.
+const STDERR_KEPT: usize = 10;
+/// Largest reply accepted from a child (the largest trajectory a request allows is far less).
+const MAX_FRAME: usize = 1 << 30;
+
+/// How long one simulation may take in a child before it is killed.
+pub fn deadline() -> Duration {
+    std::env::var("CALIB_FMU_DEADLINE")
+        .ok()
+        .and_then(|s| s.trim().parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .map_or(Duration::from_secs(60), Duration::from_secs_f64)
+}
+
+fn interface_arg(interface: Interface) -> &'static str {
+    match interface {
+        Interface::ModelExchange => "me",
+        Interface::CoSimulation => "cs",
+    }
+}
+
+/// Parse the interface argument a child is started with.
+pub fn parse_interface(arg: &str) -> Option<Interface> {
+    match arg {
+        "me" => Some(Interface::ModelExchange),
+        "cs" => Some(Interface::CoSimulation),
+        _ => None,
+    }
+}
+
+/// The children of one FMU.
+pub struct Hosts {
+    dir: PathBuf,
+    interface: Interface,
+    idle: Mutex<Vec<Child>>,
+    /// Children that died or were killed, for tests and benchmarks.
+    lost: std::sync::atomic::AtomicUsize,
+}
+
+struct Child {
+    process: std::process::Child,
+    stdin: ChildStdin,
+    replies: mpsc::Receiver<std::io::Result<Vec<u8>>>,
+    stderr: Arc<Mutex<VecDeque<String>>>,
+}
+
+impl Hosts {
+    pub(super) fn new(dir: PathBuf, interface: Interface) -> Self {
+        Self {
+            dir,
+            interface,
+            idle: Mutex::new(Vec::new()),
+            lost: std::sync::atomic::AtomicUsize::new(0),
+        }
+    }
+
+    fn spawn(&self) -> Result<Child, FmuError> {
+        let command = super::host_command()
+            .ok_or_else(|| FmuError::Host("no host program to run FMU instances in".into()))?;
+        let mut process = Command::new(&command.program)
+            .args(&command.args)
+            .arg(&self.dir)
+            .arg(interface_arg(self.interface))
+            .stdin(Stdio::piped())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .map_err(|e| {
+                FmuError::Host(format!("cannot start {}: {e}", command.program.display()))
+            })?;
+        let stdin = process.stdin.take().expect("piped");
+        let mut stdout = process.stdout.take().expect("piped");
+        let stderr_pipe = process.stderr.take().expect("piped");
+        let (send, replies) = mpsc::channel();
+        std::thread::spawn(move || loop {
+            let frame = read_frame(&mut stdout);
+            let end = frame.is_err();
+            if send.send(frame).is_err() || end {
+                return;
+            }
+        });
+        let stderr = Arc::new(Mutex::new(VecDeque::new()));
+        let kept = Arc::clone(&stderr);
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr_pipe).lines() {
+                let Ok(line) = line else { return };
+                let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
+                if kept.len() == STDERR_KEPT {
+                    kept.pop_front();
+                }
+                kept.push_back(line);
+            }
+        });
+        Ok(Child {
+            process,
+            stdin,
+            replies,
+            stderr,
+        })
+    }
+
+    /// Children lost to a crash or a deadline so far.
+    pub fn lost(&self) -> usize {
+        self.lost.load(std::sync::atomic::Ordering::Relaxed)
+    }
+
+    pub(super) fn simulate(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError> {
+        let failed = |reason: String| SimulationError::Failed { time: 0.0, reason };
+        let idle = self.idle.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        let mut child = match idle {
+            Some(child) => child,
+            None => self.spawn().map_err(|e| failed(e.to_string()))?,
+        };
+        let request = encode_request(params, grid, outputs, options);
+        let sent = write_frame(&mut child.stdin, &request);
+        let reply = match sent {
+            Ok(()) => child.replies.recv_timeout(deadline()),
+            Err(e) => Ok(Err(e)),
+        };
+        match reply {
+            Ok(Ok(frame)) => {
+                let result = decode_reply(&frame, grid).map_err(|e| failed(e.to_string()))?;
+                self.idle
+                    .lock()
+                    .unwrap_or_else(|e| e.into_inner())
+                    .push(child);
+                result
+            }
+            Ok(Err(_)) | Err(mpsc::RecvTimeoutError::Disconnected) => {
+                Err(failed(self.lose(child, None)))
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => Err(failed(self.lose(child, Some(deadline())))),
+        }
+    }
+
+    /// Kill and reap a child; what happened to it, with its last messages.
+    fn lose(&self, mut child: Child, timed_out: Option<Duration>) -> String {
+        self.lost.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let _ = child.process.kill();
+        let status = child.process.wait();
+        // Let the stderr reader take the last lines.
+        std::thread::sleep(Duration::from_millis(20));
+        let what = match (timed_out, status) {
+            (Some(d), _) => format!(
+                "the FMU did not finish within {} s and was stopped",
+                d.as_secs_f64()
+            ),
+            (None, Ok(status)) => {
+                use std::os::unix::process::ExitStatusExt;
+                match status.signal() {
+                    Some(signal) => format!("the FMU's process crashed ({})", signal_name(signal)),
+                    None => format!("the FMU's process ended ({status})"),
+                }
+            }
+            (None, Err(e)) => format!("the FMU's process was lost: {e}"),
+        };
+        let lines: Vec<String> = child
+            .stderr
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .iter()
+            .cloned()
+            .collect();
+        if lines.is_empty() {
+            what
+        } else {
+            format!("{what}; the FMU says: {}", lines.join(" | "))
+        }
+    }
+}
+
+impl Drop for Hosts {
+    fn drop(&mut self) {
+        for mut child in self
+            .idle
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+            .drain(..)
+        {
+            let _ = child.process.kill();
+            let _ = child.process.wait();
+        }
+    }
+}
+
+fn signal_name(signal: i32) -> String {
+    let name = match signal {
+        4 => "SIGILL",
+        6 => "SIGABRT",
+        7 => "SIGBUS",
+        8 => "SIGFPE",
+        9 => "SIGKILL",
+        11 => "SIGSEGV",
+        15 => "SIGTERM",
+        _ => return format!("signal {signal}"),
+    };
+    format!("signal {signal}, {name}")
+}
+
+/// The child's side: open the FMU unpacked at `dir` and answer requests on stdin until it
+/// closes. FMU log messages are written to stderr as they come.
+pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
+    super::ffi::echo_log_to_stderr();
+    let model = super::open_unpacked(dir, interface)?;
+    let stdin = std::io::stdin();
+    let stdout = std::io::stdout();
+    let mut input = stdin.lock();
+    let mut output = stdout.lock();
+    loop {
+        let frame = match read_frame(&mut input) {
+            Ok(frame) => frame,
+            Err(_) => return Ok(()),
+        };
+        let reply = match decode_request(&frame) {
+            Some((params, grid, outputs, options)) => {
+                let result = crate::Model::simulate(&model, &params, &grid, &outputs, &options);
+                encode_reply(&result)
+            }
+            None => encode_reply(&Err(SimulationError::InvalidInput(
+                "malformed request to the FMU host".into(),
+            ))),
+        };
+        if write_frame(&mut output, &reply).is_err() {
+            return Ok(());
+        }
+    }
+}
+
+fn read_frame(r: &mut impl Read) -> std::io::Result<Vec<u8>> {
+    let mut len = [0u8; 4];
+    r.read_exact(&mut len)?;
+    let len = u32::from_le_bytes(len) as usize;
+    if len > MAX_FRAME {
+        return Err(std::io::Error::other("frame too long"));
+    }
+    let mut body = vec![0u8; len];
+    r.read_exact(&mut body)?;
+    Ok(body)
+}
+
+fn write_frame(w: &mut impl Write, body: &[u8]) -> std::io::Result<()> {
+    w.write_all(&(body.len() as u32).to_le_bytes())?;
+    w.write_all(body)?;
+    w.flush()
+}
+
+#[derive(Default)]
+struct Writer(Vec<u8>);
+
+impl Writer {
+    fn u64(&mut self, v: u64) -> &mut Self {
+        self.0.extend_from_slice(&v.to_le_bytes());
+        self
+    }
+    fn f64(&mut self, v: f64) -> &mut Self {
+        self.u64(v.to_bits())
+    }
+    fn f64s(&mut self, v: &[f64]) -> &mut Self {
+        self.u64(v.len() as u64);
+        for x in v {
+            self.f64(*x);
+        }
+        self
+    }
+    fn text(&mut self, s: &str) -> &mut Self {
+        self.u64(s.len() as u64);
+        self.0.extend_from_slice(s.as_bytes());
+        self
+    }
+}
+
+struct Reader<'a>(&'a [u8]);
+
+impl Reader<'_> {
+    fn u64(&mut self) -> Option<u64> {
+        let (head, rest) = self.0.split_at_checked(8)?;
+        self.0 = rest;
+        Some(u64::from_le_bytes(head.try_into().ok()?))
+    }
+    fn f64(&mut self) -> Option<f64> {
+        self.u64().map(f64::from_bits)
+    }
+    fn len(&mut self) -> Option<usize> {
+        let n = usize::try_from(self.u64()?).ok()?;
+        (n <= self.0.len()).then_some(n)
+    }
+    fn f64s(&mut self) -> Option<Vec<f64>> {
+        let n = self.len()?;
+        (0..n).map(|_| self.f64()).collect()
+    }
+    fn text(&mut self) -> Option<String> {
+        let n = self.len()?;
+        let (head, rest) = self.0.split_at_checked(n)?;
+        self.0 = rest;
+        Some(String::from_utf8_lossy(head).into_owned())
+    }
+}
+
+fn encode_request(
+    params: &[f64],
+    grid: &[f64],
+    outputs: &[usize],
+    options: &SolverOptions,
+) -> Vec<u8> {
+    let mut w = Writer::default();
+    w.f64s(params).f64s(grid).u64(outputs.len() as u64);
+    for o in outputs {
+        w.u64(*o as u64);
+    }
+    w.f64(options.rtol)
+        .f64(options.atol)
+        .u64(options.max_steps as u64);
+    w.0
+}
+
+type Request = (Vec<f64>, Vec<f64>, Vec<usize>, SolverOptions);
+
+fn decode_request(frame: &[u8]) -> Option<Request> {
+    let mut r = Reader(frame);
+    let params = r.f64s()?;
+    let grid = r.f64s()?;
+    let n = r.len()?;
+    let outputs = (0..n)
+        .map(|_| r.u64().map(|o| o as usize))
+        .collect::<Option<Vec<_>>>()?;
+    let options = SolverOptions {
+        rtol: r.f64()?,
+        atol: r.f64()?,
+        max_steps: r.u64()? as usize,
+    };
+    Some((params, grid, outputs, options))
+}
+
+fn encode_reply(result: &Result<Trajectory, SimulationError>) -> Vec<u8> {
+    let mut w = Writer::default();
+    match result {
+        Ok(t) => {
+            w.u64(0);
+            let s = t.stats;
+            for v in [
+                s.accepted_steps,
+                s.rejected_steps,
+                s.rhs_evaluations,
+                s.events,
+            ] {
+                w.u64(v as u64);
+            }
+            w.u64(t.values.len() as u64);
+            for series in &t.values {
+                w.f64s(series);
+            }
+        }
+        Err(e) => {
+            let (kind, time, count, span, text) = match e {
+                SimulationError::StepLimit { limit, time } => (1, *time, *limit, 0.0, ""),
+                SimulationError::StepTooSmall { time } => (2, *time, 0, 0.0, ""),
+                SimulationError::Chattering {
+                    time,
+                    event,
+                    events,
+                    span,
+                } => (3, *time, *events, *span, event.as_str()),
+                SimulationError::Diverged { time } => (4, *time, 0, 0.0, ""),
+                SimulationError::InvalidInput(m) => (5, 0.0, 0, 0.0, m.as_str()),
+                SimulationError::Failed { time, reason } => (6, *time, 0, 0.0, reason.as_str()),
+            };
+            w.u64(kind).f64(time).u64(count as u64).f64(span).text(text);
+        }
+    }
+    w.0
+}
+
+fn decode_reply(
+    frame: &[u8],
+    grid: &[f64],
+) -> Result<Result<Trajectory, SimulationError>, FmuError> {
+    let malformed = || FmuError::Host("malformed reply from the FMU host".into());
+    let mut r = Reader(frame);
+    let kind = r.u64().ok_or_else(malformed)?;
+    if kind == 0 {
+        let mut s = [0usize; 4];
+        for v in &mut s {
+            *v = r.u64().ok_or_else(malformed)? as usize;
+        }
+        let n = r.len().ok_or_else(malformed)?;
+        let values = (0..n)
+            .map(|_| r.f64s())
+            .collect::<Option<Vec<_>>>()
+            .ok_or_else(malformed)?;
+        return Ok(Ok(Trajectory {
+            time: grid.to_vec(),
+            values,
+            stats: SolverStats {
+                accepted_steps: s[0],
+                rejected_steps: s[1],
+                rhs_evaluations: s[2],
+                events: s[3],
+            },
+        }));
+    }
+    let time = r.f64().ok_or_else(malformed)?;
+    let count = r.u64().ok_or_else(malformed)? as usize;
+    let span = r.f64().ok_or_else(malformed)?;
+    let text = r.text().ok_or_else(malformed)?;
+    Ok(Err(match kind {
+        1 => SimulationError::StepLimit { limit: count, time },
+        2 => SimulationError::StepTooSmall { time },
+        3 => SimulationError::Chattering {
+            time,
+            event: text,
+            events: count,
+            span,
+        },
+        4 => SimulationError::Diverged { time },
+        5 => SimulationError::InvalidInput(text),
+        6 => SimulationError::Failed { time, reason: text },
+        _ => return Err(malformed()),
+    }))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_and_replies_travel_bit_for_bit() {
+        let options = SolverOptions {
+            rtol: 1e-7,
+            atol: 1e-9,
+            max_steps: 1234,
+        };
+        let (p, g, o, opts) = decode_request(&encode_request(
+            &[0.1, f64::NAN],
+            &[0.0, 0.5],
+            &[2, 0],
+            &options,
+        ))
+        .unwrap();
+        assert_eq!(
+            (p[0], g, o, opts),
+            (0.1, vec![0.0, 0.5], vec![2, 0], options)
+        );
+        assert!(p[1].is_nan());
+        let t = Trajectory {
+            time: vec![0.0, 1.0],
+            values: vec![vec![1.0 / 3.0, -0.0]],
+            stats: SolverStats {
+                accepted_steps: 3,
+                rejected_steps: 1,
+                rhs_evaluations: 20,
+                events: 2,
+            },
+        };
+        let back = decode_reply(&encode_reply(&Ok(t.clone())), &t.time)
+            .unwrap()
+            .unwrap();
+        assert_eq!(back, t);
+        let e = SimulationError::Chattering {
+            time: 1.5,
+            event: "x".into(),
+            events: 32,
+            span: 1e-9,
+        };
+        let back = decode_reply(&encode_reply(&Err(e.clone())), &[]).unwrap();
+        assert_eq!(back, Err(e));
+    }
+}

@@ -1,0 +1,519 @@
+//! Models users bring: FMUs (FMI 2.0 and 3.0, Model Exchange and Co-Simulation).
+//!
+//! An `.fmu` is a zip archive holding `modelDescription.xml` and a shared library per
+//! platform. [`open`] reads one, names it by its content hash, unpacks it once into a cache
+//! folder and registers it as a model beside the hosted ones: its real parameters (causality
+//! `parameter`) are the model's parameters, with their start values, units and min/max; its
+//! outputs, then its other real variables, are the model's outputs; the measurement effects
+//! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]). The
+//! model's name is `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`, so that
+//! two different FMUs never share cached evaluations.
+//!
+//! The FMI C API is called through `libloading` with the standard's signatures declared in
+//! [`ffi`] (not the `fmi` crate: its bindings need libclang at build time and its logger
+//! goes to the `log` crate, where a failed simulation could not pick up the FMU's own
+//! messages). Instances are reused between evaluations: each simulation takes an idle
+//! instance (one per thread that simulates at once), `fmi*Reset`s it and initialises it
+//! again; see [`run`] for the integration.
+//!
+//! Loading an FMU runs its native code. When [`isolate_with`] names a host program (the
+//! `calib` binary does, with its hidden `fmu-host` subcommand), every instance lives in a
+//! child process instead ([`host`]): a crash, an abort or a hang there is a failed
+//! simulation with the FMU's messages, and the next simulation starts a fresh child.
+
+mod description;
+mod ffi;
+pub mod host;
+mod run;
+
+pub use description::{Description, FmiVersion, Interface, Kind, Variable};
+
+use crate::effects::WithOutputEffects;
+use crate::model::{
+    check_request, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
+    Trajectory,
+};
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock};
+
+/// Why an FMU cannot be used, or why a call into it failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FmuError {
+    #[error("cannot read the FMU: {0}")]
+    Archive(String),
+    #[error("modelDescription.xml: {0}")]
+    Description(String),
+    #[error("{0}")]
+    Binary(String),
+    #[error("{function} returned {status}{}", log_suffix(log))]
+    Call {
+        function: String,
+        status: &'static str,
+        log: Vec<String>,
+    },
+    #[error("the event iteration did not settle in {0} passes")]
+    Loop(usize),
+    #[error("{0}")]
+    Host(String),
+}
+
+fn log_suffix(log: &[String]) -> String {
+    if log.is_empty() {
+        String::new()
+    } else {
+        format!("; the FMU says: {}", log.join(" | "))
+    }
+}
+
+/// Does `name` look like an FMU path rather than a hosted model's name?
+pub fn is_fmu_path(name: &str) -> bool {
+    name.to_ascii_lowercase().ends_with(".fmu")
+}
+
+/// The content hash an FMU is named by (BLAKE3 of the archive's bytes).
+pub fn content_hash(bytes: &[u8]) -> [u8; 32] {
+    *blake3::hash(bytes).as_bytes()
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// An FMU unpacked and described, ready to simulate.
+pub struct FmuModel {
+    info: ModelInfo,
+    description: Description,
+    interface: Interface,
+    identifier: String,
+    dir: PathBuf,
+    parameter_vrs: Vec<u32>,
+    output_refs: Vec<(Kind, u32)>,
+    runner: Runner,
+}
+
+enum Runner {
+    /// Instances in this process.
+    Local(Local),
+    /// Instances in child processes.
+    Isolated(host::Hosts),
+}
+
+struct Local {
+    library: OnceLock<Result<Arc<ffi::Library>, FmuError>>,
+    idle: Mutex<Vec<ffi::Instance>>,
+}
+
+impl FmuModel {
+    /// Describe the FMU unpacked at `dir` (content hash `hash`), to run through `interface`
+    /// (default: Model Exchange when the FMU has it, else Co-Simulation).
+    fn new(
+        dir: PathBuf,
+        hash: &[u8; 32],
+        interface: Option<Interface>,
+        isolated: bool,
+    ) -> Result<Self, FmuError> {
+        let xml = std::fs::read_to_string(dir.join("modelDescription.xml"))
+            .map_err(|e| FmuError::Archive(format!("modelDescription.xml: {e}")))?;
+        let description = Description::parse(&xml)?;
+        let interface = match interface {
+            Some(i) => i,
+            None if description.model_exchange.is_some() => Interface::ModelExchange,
+            None => Interface::CoSimulation,
+        };
+        let identifier = match interface {
+            Interface::ModelExchange => description.model_exchange.clone(),
+            Interface::CoSimulation => description.co_simulation.clone(),
+        }
+        .ok_or_else(|| {
+            FmuError::Description(format!("the FMU does not support {}", interface.name()))
+        })?;
+        let parameters: Vec<ParameterSpec> = description
+            .parameters()
+            .map(|v| {
+                // Unbounded in the model description: unbounded here (a campaign's bounds
+                // are always finite).
+                let min = v.min.unwrap_or(f64::NEG_INFINITY);
+                let max = v.max.unwrap_or(f64::INFINITY);
+                ParameterSpec {
+                    name: v.name.clone(),
+                    unit: v.unit.clone(),
+                    default: v.start.unwrap_or(0.0).clamp(min, max),
+                    min,
+                    max,
+                    description: v.description.clone(),
+                }
+            })
+            .collect();
+        let parameter_vrs = description
+            .parameters()
+            .map(|v| v.value_reference)
+            .collect();
+        let observables = description.observables();
+        let outputs = observables
+            .iter()
+            .map(|v| OutputSpec {
+                name: v.name.clone(),
+                unit: v.unit.clone(),
+                description: if v.causality == "output" {
+                    v.description.clone()
+                } else {
+                    format!("({}) {}", v.causality, v.description)
+                        .trim_end()
+                        .to_string()
+                },
+            })
+            .collect();
+        let output_refs = observables
+            .iter()
+            .map(|v| (v.kind, v.value_reference))
+            .collect();
+        let kind = match interface {
+            Interface::ModelExchange => "me",
+            Interface::CoSimulation => "cs",
+        };
+        let info = ModelInfo {
+            name: format!("{identifier}.{kind}@{}", &hex(hash)[..12]),
+            version: 1,
+            description: format!(
+                "FMU {} (FMI {}, {}): {}",
+                description.model_name,
+                match description.version {
+                    FmiVersion::V2 => "2.0",
+                    FmiVersion::V3 => "3.0",
+                },
+                interface.name(),
+                description.description
+            ),
+            parameters,
+            outputs,
+            effects: Vec::new(),
+        };
+        let runner = if isolated {
+            Runner::Isolated(host::Hosts::new(dir.clone(), interface))
+        } else {
+            Runner::Local(Local {
+                library: OnceLock::new(),
+                idle: Mutex::new(Vec::new()),
+            })
+        };
+        Ok(Self {
+            info,
+            description,
+            interface,
+            identifier,
+            dir,
+            parameter_vrs,
+            output_refs,
+            runner,
+        })
+    }
+
+    pub fn description(&self) -> &Description {
+        &self.description
+    }
+
+    pub fn interface(&self) -> Interface {
+        self.interface
+    }
+
+    /// Median cost of a fresh instance (instantiate and free) and of a reset, over `repeat`
+    /// tries each, in this process: why instances are reused with a reset.
+    pub fn instance_costs(
+        &self,
+        repeat: usize,
+    ) -> Result<(std::time::Duration, std::time::Duration), FmuError> {
+        let library = Arc::new(ffi::Library::load(
+            &self.dir,
+            self.description.version,
+            self.interface,
+            &self.identifier,
+            &self.description.token,
+        )?);
+        let median = |mut v: Vec<std::time::Duration>| {
+            v.sort();
+            v[v.len() / 2]
+        };
+        let mut fresh = Vec::with_capacity(repeat);
+        for _ in 0..repeat.max(1) {
+            let start = std::time::Instant::now();
+            drop(library.instantiate()?);
+            fresh.push(start.elapsed());
+        }
+        let mut instance = library.instantiate()?;
+        let mut reset = Vec::with_capacity(repeat);
+        for _ in 0..repeat.max(1) {
+            let start = std::time::Instant::now();
+            instance.reset()?;
+            reset.push(start.elapsed());
+        }
+        Ok((median(fresh), median(reset)))
+    }
+
+    /// Simulate in this process, whatever the runner (the child process's side).
+    fn simulate_here(
+        &self,
+        local: &Local,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError> {
+        let library = local
+            .library
+            .get_or_init(|| {
+                ffi::Library::load(
+                    &self.dir,
+                    self.description.version,
+                    self.interface,
+                    &self.identifier,
+                    &self.description.token,
+                )
+                .map(Arc::new)
+            })
+            .as_ref()
+            .map_err(|e| SimulationError::Failed {
+                time: 0.0,
+                reason: e.to_string(),
+            })?;
+        let reused = local.idle.lock().unwrap_or_else(|e| e.into_inner()).pop();
+        let (mut instance, fresh) = match reused {
+            Some(instance) => (instance, false),
+            None => (
+                library.instantiate().map_err(|e| SimulationError::Failed {
+                    time: 0.0,
+                    reason: e.to_string(),
+                })?,
+                true,
+            ),
+        };
+        let selected: Vec<(Kind, u32)> = outputs.iter().map(|&o| self.output_refs[o]).collect();
+        let outputs = run::Outputs::new(&selected);
+        let plan = run::Plan {
+            interface: self.interface,
+            parameter_vrs: &self.parameter_vrs,
+            parameters: &params[..self.parameter_vrs.len()],
+            outputs: &outputs,
+            states: self.description.continuous_states,
+            indicators: self.description.event_indicators,
+        };
+        let result = run::simulate(&mut instance, fresh, &plan, grid, options);
+        // An instance that failed is dropped (freed) rather than reset for the next run.
+        if result.is_ok() {
+            local
+                .idle
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .push(instance);
+        }
+        result
+    }
+}
+
+impl Model for FmuModel {
+    fn info(&self) -> &ModelInfo {
+        &self.info
+    }
+
+    fn simulate(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+    ) -> Result<Trajectory, SimulationError> {
+        check_request(&self.info, params, grid, outputs)?;
+        match &self.runner {
+            Runner::Local(local) => self.simulate_here(local, params, grid, outputs, options),
+            Runner::Isolated(hosts) => hosts.simulate(params, grid, outputs, options),
+        }
+    }
+}
+
+/// The program (and its leading arguments) that hosts FMU instances in child processes.
+#[derive(Debug, Clone)]
+pub struct HostCommand {
+    pub program: PathBuf,
+    pub args: Vec<String>,
+}
+
+static HOST: OnceLock<HostCommand> = OnceLock::new();
+
+/// Run every FMU opened from now on in child processes started as `command DIR INTERFACE`.
+/// Without it (library tests, the child itself) instances live in this process.
+pub fn isolate_with(command: HostCommand) {
+    let _ = HOST.set(command);
+}
+
+pub(crate) fn host_command() -> Option<&'static HostCommand> {
+    HOST.get()
+}
+
+struct Registered {
+    hash: [u8; 32],
+    interface: Interface,
+    archive: Arc<Vec<u8>>,
+    model: &'static dyn Model,
+}
+
+fn registry() -> &'static Mutex<Vec<Registered>> {
+    static REGISTRY: OnceLock<Mutex<Vec<Registered>>> = OnceLock::new();
+    REGISTRY.get_or_init(|| Mutex::new(Vec::new()))
+}
+
+/// The FMU at `path` as a model (with the measurement effects of its outputs). Opening the
+/// same content again returns the same model.
+pub fn open(path: &Path, interface: Option<Interface>) -> Result<&'static dyn Model, FmuError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| FmuError::Archive(format!("{}: {e}", path.display())))?;
+    open_bytes(&bytes, interface)
+}
+
+/// The FMU whose archive is `bytes`, as [`open`].
+pub fn open_bytes(
+    bytes: &[u8],
+    interface: Option<Interface>,
+) -> Result<&'static dyn Model, FmuError> {
+    let hash = content_hash(bytes);
+    let mut registry = registry().lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(r) = registry
+        .iter()
+        .find(|r| r.hash == hash && interface.is_none_or(|i| i == r.interface))
+    {
+        return Ok(r.model);
+    }
+    let dir = unpack(bytes, &hash, &unpack_root())?;
+    let model = FmuModel::new(dir, &hash, interface, host_command().is_some())?;
+    let interface = model.interface;
+    let archive = registry
+        .iter()
+        .find(|r| r.hash == hash)
+        .map_or_else(|| Arc::new(bytes.to_vec()), |r| Arc::clone(&r.archive));
+    let model: &'static dyn Model = Box::leak(Box::new(WithOutputEffects::new(model)));
+    registry.push(Registered {
+        hash,
+        interface,
+        archive,
+        model,
+    });
+    Ok(model)
+}
+
+/// Every interface the FMU whose archive is `bytes` offers, opened (see [`open_bytes`]).
+pub fn open_all(bytes: &[u8]) -> Result<Vec<&'static dyn Model>, FmuError> {
+    let first = open_bytes(bytes, None)?;
+    let mut models = vec![first];
+    if first.info().name.contains(".me@") {
+        // Model Exchange is the default; Co-Simulation may be there too.
+        if let Ok(cs) = open_bytes(bytes, Some(Interface::CoSimulation)) {
+            models.push(cs);
+        }
+    }
+    Ok(models)
+}
+
+/// The archive and content hash of the FMU model registered under `name`, to send it to a
+/// worker.
+pub fn archive_of(name: &str) -> Option<([u8; 32], Arc<Vec<u8>>)> {
+    registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|r| r.model.info().name == name)
+        .map(|r| (r.hash, Arc::clone(&r.archive)))
+}
+
+/// The interface an FMU model's name says it runs through (`….me@…` or `….cs@…`).
+pub fn interface_in_name(name: &str) -> Option<Interface> {
+    let (head, _) = name.rsplit_once('@')?;
+    if head.ends_with(".me") {
+        Some(Interface::ModelExchange)
+    } else if head.ends_with(".cs") {
+        Some(Interface::CoSimulation)
+    } else {
+        None
+    }
+}
+
+/// The FMU model registered under `name` (see the module documentation).
+pub fn find(name: &str) -> Option<&'static dyn Model> {
+    registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|r| r.model.info().name == name)
+        .map(|r| r.model)
+}
+
+/// The FMU at `path` with its instances in this process whatever [`isolate_with`] says, and
+/// not registered (for benchmarks).
+pub fn open_local(path: &Path, interface: Option<Interface>) -> Result<FmuModel, FmuError> {
+    let bytes =
+        std::fs::read(path).map_err(|e| FmuError::Archive(format!("{}: {e}", path.display())))?;
+    let hash = content_hash(&bytes);
+    let dir = unpack(&bytes, &hash, &unpack_root())?;
+    FmuModel::new(dir, &hash, interface, false)
+}
+
+/// Open an FMU already unpacked at `dir`, in this process (the child process's side).
+pub fn open_unpacked(dir: &Path, interface: Interface) -> Result<FmuModel, FmuError> {
+    FmuModel::new(dir.to_path_buf(), &[0; 32], Some(interface), false)
+}
+
+fn unpack_root() -> PathBuf {
+    std::env::var_os("CALIB_FMU_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| std::env::temp_dir().join("calib-fmu"))
+}
+
+/// Unpack the archive into `root/<hash>/` once (into a fresh folder renamed into place, so a
+/// half-written folder is never used).
+fn unpack(bytes: &[u8], hash: &[u8; 32], root: &Path) -> Result<PathBuf, FmuError> {
+    let dir = root.join(hex(hash));
+    if dir.join("modelDescription.xml").is_file() {
+        return Ok(dir);
+    }
+    let io = |e: std::io::Error| FmuError::Archive(e.to_string());
+    std::fs::create_dir_all(root).map_err(io)?;
+    let staging = root.join(format!(".{}-{}", hex(hash), std::process::id()));
+    let _ = std::fs::remove_dir_all(&staging);
+    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
+        .map_err(|e| FmuError::Archive(format!("not a zip archive: {e}")))?;
+    for i in 0..archive.len() {
+        let mut entry = archive
+            .by_index(i)
+            .map_err(|e| FmuError::Archive(e.to_string()))?;
+        let Some(relative) = entry.enclosed_name() else {
+            return Err(FmuError::Archive(format!(
+                "entry `{}` points outside the archive",
+                entry.name()
+            )));
+        };
+        let target = staging.join(relative);
+        if entry.is_dir() {
+            std::fs::create_dir_all(&target).map_err(io)?;
+            continue;
+        }
+        if let Some(parent) = target.parent() {
+            std::fs::create_dir_all(parent).map_err(io)?;
+        }
+        let mut data = Vec::with_capacity(entry.size() as usize);
+        entry.read_to_end(&mut data).map_err(io)?;
+        std::fs::write(&target, data).map_err(io)?;
+    }
+    if !staging.join("modelDescription.xml").is_file() {
+        let _ = std::fs::remove_dir_all(&staging);
+        return Err(FmuError::Archive(
+            "no modelDescription.xml in the archive".into(),
+        ));
+    }
+    match std::fs::rename(&staging, &dir) {
+        Ok(()) => Ok(dir),
+        // Another process unpacked it first.
+        Err(_) if dir.join("modelDescription.xml").is_file() => {
+            let _ = std::fs::remove_dir_all(&staging);
+            Ok(dir)
+        }
+        Err(e) => Err(io(e)),
+    }
+}
