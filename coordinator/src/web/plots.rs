@@ -198,7 +198,7 @@ mod tests {
             ],
             shade: None,
         };
-        let refused = draw(&request).err().expect("refused");
+        let refused = draw(&request).expect_err("refused");
         assert_eq!(refused.0.code(), tonic::Code::InvalidArgument);
         assert!(
             refused.0.message().starts_with("series[1]:"),
