@@ -73,6 +73,38 @@ fn furuta_the_pendulum_friction_drives_the_objective() {
 }
 
 #[test]
+fn furuta_on_the_log10_scale_both_frictions_are_influential() {
+    // examples/furuta.toml with the frictions searched on their logarithm over
+    // [1e-4, 0.9]: the decades where the bearings stick no longer fill the box.
+    let text = std::fs::read_to_string(repo().join("examples/furuta.toml"))
+        .unwrap()
+        .replace("min = 0.0\n", "min = 0.0001\nscale = \"log10\"\n")
+        .replace(
+            "file = \"data/",
+            &format!("file = \"{}/", repo().join("examples/data").display()),
+        );
+    assert_eq!(text.matches("scale = \"log10\"").count(), 2);
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Campaign::load(&write(dir.path(), "furuta_log.toml", &text)).unwrap();
+    let settings = Settings {
+        methods: Methods::Sobol,
+        samples: 512,
+        seed: 1,
+    };
+    let s = analyse(&campaign, LocalEvaluator, &MemoryStore::new(), settings).unwrap();
+    println!("{}", calib_coordinator::sensitivity::report::table(&s));
+    for friction in ["armFriction", "pendulumFriction"] {
+        assert!(s.influential(index_of(&s, friction)), "{friction}");
+        assert!(total(&s, 0, friction) >= 0.01, "{friction}");
+    }
+    assert!(s.fixable().is_empty());
+    assert!(s.conclusion().starts_with("No parameter can be held fixed"));
+    // The arm friction's share is small but its interval stays above the threshold.
+    let arm = index_of(&s, "armFriction");
+    assert!(s.quantities[0].sobol.as_ref().unwrap().total_ci[arm].0 > 0.01);
+}
+
+#[test]
 fn sensitivity_on_workers_equals_the_local_one_and_a_rerun_simulates_nothing() {
     let campaign = example("furuta.toml");
     let settings = Settings {
@@ -162,4 +194,18 @@ fn the_command_writes_the_table_the_json_and_a_chart_per_output() {
     assert_eq!(parameters[0]["name"], "armFriction");
     assert_eq!(parameters[0]["influential"], false);
     assert_eq!(parameters[1]["influential"], true);
+    // On a worker, into a fresh store: the same numbers, every point simulated there.
+    let cluster = TestCluster::start(1, 1);
+    let url = format!("http://{}", cluster.workers[0].address());
+    let fresh = dir.path().join("db2");
+    let mut remote_args = json_args.clone();
+    remote_args[5] = fresh.to_str().unwrap();
+    remote_args.extend(["--workers", url.as_str()]);
+    let remote = json_of(&calib(&remote_args));
+    assert_eq!(remote["parameters"], written["parameters"]);
+    assert_eq!(
+        remote["evaluations"]["simulated"].as_u64().unwrap(),
+        cluster.workers[0].simulations()
+    );
+    assert!(cluster.workers[0].simulations() > 0);
 }
