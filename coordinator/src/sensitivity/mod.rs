@@ -168,7 +168,7 @@ pub fn analyse<E: Evaluator>(
     }
     if settings.samples < 2 {
         return Err(Error::InvalidRequest(format!(
-            "--samples {}: at least 2 are needed",
+            "{} samples: at least 2 are needed",
             settings.samples
         )));
     }
