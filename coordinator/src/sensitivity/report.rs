@@ -300,3 +300,88 @@ fn bar_chart(s: &Sensitivity, q: usize, path: &Path) -> std::result::Result<(), 
     };
     draw().map_err(|e| e.to_string())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluator::CacheStats;
+    use crate::sensitivity::sampling::MorrisEffects;
+    use crate::sensitivity::{Methods, Quantity, Settings};
+
+    /// Morris alone on two parameters: `a` with μ* 1, `b` with μ* 0.005.
+    fn morris_only() -> Sensitivity {
+        let effects = MorrisEffects {
+            mu: vec![1.0, -0.005],
+            mu_star: vec![1.0, 0.005],
+            sigma: vec![0.1, 0.0],
+            effects: vec![4, 4],
+        };
+        Sensitivity {
+            campaign: "c".into(),
+            parameters: vec!["a".into(), "b".into()],
+            scales: vec![Scale::Lin, Scale::Log10],
+            bounds: vec![(0.0, 1.0), (1e-3, 1.0)],
+            settings: Settings {
+                methods: Methods::Morris,
+                samples: 4,
+                seed: 1,
+            },
+            quantities: ["objective", "y/1"]
+                .into_iter()
+                .map(|name| Quantity {
+                    name: name.into(),
+                    morris: Some(effects.clone()),
+                    sobol: None,
+                })
+                .collect(),
+            morris_points: 12,
+            morris_failed: 0,
+            sobol_points: 0,
+            sobol_failed: 0,
+            sobol_excluded: 0,
+            stats: CacheStats::default(),
+        }
+    }
+
+    #[test]
+    fn with_morris_alone_a_parameter_below_a_hundredth_of_the_largest_mu_star_is_fixable() {
+        let s = morris_only();
+        assert!(s.influential(0));
+        assert!(!s.influential(1));
+        assert_eq!(s.fixable(), vec!["b"]);
+        assert!(
+            s.conclusion().starts_with("b can be held fixed"),
+            "{}",
+            s.conclusion()
+        );
+        let json = sensitivity_json(&s);
+        let b = &json["parameters"][1];
+        assert_eq!(b["scale"], "log10");
+        assert_eq!(b["mu_star"], 0.005);
+        assert_eq!(b["influential"], false);
+        assert!(b.get("total").is_none(), "{b}");
+        assert_eq!(b["outputs"]["y/1"]["mu_star"], 0.005);
+        assert_eq!(json["methods"], serde_json::json!(["morris"]));
+    }
+
+    #[test]
+    fn a_morris_chart_is_written_per_quantity() {
+        let dir = tempfile::tempdir().unwrap();
+        let written = write(&morris_only(), dir.path()).unwrap();
+        let names: Vec<String> = written
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "sensitivity.json",
+                "sensitivity_objective.svg",
+                "sensitivity_y_1.svg"
+            ]
+        );
+        let svg = std::fs::read_to_string(dir.path().join("sensitivity_y_1.svg")).unwrap();
+        assert!(svg.contains("mu* (whisker: sigma)"), "{svg}");
+        assert!(svg.contains("y/1"));
+    }
+}
