@@ -140,10 +140,10 @@ pub fn saltelli_design(dim: usize, n: usize, seed: u64) -> Vec<Vec<f64>> {
     points
 }
 
-/// The largest base sample a Saltelli design takes (the Sobol sequence's length), and the
-/// most dimensions (twice the parameters).
-pub const SALTELLI_MAX_SAMPLES: usize = 1 << 16;
-pub const SALTELLI_MAX_DIMENSIONS: usize = 256;
+/// The largest base sample a Saltelli design takes (the Sobol sequence's indices 1 to
+/// 2^16 − 1), and the most dimensions (twice the parameters).
+pub const SALTELLI_MAX_SAMPLES: usize = (1 << 16) - 1;
+pub const SALTELLI_MAX_DIMENSIONS: usize = sobol_burley::NUM_DIMENSIONS as usize;
 
 /// Sobol indices of one quantity, with bootstrap confidence intervals (95 %).
 #[derive(Debug, Clone, PartialEq)]
