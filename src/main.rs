@@ -37,6 +37,10 @@ enum Command {
     /// Calibrate, then trace what is left to the physical effect the model lacks: rank the
     /// candidate effects, refit the best, and report the error before and after.
     Diagnose(commands::diagnose::Args),
+    /// Global sensitivity of the objective and of each output's contribution to the free
+    /// parameters over their bounds: Morris effects and Sobol indices, a table, bar charts
+    /// and sensitivity.json, and the parameters that can be held fixed.
+    Sensitivity(commands::sensitivity::Args),
     /// Serve the hosted models to coordinators (gRPC Simulator, health, reflection).
     Worker(commands::worker::Args),
     /// Serve the Calibration API (campaigns from `calib submit` and gRPC clients) and the
@@ -101,6 +105,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => commands::simulate::run(args),
         Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Diagnose(args) => commands::diagnose::run(args),
+        Command::Sensitivity(args) => commands::sensitivity::run(args),
         Command::Worker(args) => commands::worker::run(args),
         Command::Coordinator(args) => commands::coordinator::run(args),
         Command::Health(args) => commands::health::run(args),

@@ -14,6 +14,7 @@ pub mod measurement;
 pub mod objective;
 pub mod optim;
 pub mod report;
+pub mod sensitivity;
 pub mod server;
 pub mod store;
 pub mod web;

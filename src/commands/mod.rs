@@ -12,6 +12,7 @@ pub mod fmu;
 pub mod health;
 pub mod models;
 pub mod security;
+pub mod sensitivity;
 pub mod simulate;
 pub mod store;
 pub mod submit;

@@ -1,0 +1,261 @@
+//! Global sensitivity of the objective, and of each output's contribution to it, to the free
+//! parameters over their bounds (on their search scale): Morris elementary effects (μ*, σ)
+//! and Sobol first-order and total indices.
+//!
+//! Every sample set (the Morris trajectories, the Saltelli design) is one batch through the
+//! store-backed evaluator `calib calibrate` uses, so it spreads over the workers, lands in
+//! the evaluation store and is answered from it when asked again. A failed simulation has no
+//! quantity to analyse: the Morris effects that need the point, and the Sobol base samples
+//! with a failed point, are left out and counted.
+
+pub mod report;
+pub mod sampling;
+
+use crate::calibration::load_measurement;
+use crate::campaign::{Campaign, Scale};
+use crate::error::{Error, Result};
+use crate::evaluator::{CacheStats, Evaluator};
+use crate::objective::{Evaluation, Objective};
+use crate::optim::space::UnitBox;
+use crate::store::{encoding, Store, StoredEvaluator};
+use sampling::{MorrisEffects, SobolIndices};
+
+/// The total index on the objective at and above which a parameter is influential.
+pub const INFLUENTIAL_TOTAL: f64 = 0.01;
+
+/// Which analyses to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Methods {
+    Morris,
+    Sobol,
+    /// Both (the default).
+    #[default]
+    Both,
+}
+
+impl Methods {
+    fn morris(self) -> bool {
+        self != Methods::Sobol
+    }
+
+    fn sobol(self) -> bool {
+        self != Methods::Morris
+    }
+}
+
+/// How to sample.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Settings {
+    pub methods: Methods,
+    /// Sobol: base samples of the Saltelli design (`samples · (parameters + 2)`
+    /// evaluations). Morris: trajectories (`samples · (parameters + 1)` evaluations).
+    pub samples: usize,
+    pub seed: u64,
+}
+
+/// Default base samples (Sobol) and trajectories (Morris).
+pub const DEFAULT_SAMPLES: usize = 128;
+
+/// One analysed quantity: the objective or one output's weighted contribution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Quantity {
+    /// `objective`, or the output's model name.
+    pub name: String,
+    pub morris: Option<MorrisEffects>,
+    pub sobol: Option<SobolIndices>,
+}
+
+/// What a sensitivity analysis found.
+#[derive(Debug, Clone)]
+pub struct Sensitivity {
+    pub campaign: String,
+    pub parameters: Vec<String>,
+    pub scales: Vec<Scale>,
+    pub bounds: Vec<(f64, f64)>,
+    pub settings: Settings,
+    /// The objective first, then one per output in campaign order.
+    pub quantities: Vec<Quantity>,
+    /// Points evaluated per method, and how many of them failed.
+    pub morris_points: usize,
+    pub morris_failed: usize,
+    pub sobol_points: usize,
+    pub sobol_failed: usize,
+    /// Sobol base samples left out because one of their points failed.
+    pub sobol_excluded: usize,
+    pub stats: CacheStats,
+}
+
+impl Sensitivity {
+    /// Whether parameter `i` matters: its total index on the objective is at least
+    /// [`INFLUENTIAL_TOTAL`] (or, with Morris alone, its μ* on the objective is at least
+    /// that fraction of the largest μ*).
+    pub fn influential(&self, i: usize) -> bool {
+        let objective = &self.quantities[0];
+        if let Some(s) = &objective.sobol {
+            return s.total[i] >= INFLUENTIAL_TOTAL;
+        }
+        let m = objective.morris.as_ref().expect("one method ran");
+        let largest = m.mu_star.iter().copied().fold(0.0, f64::max);
+        largest > 0.0 && m.mu_star[i] >= INFLUENTIAL_TOTAL * largest
+    }
+
+    /// The parameters that can be held fixed (not influential), in campaign order.
+    pub fn fixable(&self) -> Vec<&str> {
+        (0..self.parameters.len())
+            .filter(|&i| !self.influential(i))
+            .map(|i| self.parameters[i].as_str())
+            .collect()
+    }
+
+    /// The most influential parameter on quantity `q` (largest total index, else μ*).
+    pub fn most_influential(&self, q: usize) -> usize {
+        let quantity = &self.quantities[q];
+        let scores = match (&quantity.sobol, &quantity.morris) {
+            (Some(s), _) => &s.total,
+            (None, Some(m)) => &m.mu_star,
+            (None, None) => unreachable!("one method ran"),
+        };
+        (0..scores.len())
+            .max_by(|&a, &b| scores[a].total_cmp(&scores[b]))
+            .unwrap_or(0)
+    }
+
+    /// The sentence naming the parameters that can be held fixed.
+    pub fn conclusion(&self) -> String {
+        let fixable = self.fixable();
+        let rule = if self.quantities[0].sobol.is_some() {
+            format!("total index on the objective below {INFLUENTIAL_TOTAL}")
+        } else {
+            format!("μ* on the objective below {INFLUENTIAL_TOTAL} of the largest")
+        };
+        match fixable.len() {
+            0 => format!("No parameter can be held fixed: none has a {rule}."),
+            1 => format!(
+                "{} can be held fixed: its {rule} over the bounds.",
+                fixable[0]
+            ),
+            _ => format!(
+                "{} can be held fixed: each has a {rule} over the bounds.",
+                fixable.join(", ")
+            ),
+        }
+    }
+}
+
+/// The analysed quantities of one evaluation: the objective, then each output's weighted
+/// squared error `k_i · SSE_i`; `None` for a failed simulation.
+fn quantities(objective: &Objective, e: &Evaluation) -> Option<Vec<f64>> {
+    if e.failure.is_some() {
+        return None;
+    }
+    let mut q = vec![e.objective];
+    q.extend(e.sse.iter().zip(&objective.weights).map(|(s, k)| s * k));
+    Some(q)
+}
+
+/// Analyse `campaign`'s sensitivities, simulating through `evaluator` behind `store`.
+pub fn analyse<E: Evaluator>(
+    campaign: &Campaign,
+    evaluator: E,
+    store: &dyn Store,
+    settings: Settings,
+) -> Result<Sensitivity> {
+    let dim = campaign.free.len();
+    if dim == 0 {
+        return Err(Error::InvalidRequest(
+            "the campaign has no free parameter to analyse".into(),
+        ));
+    }
+    if settings.samples < 2 {
+        return Err(Error::InvalidRequest(format!(
+            "{} samples: at least 2 are needed",
+            settings.samples
+        )));
+    }
+    if settings.methods.sobol()
+        && (settings.samples > sampling::SALTELLI_MAX_SAMPLES
+            || 2 * dim > sampling::SALTELLI_MAX_DIMENSIONS)
+    {
+        return Err(Error::InvalidRequest(format!(
+            "Sobol indices take at most {} samples and {} parameters",
+            sampling::SALTELLI_MAX_SAMPLES,
+            sampling::SALTELLI_MAX_DIMENSIONS / 2
+        )));
+    }
+    let measurement = load_measurement(campaign)?;
+    let objective = Objective::new(campaign, &measurement)?;
+    let dataset = measurement.content_hash();
+    if store.dataset(&dataset)?.is_none() {
+        store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
+    }
+    let space = UnitBox::new(&campaign.free);
+    let evaluator = StoredEvaluator::new(evaluator, store);
+    let outputs = campaign.outputs.len();
+    let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
+        let physical: Vec<Vec<f64>> = unit.iter().map(|u| space.to_physical(u)).collect();
+        let evaluations = evaluator.evaluate(&objective, &physical)?;
+        if let Some(e) = evaluator.error() {
+            return Err(e.into());
+        }
+        Ok(evaluations
+            .iter()
+            .map(|e| quantities(&objective, e))
+            .collect())
+    };
+    let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
+        values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
+    };
+    let mut names = vec!["objective".to_string()];
+    names.extend(campaign.outputs.iter().map(|o| o.model.clone()));
+    let mut result = Sensitivity {
+        campaign: campaign.name.clone(),
+        parameters: campaign.free.iter().map(|p| p.name.clone()).collect(),
+        scales: campaign.free.iter().map(|p| p.scale).collect(),
+        bounds: campaign.free.iter().map(|p| (p.min, p.max)).collect(),
+        settings,
+        quantities: names
+            .into_iter()
+            .map(|name| Quantity {
+                name,
+                morris: None,
+                sobol: None,
+            })
+            .collect(),
+        morris_points: 0,
+        morris_failed: 0,
+        sobol_points: 0,
+        sobol_failed: 0,
+        sobol_excluded: 0,
+        stats: CacheStats::default(),
+    };
+    if settings.methods.morris() {
+        let design = sampling::morris_design(dim, settings.samples, settings.seed);
+        let values = evaluate(&design)?;
+        result.morris_points = design.len();
+        result.morris_failed = values.iter().filter(|v| v.is_none()).count();
+        for q in 0..=outputs {
+            result.quantities[q].morris =
+                Some(sampling::morris_effects(&design, &column(&values, q), dim));
+        }
+    }
+    if settings.methods.sobol() {
+        let n = settings.samples;
+        let design = sampling::saltelli_design(dim, n, settings.seed);
+        let values = evaluate(&design)?;
+        result.sobol_points = design.len();
+        result.sobol_failed = values.iter().filter(|v| v.is_none()).count();
+        result.sobol_excluded = (0..n)
+            .filter(|&j| (0..dim + 2).any(|block| values[block * n + j].is_none()))
+            .count();
+        for q in 0..=outputs {
+            result.quantities[q].sobol = Some(sampling::sobol_indices(
+                &column(&values, q),
+                dim,
+                n,
+                settings.seed,
+            ));
+        }
+    }
+    result.stats = evaluator.stats();
+    Ok(result)
+}

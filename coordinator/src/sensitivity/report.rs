@@ -1,0 +1,387 @@
+//! What a sensitivity analysis writes: `sensitivity.json`, a table, and one SVG bar chart per
+//! quantity (the objective and each output's contribution).
+
+use super::Sensitivity;
+use crate::campaign::Scale;
+use crate::error::{Error, Result};
+use crate::report::plot::sanitize;
+use plotters::prelude::*;
+use serde_json::{json, Value};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// A number for JSON: `null` when it is not finite.
+fn number(v: f64) -> Value {
+    if v.is_finite() {
+        json!(v)
+    } else {
+        Value::Null
+    }
+}
+
+/// The statistics of parameter `i` on quantity `q`.
+fn statistics(s: &Sensitivity, q: usize, i: usize) -> Value {
+    let quantity = &s.quantities[q];
+    let mut v = serde_json::Map::new();
+    if let Some(m) = &quantity.morris {
+        v.insert("mu".into(), number(m.mu[i]));
+        v.insert("mu_star".into(), number(m.mu_star[i]));
+        v.insert("sigma".into(), number(m.sigma[i]));
+    }
+    if let Some(sobol) = &quantity.sobol {
+        v.insert("first".into(), number(sobol.first[i]));
+        v.insert(
+            "first_ci".into(),
+            json!([number(sobol.first_ci[i].0), number(sobol.first_ci[i].1)]),
+        );
+        v.insert("total".into(), number(sobol.total[i]));
+        v.insert(
+            "total_ci".into(),
+            json!([number(sobol.total_ci[i].0), number(sobol.total_ci[i].1)]),
+        );
+    }
+    Value::Object(v)
+}
+
+/// The content of `sensitivity.json`.
+pub fn sensitivity_json(s: &Sensitivity) -> Value {
+    let parameters: Vec<Value> = (0..s.parameters.len())
+        .map(|i| {
+            let mut p = serde_json::Map::new();
+            p.insert("name".into(), json!(s.parameters[i]));
+            p.insert(
+                "scale".into(),
+                json!(match s.scales[i] {
+                    Scale::Lin => "lin",
+                    Scale::Log10 => "log10",
+                }),
+            );
+            p.insert("min".into(), json!(s.bounds[i].0));
+            p.insert("max".into(), json!(s.bounds[i].1));
+            p.insert("influential".into(), json!(s.influential(i)));
+            if let Value::Object(stats) = statistics(s, 0, i) {
+                p.extend(stats);
+            }
+            let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
+                .map(|q| (s.quantities[q].name.clone(), statistics(s, q, i)))
+                .collect();
+            p.insert("outputs".into(), Value::Object(outputs));
+            Value::Object(p)
+        })
+        .collect();
+    let methods: Vec<&str> = [
+        (s.quantities[0].morris.is_some(), "morris"),
+        (s.quantities[0].sobol.is_some(), "sobol"),
+    ]
+    .into_iter()
+    .filter_map(|(ran, name)| ran.then_some(name))
+    .collect();
+    json!({
+        "campaign": s.campaign,
+        "methods": methods,
+        "samples": s.settings.samples,
+        "seed": s.settings.seed,
+        "morris": {
+            "levels": super::sampling::MORRIS_LEVELS,
+            "points": s.morris_points,
+            "failed": s.morris_failed,
+        },
+        "sobol": {
+            "points": s.sobol_points,
+            "failed": s.sobol_failed,
+            "excluded_samples": s.sobol_excluded,
+            "bootstrap_resamples": super::sampling::BOOTSTRAP_RESAMPLES,
+            "confidence": 0.95,
+        },
+        "influential_total": super::INFLUENTIAL_TOTAL,
+        "parameters": parameters,
+        "fixable": s.fixable(),
+        "conclusion": s.conclusion(),
+        "evaluations": s.stats,
+    })
+}
+
+/// The table: one block per quantity, one row per parameter.
+pub fn table(s: &Sensitivity) -> String {
+    let width = s
+        .parameters
+        .iter()
+        .map(|p| p.chars().count())
+        .max()
+        .unwrap_or(9)
+        .max(9);
+    let mut out = String::new();
+    for quantity in &s.quantities {
+        let title = if quantity.name == "objective" {
+            "objective".to_string()
+        } else {
+            format!("contribution of {}", quantity.name)
+        };
+        let _ = writeln!(out, "{title}");
+        let mut header = format!("  {:<width$}", "parameter");
+        if quantity.morris.is_some() {
+            header.push_str(&format!(" {:>11} {:>11}", "mu*", "sigma"));
+        }
+        if quantity.sobol.is_some() {
+            header.push_str(&format!(
+                " {:>7} {:>17} {:>7} {:>17}",
+                "first", "95% CI", "total", "95% CI"
+            ));
+        }
+        let _ = writeln!(out, "{header}");
+        for (i, name) in s.parameters.iter().enumerate() {
+            let mut row = format!("  {name:<width$}");
+            if let Some(m) = &quantity.morris {
+                row.push_str(&format!(" {:>11.4e} {:>11.4e}", m.mu_star[i], m.sigma[i]));
+            }
+            if let Some(sobol) = &quantity.sobol {
+                let ci = |(lo, hi): (f64, f64)| format!("[{lo:.3}, {hi:.3}]");
+                row.push_str(&format!(
+                    " {:>7.3} {:>17} {:>7.3} {:>17}",
+                    sobol.first[i],
+                    ci(sobol.first_ci[i]),
+                    sobol.total[i],
+                    ci(sobol.total_ci[i])
+                ));
+            }
+            let _ = writeln!(out, "{row}");
+        }
+        let _ = writeln!(out);
+    }
+    let _ = writeln!(
+        out,
+        "{} evaluations ({} simulated, {} from the store); failed: {} of the Morris points, \
+         {} of the Sobol points ({} base samples left out)",
+        s.stats.requested,
+        s.stats.simulated,
+        s.stats.cached,
+        s.morris_failed,
+        s.sobol_failed,
+        s.sobol_excluded
+    );
+    let _ = writeln!(out, "{}", s.conclusion());
+    out
+}
+
+/// Write `sensitivity.json` and one bar chart per quantity into `dir` (created).
+pub fn write(s: &Sensitivity, dir: &Path) -> Result<Vec<PathBuf>> {
+    let write_error = |path: &Path, source: std::io::Error| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    std::fs::create_dir_all(dir).map_err(|e| write_error(dir, e))?;
+    let json_path = dir.join("sensitivity.json");
+    let text = serde_json::to_string_pretty(&sensitivity_json(s)).expect("plain data");
+    std::fs::write(&json_path, text).map_err(|e| write_error(&json_path, e))?;
+    let mut written = vec![json_path];
+    for (q, quantity) in s.quantities.iter().enumerate() {
+        let path = dir.join(format!("sensitivity_{}.svg", sanitize(&quantity.name)));
+        bar_chart(s, q, &path).map_err(|e| write_error(&path, std::io::Error::other(e)))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// Bars per parameter: first-order and total indices (with their intervals) when Sobol ran,
+/// else μ* with σ as whisker.
+fn bar_chart(s: &Sensitivity, q: usize, path: &Path) -> std::result::Result<(), String> {
+    let quantity = &s.quantities[q];
+    let n = s.parameters.len();
+    let title = if quantity.name == "objective" {
+        format!("{}: sensitivity of the objective", s.campaign)
+    } else {
+        format!(
+            "{}: sensitivity of {}'s contribution",
+            s.campaign, quantity.name
+        )
+    };
+    // Series: (label, values, intervals, colour).
+    type Bars = (String, Vec<f64>, Vec<(f64, f64)>, RGBColor);
+    let (series, y_desc): (Vec<Bars>, &str) = match (&quantity.sobol, &quantity.morris) {
+        (Some(sobol), _) => (
+            vec![
+                (
+                    "first-order index".into(),
+                    sobol.first.clone(),
+                    sobol.first_ci.clone(),
+                    RGBColor(38, 139, 210),
+                ),
+                (
+                    "total index".into(),
+                    sobol.total.clone(),
+                    sobol.total_ci.clone(),
+                    RGBColor(203, 75, 22),
+                ),
+            ],
+            "Sobol index (95% bootstrap interval)",
+        ),
+        (None, Some(m)) => (
+            vec![(
+                "mu* (whisker: sigma)".into(),
+                m.mu_star.clone(),
+                m.mu_star
+                    .iter()
+                    .zip(&m.sigma)
+                    .map(|(u, sd)| (u - sd, u + sd))
+                    .collect(),
+                RGBColor(38, 139, 210),
+            )],
+            "Morris mu* (unit box of the scaled bounds)",
+        ),
+        (None, None) => return Ok(()),
+    };
+    let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
+    let top = series
+        .iter()
+        .flat_map(|(_, v, ci, _)| v.iter().copied().chain(ci.iter().map(|c| c.1)))
+        .map(finite)
+        .fold(0.0, f64::max);
+    let bottom = series
+        .iter()
+        .flat_map(|(_, v, ci, _)| v.iter().copied().chain(ci.iter().map(|c| c.0)))
+        .map(finite)
+        .fold(0.0, f64::min);
+    let top = if top > 0.0 { top * 1.1 } else { 1.0 };
+    let bottom = bottom * 1.1;
+    let names = s.parameters.clone();
+    let k = series.len() as f64;
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(&title, ("sans-serif", 20))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(-0.5..(n as f64 - 0.5), bottom..top)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
+                    names[i as usize].clone()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(y_desc)
+            .draw()?;
+        let width = 0.8 / k;
+        for (b, (label, values, intervals, color)) in series.iter().enumerate() {
+            let color = *color;
+            let offset = -0.4 + width * b as f64;
+            chart
+                .draw_series(values.iter().enumerate().map(|(i, &v)| {
+                    let x0 = i as f64 + offset;
+                    Rectangle::new([(x0, 0.0), (x0 + width, finite(v))], color.filled())
+                }))?
+                .label(label.as_str())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], color.filled())
+                });
+            chart.draw_series(intervals.iter().enumerate().map(|(i, &(lo, hi))| {
+                let x = i as f64 + offset + width / 2.0;
+                PathElement::new(
+                    vec![(x, finite(lo)), (x, finite(hi))],
+                    BLACK.stroke_width(1),
+                )
+            }))?;
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluator::CacheStats;
+    use crate::sensitivity::sampling::MorrisEffects;
+    use crate::sensitivity::{Methods, Quantity, Settings};
+
+    /// Morris alone on two parameters: `a` with μ* 1, `b` with μ* 0.005.
+    fn morris_only() -> Sensitivity {
+        let effects = MorrisEffects {
+            mu: vec![1.0, -0.005],
+            mu_star: vec![1.0, 0.005],
+            sigma: vec![0.1, 0.0],
+            effects: vec![4, 4],
+        };
+        Sensitivity {
+            campaign: "c".into(),
+            parameters: vec!["a".into(), "b".into()],
+            scales: vec![Scale::Lin, Scale::Log10],
+            bounds: vec![(0.0, 1.0), (1e-3, 1.0)],
+            settings: Settings {
+                methods: Methods::Morris,
+                samples: 4,
+                seed: 1,
+            },
+            quantities: ["objective", "y/1"]
+                .into_iter()
+                .map(|name| Quantity {
+                    name: name.into(),
+                    morris: Some(effects.clone()),
+                    sobol: None,
+                })
+                .collect(),
+            morris_points: 12,
+            morris_failed: 0,
+            sobol_points: 0,
+            sobol_failed: 0,
+            sobol_excluded: 0,
+            stats: CacheStats::default(),
+        }
+    }
+
+    #[test]
+    fn with_morris_alone_a_parameter_below_a_hundredth_of_the_largest_mu_star_is_fixable() {
+        let s = morris_only();
+        assert!(s.influential(0));
+        assert!(!s.influential(1));
+        assert_eq!(s.fixable(), vec!["b"]);
+        assert!(
+            s.conclusion().starts_with("b can be held fixed"),
+            "{}",
+            s.conclusion()
+        );
+        let json = sensitivity_json(&s);
+        let b = &json["parameters"][1];
+        assert_eq!(b["scale"], "log10");
+        assert_eq!(b["mu_star"], 0.005);
+        assert_eq!(b["influential"], false);
+        assert!(b.get("total").is_none(), "{b}");
+        assert_eq!(b["outputs"]["y/1"]["mu_star"], 0.005);
+        assert_eq!(json["methods"], serde_json::json!(["morris"]));
+    }
+
+    #[test]
+    fn a_morris_chart_is_written_per_quantity() {
+        let dir = tempfile::tempdir().unwrap();
+        let written = write(&morris_only(), dir.path()).unwrap();
+        let names: Vec<String> = written
+            .iter()
+            .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(
+            names,
+            [
+                "sensitivity.json",
+                "sensitivity_objective.svg",
+                "sensitivity_y_1.svg"
+            ]
+        );
+        let svg = std::fs::read_to_string(dir.path().join("sensitivity_y_1.svg")).unwrap();
+        assert!(svg.contains("mu* (whisker: sigma)"), "{svg}");
+        assert!(svg.contains("y/1"));
+    }
+}
