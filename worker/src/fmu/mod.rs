@@ -352,6 +352,8 @@ pub(crate) fn host_command() -> Option<&'static HostCommand> {
 struct Registered {
     hash: [u8; 32],
     interface: Interface,
+    /// Opened without naming an interface: the FMU's default (Model Exchange when offered).
+    default: bool,
     archive: Arc<Vec<u8>>,
     model: &'static dyn Model,
 }
@@ -376,14 +378,20 @@ pub fn open_bytes(
 ) -> Result<&'static dyn Model, FmuError> {
     let hash = content_hash(bytes);
     let mut registry = registry().lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(r) = registry
-        .iter()
-        .find(|r| r.hash == hash && interface.is_none_or(|i| i == r.interface))
-    {
+    if let Some(r) = registry.iter().find(|r| {
+        r.hash == hash
+            && match interface {
+                Some(i) => i == r.interface,
+                // Only an FMU opened by default answers for the default: one opened for
+                // Co-Simulation first must not stand in for its Model Exchange.
+                None => r.default,
+            }
+    }) {
         return Ok(r.model);
     }
     let dir = unpack(bytes, &hash, &unpack_root())?;
     let model = FmuModel::new(dir, &hash, interface, host_command().is_some())?;
+    let default = interface.is_none();
     let interface = model.interface;
     let archive = registry
         .iter()
@@ -393,6 +401,7 @@ pub fn open_bytes(
     registry.push(Registered {
         hash,
         interface,
+        default,
         archive,
         model,
     });
