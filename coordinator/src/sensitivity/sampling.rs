@@ -324,12 +324,9 @@ mod tests {
             .map(|p| Some(p.iter().zip(coefficients).map(|(x, c)| x * c).sum()))
             .collect();
         let m = morris_effects(&points, &values, 4);
-        for i in 0..4 {
-            assert!(
-                (m.mu_star[i] - coefficients[i].abs()).abs() < 1e-12,
-                "{m:?}"
-            );
-            assert!((m.mu[i] - coefficients[i]).abs() < 1e-12, "{m:?}");
+        for (i, c) in coefficients.iter().enumerate() {
+            assert!((m.mu_star[i] - c.abs()).abs() < 1e-12, "{m:?}");
+            assert!((m.mu[i] - c).abs() < 1e-12, "{m:?}");
             assert!(m.sigma[i] < 1e-12, "{m:?}");
             assert_eq!(m.effects[i], 10);
         }
