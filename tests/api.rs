@@ -96,18 +96,24 @@ fn message(search: &str, dataset: &str) -> pb::Campaign {
 /// Follow a campaign to its end; every state seen.
 fn watch(c: &Coordinator, id: &str) -> Vec<pb::CampaignState> {
     let mut client = c.client();
-    c.runtime.block_on(async {
-        let mut stream = client
-            .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
-            .await
-            .unwrap()
-            .into_inner();
-        let mut states = Vec::new();
-        while let Some(s) = stream.message().await.unwrap() {
-            states.push(s);
-        }
-        states
-    })
+    c.runtime.block_on(states_to_the_end(&mut client, id))
+}
+
+/// Every state a campaign's watch gives, to its end.
+async fn states_to_the_end(
+    client: &mut CalibrationClient<Channel>,
+    id: &str,
+) -> Vec<pb::CampaignState> {
+    let mut stream = client
+        .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
+        .await
+        .unwrap()
+        .into_inner();
+    let mut states = Vec::new();
+    while let Some(s) = stream.message().await.unwrap() {
+        states.push(s);
+    }
+    states
 }
 
 fn runs_of(result: &Value) -> Vec<(String, u64, f64, Value)> {
@@ -456,16 +462,7 @@ fn watch_url(url: &str, id: &str) -> Vec<pb::CampaignState> {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     runtime.block_on(async {
         let mut client = CalibrationClient::connect(url.to_string()).await.unwrap();
-        let mut stream = client
-            .watch_campaign(pb::WatchCampaignRequest { id: id.into() })
-            .await
-            .unwrap()
-            .into_inner();
-        let mut states = Vec::new();
-        while let Some(s) = stream.message().await.unwrap() {
-            states.push(s);
-        }
-        states
+        states_to_the_end(&mut client, id).await
     })
 }
 

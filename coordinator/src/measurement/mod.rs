@@ -18,6 +18,23 @@
 mod csv;
 mod error;
 mod mat;
+/// The bytes of the measurement file `path`; a missing file and an unreadable one are told
+/// apart.
+fn read_file(path: &Path) -> Result<Vec<u8>, MeasurementError> {
+    std::fs::read(path).map_err(|source| {
+        if source.kind() == std::io::ErrorKind::NotFound {
+            MeasurementError::NotFound {
+                path: path.to_owned(),
+            }
+        } else {
+            MeasurementError::Unreadable {
+                path: path.to_owned(),
+                source,
+            }
+        }
+    })
+}
+
 #[cfg(test)]
 mod robustness;
 #[cfg(test)]
@@ -52,18 +69,7 @@ impl Measurement {
         time_column: &str,
         columns: &[&str],
     ) -> Result<Measurement, MeasurementError> {
-        let bytes = std::fs::read(path).map_err(|source| {
-            if source.kind() == std::io::ErrorKind::NotFound {
-                MeasurementError::NotFound {
-                    path: path.to_owned(),
-                }
-            } else {
-                MeasurementError::Unreadable {
-                    path: path.to_owned(),
-                    source,
-                }
-            }
-        })?;
+        let bytes = read_file(path)?;
         Measurement::from_bytes(path, &bytes, time_column, columns)
     }
 
@@ -88,18 +94,7 @@ impl Measurement {
     /// file order, as the loader finds them: it is asked for a column no file can hold and
     /// lists the ones there are. The time column is checked on the way.
     pub fn column_names(path: &Path, time_column: &str) -> Result<Vec<String>, MeasurementError> {
-        let bytes = std::fs::read(path).map_err(|source| {
-            if source.kind() == std::io::ErrorKind::NotFound {
-                MeasurementError::NotFound {
-                    path: path.to_owned(),
-                }
-            } else {
-                MeasurementError::Unreadable {
-                    path: path.to_owned(),
-                    source,
-                }
-            }
-        })?;
+        let bytes = read_file(path)?;
         Self::column_names_of_bytes(path, &bytes, time_column)
     }
 
