@@ -655,3 +655,108 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
     });
     assert_eq!(unknown.unwrap_err().code(), tonic::Code::NotFound);
 }
+
+#[test]
+fn a_sensitivity_analysis_over_the_api_equals_calib_sensitivitys_and_is_not_simulated_twice() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = upload(&coordinator, &repo().join("examples/data/furuta_clean.csv"));
+    let search = "methods = [\"nelder-mead\"]\nstarts = 1\nmax_evaluations = 100";
+    let request = pb::SensitivityRequest {
+        campaign: Some(message(search, &dataset.id)),
+        method: String::new(),
+        samples: 16,
+        seed: 3,
+    };
+    let mut client = coordinator.client();
+    let analyse = |client: &mut CalibrationClient<Channel>| {
+        coordinator.runtime.block_on(async {
+            let mut stream = client
+                .sensitivity(request.clone())
+                .await
+                .unwrap()
+                .into_inner();
+            let mut states = Vec::new();
+            while let Some(s) = stream.message().await.unwrap() {
+                states.push(s);
+            }
+            states
+        })
+    };
+    let states = analyse(&mut client);
+    let done = states.last().unwrap();
+    assert_eq!(done.phase(), pb::CampaignPhase::Finished, "{done:?}");
+    // Morris 16 · 3 points, Sobol 16 · 4.
+    assert_eq!(done.planned, 16 * 3 + 16 * 4);
+    assert_eq!(done.evaluations, done.planned);
+    assert!(states
+        .windows(2)
+        .all(|w| w[0].evaluations <= w[1].evaluations));
+    let report: Value = serde_json::from_str(&done.report_json).unwrap();
+    assert!(done.files.contains_key("sensitivity_objective.svg"));
+    assert_eq!(report["conclusion"].as_str().unwrap(), done.conclusion);
+
+    // The same analysis as `calib sensitivity` on the same campaign file, in one process.
+    let campaign = write(dir.path(), "local.toml", &clean_campaign(search));
+    let out = calib(&[
+        "sensitivity",
+        campaign.to_str().unwrap(),
+        "--samples",
+        "16",
+        "--seed",
+        "3",
+        "--json",
+        "--db",
+        dir.path().join("local-db").to_str().unwrap(),
+        "--out",
+        dir.path().join("local").to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let local = json_of(&out);
+    assert_eq!(report["parameters"], local["parameters"]);
+    assert_eq!(report["conclusion"], local["conclusion"]);
+
+    // Asked again: the same analysis, finished, nothing simulated.
+    let simulated = cluster.simulations();
+    let again = analyse(&mut client);
+    assert_eq!(again.len(), 1);
+    assert_eq!(again[0].id, done.id);
+    assert_eq!(again[0].report_json, done.report_json);
+    let watched = coordinator.runtime.block_on(async {
+        let mut stream = client
+            .watch_analysis(pb::WatchAnalysisRequest {
+                id: done.id.clone(),
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        stream.message().await.unwrap().unwrap()
+    });
+    assert_eq!(watched.report_json, done.report_json);
+    assert_eq!(cluster.simulations(), simulated);
+
+    // A bad request names its field.
+    let mut bad = request.clone();
+    bad.method = "fast".into();
+    let refused = coordinator
+        .runtime
+        .block_on(async { client.sensitivity(bad).await.map(|_| ()) })
+        .unwrap_err();
+    assert_eq!(refused.code(), tonic::Code::InvalidArgument);
+    assert!(refused.message().starts_with("method:"), "{refused:?}");
+    let unknown = coordinator
+        .runtime
+        .block_on(async {
+            client
+                .watch_analysis(pb::WatchAnalysisRequest { id: "0".repeat(64) })
+                .await
+                .map(|_| ())
+        })
+        .unwrap_err();
+    assert_eq!(unknown.code(), tonic::Code::NotFound);
+}

@@ -70,6 +70,16 @@ fn furuta_the_pendulum_friction_drives_the_objective() {
     let morris = s.quantities[0].morris.as_ref().unwrap();
     assert!(morris.mu_star[pendulum] > 100.0 * morris.mu_star[index_of(&s, "armFriction")]);
     assert_eq!(s.fixable(), vec!["armFriction"]);
+    // ...which says more about the bounds than about the friction: the sentence warns
+    // that its nominal 0.012 sits where the linear box is hardly sampled.
+    let conclusion = s.conclusion();
+    assert!(
+        conclusion.starts_with("armFriction can be held fixed")
+            && conclusion.contains("Caution: armFriction's bounds [0, 0.9]")
+            && conclusion.contains("log10")
+            && !conclusion.contains("pendulumFriction"),
+        "{conclusion}"
+    );
 }
 
 #[test]

@@ -251,7 +251,63 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
             "{name}"
         );
     }
-    for tab in ["model", "measurement", "calibration", "diagnosis"] {
+    // The sensitivity analysed on the page before calibrating is `calib sensitivity`'s on
+    // the campaign file (the same 32 samples, seed 1): the same sentence, the same flags,
+    // the total indices shown to 3 digits.
+    let cli = common::calib(&[
+        "sensitivity",
+        repo().join("examples/furuta.toml").to_str().unwrap(),
+        "--samples",
+        "32",
+        "--json",
+        "--db",
+        dir.path().join("sensitivity-db").to_str().unwrap(),
+        "--out",
+        dir.path().join("sensitivity").to_str().unwrap(),
+    ]);
+    assert!(
+        cli.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cli.stderr)
+    );
+    let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    let shown = &page["sensitivity"];
+    assert_eq!(shown["conclusion"], cli["conclusion"], "{shown}");
+    assert!(
+        shown["status"].as_str().unwrap().contains("finished"),
+        "{shown}"
+    );
+    let rows = shown["rows"].as_array().unwrap();
+    let parameters = cli["parameters"].as_array().unwrap();
+    assert_eq!(rows.len(), parameters.len(), "{shown}");
+    for (row, p) in rows.iter().zip(parameters) {
+        assert_eq!(row[0], p["name"], "{row}");
+        let flag = if p["influential"].as_bool().unwrap() {
+            "influential"
+        } else {
+            "can be held fixed"
+        };
+        assert_eq!(row[1], flag, "{row}");
+        let total = p["total"].as_f64().unwrap();
+        let text: f64 = row[2].as_str().unwrap().parse().unwrap();
+        assert!(
+            (text - total).abs() <= 5e-3 * total.abs().max(1e-12),
+            "{row}: {total}"
+        );
+    }
+    assert!(
+        shown["plots"]
+            .to_string()
+            .contains("sensitivity of the objective"),
+        "{shown}"
+    );
+    for tab in [
+        "model",
+        "measurement",
+        "sensitivity",
+        "calibration",
+        "diagnosis",
+    ] {
         let png = std::fs::read(shots.join(format!("{tab}.png"))).unwrap();
         assert!(
             png.starts_with(b"\x89PNG") && png.len() > 10_000,

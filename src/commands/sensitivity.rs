@@ -61,8 +61,16 @@ pub fn run(args: Args) -> Outcome {
         samples: args.samples,
         seed: args.seed,
     };
+    // Progress on standard error, a line per slice of the designs.
+    let progress = |done: usize, planned: usize| {
+        if done > 0 {
+            eprintln!("sensitivity: {done} of {planned} evaluations");
+        }
+    };
     let result = match &args.workers.workers {
-        None => sensitivity::analyse(&campaign, LocalEvaluator, &store, settings),
+        None => {
+            sensitivity::analyse_reporting(&campaign, LocalEvaluator, &store, settings, &progress)
+        }
         Some(list) => {
             let status = |line: &str| {
                 if !line.is_empty() {
@@ -73,7 +81,13 @@ pub fn run(args: Args) -> Outcome {
             let stop = AtomicBool::new(false);
             std::thread::scope(|scope| {
                 scope.spawn(|| super::workers::watch(workers.pool(), &stop, &status));
-                let result = sensitivity::analyse(&campaign, workers.evaluator(), &store, settings);
+                let result = sensitivity::analyse_reporting(
+                    &campaign,
+                    workers.evaluator(),
+                    &store,
+                    settings,
+                    &progress,
+                );
                 stop.store(true, Ordering::SeqCst);
                 result
             })

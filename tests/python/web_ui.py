@@ -25,6 +25,7 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 # The campaign of examples/furuta.toml, typed into the page.
 THETA0 = "0.5235987755983"
+SENSITIVITY_SAMPLES = "32"  # base samples of the sensitivity asked on the Calibration tab
 LONG = 900  # seconds a campaign or a diagnosis may take on a loaded machine
 
 
@@ -134,6 +135,23 @@ def workflow(url, data, shots, out):
         type_into(driver, "starts", "4")
         type_into(driver, "max-evaluations", "2500")
         type_into(driver, "seed", "1")
+        # Before calibrating: the sensitivity of this campaign.
+        Select(by_id(driver, "sensitivity-method")).select_by_value("")
+        type_into(driver, "sensitivity-samples", SENSITIVITY_SAMPLES)
+        by_id(driver, "analyse").click()
+        wait(driver, LONG).until(lambda d: by_id(d, "sensitivity-conclusion").is_displayed()
+                                 or by_id(d, "sensitivity-error").is_displayed())
+        no_error(driver, "sensitivity-error")
+        sensitivity = {
+            "conclusion": by_id(driver, "sensitivity-conclusion").text,
+            "status": by_id(driver, "sensitivity-status").text,
+            "rows": [[c.text for c in row.find_elements(By.CSS_SELECTOR, "th, td")]
+                     for row in driver.find_elements(By.CSS_SELECTOR, "#sensitivity-table tbody tr")],
+            "plots": [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#sensitivity-plots figcaption")],
+        }
+        by_id(driver, "sensitivity").location_once_scrolled_into_view
+        screenshot(driver, os.path.join(shots, "sensitivity.png"))
+
         by_id(driver, "start").click()
         live = set()
 
@@ -197,6 +215,7 @@ def workflow(url, data, shots, out):
                 "candidates": candidates,
                 "diagnosis_plots": diagnosis_plots,
                 "reopened": reopened,
+                "sensitivity": sensitivity,
             }, f, indent=2)
     finally:
         driver.quit()

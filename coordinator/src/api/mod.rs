@@ -3,10 +3,12 @@
 
 pub mod spec;
 
+use crate::campaigns::analyses::AnalysisSnapshot;
 use crate::campaigns::datasets::MAX_DATASET_BYTES;
 use crate::campaigns::diagnoses::DiagnosisSnapshot;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
+use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
 use std::pin::Pin;
@@ -16,6 +18,10 @@ use tonic::{Request, Response, Status, Streaming};
 
 /// Largest chunk of an upload.
 pub const MAX_CHUNK_BYTES: usize = 1 << 20;
+
+/// Most samples a `Sensitivity` request may ask for (Sobol's design takes
+/// `samples · (parameters + 2)` evaluations).
+pub const MAX_SENSITIVITY_SAMPLES: usize = 4096;
 
 /// Largest page of `ListCampaigns`.
 pub const MAX_PAGE: usize = 100;
@@ -58,6 +64,30 @@ impl CalibrationApi {
             start_time: info.start_time,
             stop_time: info.stop_time,
         })
+    }
+
+    /// The campaign file of a campaign message, its measurement the uploaded dataset it
+    /// names.
+    async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
+        if campaign.dataset_id.is_empty() {
+            return Err(Status::invalid_argument(
+                "campaign.dataset_id: missing; upload the data with UploadDataset first",
+            ));
+        }
+        let dataset = {
+            let campaigns = self.campaigns.clone();
+            let id = campaign.dataset_id.clone();
+            blocking(move || campaigns.datasets().get(&id)).await?
+        };
+        let Some(dataset) = dataset else {
+            return Err(Status::not_found(format!(
+                "campaign.dataset_id: no dataset `{}` on this coordinator; upload it with \
+                 UploadDataset",
+                campaign.dataset_id
+            )));
+        };
+        let file = self.campaigns.datasets().file(&dataset);
+        spec::campaign_file(campaign, &file, &dataset.time_column).map_err(Status::invalid_argument)
     }
 }
 
@@ -137,6 +167,51 @@ fn diagnosis_state(s: &DiagnosisSnapshot) -> pb::DiagnosisState {
     }
 }
 
+fn analysis_state(s: &AnalysisSnapshot) -> pb::AnalysisState {
+    pb::AnalysisState {
+        id: s.id.clone(),
+        phase: phase(s.phase).into(),
+        evaluations: s.evaluations,
+        planned: s.planned,
+        failure: s.failure.clone().unwrap_or_default(),
+        report_json: s
+            .report
+            .as_ref()
+            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
+            .unwrap_or_default(),
+        conclusion: s.conclusion.clone(),
+        files: s.files.iter().cloned().collect(),
+    }
+}
+
+type AnalysisStream =
+    Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::AnalysisState, Status>> + Send>>;
+
+/// Every state of `receiver` as a message, from the current one to the one that `ended`.
+fn follow<S, M>(
+    mut receiver: tokio::sync::watch::Receiver<S>,
+    message: fn(&S) -> M,
+    ended: fn(&S) -> bool,
+) -> Pin<Box<dyn tokio_stream::Stream<Item = Result<M, Status>> + Send>>
+where
+    S: Clone + Send + Sync + 'static,
+    M: Send + 'static,
+{
+    let (tx, rx) = tokio::sync::mpsc::channel(16);
+    tokio::spawn(async move {
+        loop {
+            let snapshot = receiver.borrow_and_update().clone();
+            if tx.send(Ok(message(&snapshot))).await.is_err() || ended(&snapshot) {
+                break;
+            }
+            if receiver.changed().await.is_err() {
+                break;
+            }
+        }
+    });
+    Box::pin(ReceiverStream::new(rx))
+}
+
 type StateStream =
     Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::CampaignState, Status>> + Send>>;
 
@@ -182,28 +257,9 @@ impl Calibration for CalibrationApi {
         let campaign = request
             .campaign
             .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
-        if campaign.dataset_id.is_empty() {
-            return Err(Status::invalid_argument(
-                "campaign.dataset_id: missing; upload the data with UploadDataset first",
-            ));
-        }
+        let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
-        let dataset = {
-            let campaigns = campaigns.clone();
-            let id = campaign.dataset_id.clone();
-            blocking(move || campaigns.datasets().get(&id)).await?
-        };
-        let Some(dataset) = dataset else {
-            return Err(Status::not_found(format!(
-                "campaign.dataset_id: no dataset `{}` on this coordinator; upload it with \
-                 UploadDataset",
-                campaign.dataset_id
-            )));
-        };
-        let file = campaigns.datasets().file(&dataset);
-        let text = spec::campaign_file(&campaign, &file, &dataset.time_column)
-            .map_err(Status::invalid_argument)?;
         let (id, started) = blocking(move || campaigns.submit(&text, key.as_deref())).await?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
     }
@@ -220,26 +276,15 @@ impl Calibration for CalibrationApi {
             let id = id.clone();
             blocking(move || campaigns.watch(&id)).await?
         };
-        let (tx, rx) = tokio::sync::mpsc::channel(16);
         match watched.ok_or_else(|| not_found(&id))? {
             Watched::Stored(snapshot) => {
-                let _ = tx.send(Ok(state(&snapshot))).await;
+                let message = Ok(state(&snapshot));
+                Ok(Response::new(Box::pin(tokio_stream::once(message))))
             }
-            Watched::Live(mut receiver) => {
-                tokio::spawn(async move {
-                    loop {
-                        let snapshot = receiver.borrow_and_update().clone();
-                        if tx.send(Ok(state(&snapshot))).await.is_err() || snapshot.phase.ended() {
-                            break;
-                        }
-                        if receiver.changed().await.is_err() {
-                            break;
-                        }
-                    }
-                });
+            Watched::Live(receiver) => {
+                Ok(Response::new(follow(receiver, state, |s| s.phase.ended())))
             }
         }
-        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
     }
 
     type DiagnoseStream = DiagnosisStream;
@@ -254,21 +299,10 @@ impl Calibration for CalibrationApi {
             let id = id.clone();
             blocking(move || campaigns.diagnose(&id)).await?
         };
-        let mut receiver = watched.ok_or_else(|| not_found(&id))?;
-        let (tx, rx) = tokio::sync::mpsc::channel(16);
-        tokio::spawn(async move {
-            loop {
-                let snapshot = receiver.borrow_and_update().clone();
-                if tx.send(Ok(diagnosis_state(&snapshot))).await.is_err() || snapshot.phase.ended()
-                {
-                    break;
-                }
-                if receiver.changed().await.is_err() {
-                    break;
-                }
-            }
-        });
-        Ok(Response::new(Box::pin(ReceiverStream::new(rx))))
+        let receiver = watched.ok_or_else(|| not_found(&id))?;
+        Ok(Response::new(follow(receiver, diagnosis_state, |s| {
+            s.phase.ended()
+        })))
     }
 
     async fn get_campaign(
@@ -332,5 +366,65 @@ impl Calibration for CalibrationApi {
         found
             .map(|s| Response::new(state(&s)))
             .ok_or_else(|| not_found(&id))
+    }
+
+    type SensitivityStream = AnalysisStream;
+
+    async fn sensitivity(
+        &self,
+        request: Request<pb::SensitivityRequest>,
+    ) -> Result<Response<Self::SensitivityStream>, Status> {
+        let request = request.into_inner();
+        let campaign = request
+            .campaign
+            .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
+        let methods = match request.method.as_str() {
+            "" | "both" => Methods::Both,
+            "morris" => Methods::Morris,
+            "sobol" => Methods::Sobol,
+            other => {
+                return Err(Status::invalid_argument(format!(
+                    "method: `{other}` is not \"morris\", \"sobol\" or empty (both)"
+                )))
+            }
+        };
+        let settings = Settings {
+            methods,
+            samples: match request.samples {
+                0 => DEFAULT_SAMPLES,
+                n => n as usize,
+            },
+            seed: match request.seed {
+                0 => 1,
+                n => n,
+            },
+        };
+        if settings.samples < 2 || settings.samples > MAX_SENSITIVITY_SAMPLES {
+            return Err(Status::invalid_argument(format!(
+                "samples: {} is not between 2 and {MAX_SENSITIVITY_SAMPLES}",
+                settings.samples
+            )));
+        }
+        let text = self.campaign_file(&campaign).await?;
+        let campaigns = self.campaigns.clone();
+        let receiver = blocking(move || campaigns.sensitivity(&text, settings)).await?;
+        Ok(Response::new(follow(receiver, analysis_state, |s| {
+            s.phase.ended()
+        })))
+    }
+
+    type WatchAnalysisStream = AnalysisStream;
+
+    async fn watch_analysis(
+        &self,
+        request: Request<pb::WatchAnalysisRequest>,
+    ) -> Result<Response<Self::WatchAnalysisStream>, Status> {
+        let id = request.into_inner().id;
+        let receiver = self.campaigns.watch_analysis(&id).ok_or_else(|| {
+            Status::not_found(format!("id: no analysis `{id}` on this coordinator"))
+        })?;
+        Ok(Response::new(follow(receiver, analysis_state, |s| {
+            s.phase.ended()
+        })))
     }
 }

@@ -16,6 +16,7 @@
 //! **No workers.** A campaign whose batch no worker could do stays running: it waits, with
 //! growing pauses (at most [`MAX_PAUSE`]), and resumes from the store when workers are back.
 
+pub mod analyses;
 pub mod datasets;
 pub mod diagnoses;
 
@@ -126,6 +127,7 @@ pub struct Campaigns {
     live: Mutex<HashMap<CampaignId, Arc<Live>>>,
     keys: Mutex<HashMap<String, CampaignId>>,
     diagnoses: Mutex<HashMap<CampaignId, watch::Sender<diagnoses::DiagnosisSnapshot>>>,
+    analyses: Mutex<HashMap<[u8; 32], watch::Sender<analyses::AnalysisSnapshot>>>,
 }
 
 impl Campaigns {
@@ -143,6 +145,7 @@ impl Campaigns {
             live: Mutex::new(HashMap::new()),
             keys: Mutex::new(HashMap::new()),
             diagnoses: Mutex::new(HashMap::new()),
+            analyses: Mutex::new(HashMap::new()),
         }
     }
 

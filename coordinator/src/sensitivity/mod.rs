@@ -23,6 +23,12 @@ use sampling::{MorrisEffects, SobolIndices};
 /// The total index on the objective at and above which a parameter is influential.
 pub const INFLUENTIAL_TOTAL: f64 = 0.01;
 
+/// [`Sensitivity::crowded_at_the_bottom`]: a nominal value in this bottom fraction of linear
+/// bounds...
+pub const CROWDED_FRACTION: f64 = 0.05;
+/// ...and at least this many decades below the upper bound.
+pub const CROWDED_DECADES: i32 = 1;
+
 /// Which analyses to run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Methods {
@@ -72,6 +78,8 @@ pub struct Sensitivity {
     pub parameters: Vec<String>,
     pub scales: Vec<Scale>,
     pub bounds: Vec<(f64, f64)>,
+    /// Each free parameter's nominal value.
+    pub nominals: Vec<f64>,
     pub settings: Settings,
     /// The objective first, then one per output in campaign order.
     pub quantities: Vec<Quantity>,
@@ -120,8 +128,40 @@ impl Sensitivity {
             .unwrap_or(0)
     }
 
-    /// The sentence naming the parameters that can be held fixed.
+    /// Whether parameter `i` is searched on a linear scale over bounds so wide that its
+    /// nominal value sits in the bottom [`CROWDED_FRACTION`] of them, at least
+    /// [`CROWDED_DECADES`] decades below the upper bound: the samples then fall almost all
+    /// far above the values that matter, and a small index may only say so.
+    pub fn crowded_at_the_bottom(&self, i: usize) -> bool {
+        let (min, max) = self.bounds[i];
+        let nominal = self.nominals[i];
+        self.scales[i] == Scale::Lin
+            && min >= 0.0
+            && nominal > 0.0
+            && nominal - min < CROWDED_FRACTION * (max - min)
+            && max >= 10f64.powi(CROWDED_DECADES) * nominal
+    }
+
+    /// The sentence naming the parameters that can be held fixed, with a caution for those
+    /// whose bounds hide their small values (see [`Self::crowded_at_the_bottom`]).
     pub fn conclusion(&self) -> String {
+        let mut sentence = self.fixable_sentence();
+        for i in (0..self.parameters.len()).filter(|&i| !self.influential(i)) {
+            if self.crowded_at_the_bottom(i) {
+                let (min, max) = self.bounds[i];
+                sentence.push_str(&format!(
+                    " Caution: {name}'s bounds [{min}, {max}] span decades on a linear scale, \
+                     so values near its nominal {nominal} are hardly sampled; analyse it on \
+                     scale = \"log10\" (min above 0) before holding it fixed.",
+                    name = self.parameters[i],
+                    nominal = self.nominals[i],
+                ));
+            }
+        }
+        sentence
+    }
+
+    fn fixable_sentence(&self) -> String {
         let fixable = self.fixable();
         let rule = if self.quantities[0].sobol.is_some() {
             format!("total index on the objective below {INFLUENTIAL_TOTAL}")
@@ -153,12 +193,40 @@ fn quantities(objective: &Objective, e: &Evaluation) -> Option<Vec<f64>> {
     Some(q)
 }
 
+/// Points a design is evaluated in, at most: large enough to fill many workers, small enough
+/// to report progress while a large design runs. (Every point is independent, so slicing
+/// changes no number.)
+pub const SLICE_POINTS: usize = 256;
+
+/// The evaluations an analysis of `dim` free parameters needs.
+pub fn planned(dim: usize, settings: Settings) -> usize {
+    let mut n = 0;
+    if settings.methods.morris() {
+        n += settings.samples * (dim + 1);
+    }
+    if settings.methods.sobol() {
+        n += settings.samples * (dim + 2);
+    }
+    n
+}
+
 /// Analyse `campaign`'s sensitivities, simulating through `evaluator` behind `store`.
 pub fn analyse<E: Evaluator>(
     campaign: &Campaign,
     evaluator: E,
     store: &dyn Store,
     settings: Settings,
+) -> Result<Sensitivity> {
+    analyse_reporting(campaign, evaluator, store, settings, &|_, _| {})
+}
+
+/// [`analyse`], calling `progress(evaluated, planned)` after every slice of the designs.
+pub fn analyse_reporting<E: Evaluator>(
+    campaign: &Campaign,
+    evaluator: E,
+    store: &dyn Store,
+    settings: Settings,
+    progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Sensitivity> {
     let dim = campaign.free.len();
     if dim == 0 {
@@ -191,16 +259,22 @@ pub fn analyse<E: Evaluator>(
     let space = UnitBox::new(&campaign.free);
     let evaluator = StoredEvaluator::new(evaluator, store);
     let outputs = campaign.outputs.len();
+    let total = planned(dim, settings);
+    let done = std::cell::Cell::new(0);
+    progress(0, total);
     let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
-        let physical: Vec<Vec<f64>> = unit.iter().map(|u| space.to_physical(u)).collect();
-        let evaluations = evaluator.evaluate(&objective, &physical)?;
-        if let Some(e) = evaluator.error() {
-            return Err(e.into());
+        let mut values = Vec::with_capacity(unit.len());
+        for slice in unit.chunks(SLICE_POINTS) {
+            let physical: Vec<Vec<f64>> = slice.iter().map(|u| space.to_physical(u)).collect();
+            let evaluations = evaluator.evaluate(&objective, &physical)?;
+            if let Some(e) = evaluator.error() {
+                return Err(e.into());
+            }
+            values.extend(evaluations.iter().map(|e| quantities(&objective, e)));
+            done.set(done.get() + slice.len());
+            progress(done.get(), total);
         }
-        Ok(evaluations
-            .iter()
-            .map(|e| quantities(&objective, e))
-            .collect())
+        Ok(values)
     };
     let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
         values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
@@ -212,6 +286,7 @@ pub fn analyse<E: Evaluator>(
         parameters: campaign.free.iter().map(|p| p.name.clone()).collect(),
         scales: campaign.free.iter().map(|p| p.scale).collect(),
         bounds: campaign.free.iter().map(|p| (p.min, p.max)).collect(),
+        nominals: campaign.free.iter().map(|p| p.nominal).collect(),
         settings,
         quantities: names
             .into_iter()

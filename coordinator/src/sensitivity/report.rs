@@ -321,6 +321,7 @@ mod tests {
             parameters: vec!["a".into(), "b".into()],
             scales: vec![Scale::Lin, Scale::Log10],
             bounds: vec![(0.0, 1.0), (1e-3, 1.0)],
+            nominals: vec![0.5, 0.5],
             settings: Settings {
                 methods: Methods::Morris,
                 samples: 4,

@@ -91,6 +91,8 @@ impl WebApp {
             .route("/api/v1/CancelCampaign", post(cancel_campaign))
             .route("/api/v1/WatchCampaign/{id}", get(watch_campaign))
             .route("/api/v1/Diagnose/{id}", get(diagnose))
+            .route("/api/v1/Sensitivity", post(sensitivity))
+            .route("/api/v1/WatchAnalysis/{id}", get(watch_analysis))
             .route("/api/v1/ListModels", post(list_models))
             .route("/api/v1/Describe", post(describe))
             .route("/api/v1/Simulate", post(simulate))
@@ -270,6 +272,34 @@ async fn diagnose(
     let stream = app
         .calibration
         .diagnose(Request::new(pb::DiagnoseRequest { id }))
+        .await?
+        .into_inner();
+    Ok(events(stream))
+}
+
+/// `POST /api/v1/Sensitivity`: starts (or joins) the analysis and answers with the
+/// stream's first state, which names it; `WatchAnalysis/{id}` follows it.
+async fn sensitivity(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
+    let request: pb::SensitivityRequest = decode(&body)?;
+    let mut stream = app
+        .calibration
+        .sensitivity(Request::new(request))
+        .await?
+        .into_inner();
+    match stream.next().await {
+        Some(first) => Ok(json(&first?)),
+        None => Err(ApiError(Status::internal("the analysis sent no state"))),
+    }
+}
+
+/// `GET /api/v1/WatchAnalysis/{id}`: the `WatchAnalysis` stream as Server-Sent Events.
+async fn watch_analysis(
+    State(app): State<WebApp>,
+    Path(id): Path<String>,
+) -> Result<EventStream, ApiError> {
+    let stream = app
+        .calibration
+        .watch_analysis(Request::new(pb::WatchAnalysisRequest { id }))
         .await?
         .into_inner();
     Ok(events(stream))
