@@ -45,7 +45,10 @@ fn furuta_both_frictions_are_identifiable_and_agree_with_the_linearised_interval
         let width = high - low;
         let linearised = p.linearised.ci_high - p.linearised.ci_low;
         let ratio = width / linearised;
-        assert!((0.5..=2.0).contains(&ratio), "{name}: widths {width} vs {linearised}");
+        assert!(
+            (0.5..=2.0).contains(&ratio),
+            "{name}: widths {width} vs {linearised}"
+        );
         // The record's simulator is not calib's: widened to twice its width about its
         // middle, the interval holds the true value.
         let middle = 0.5 * (low + high);
@@ -103,8 +106,8 @@ fn hx_all_the_air_side_pressure_drop_factor_is_open_on_both_sides() {
     assert_eq!(airdp["low"]["end"], "bound");
     assert_eq!(airdp["high"]["end"], "bound");
     // Flat: each step costs one evaluation, no re-optimisation, a handful of steps.
-    let evaluations =
-        airdp["low"]["evaluations"].as_u64().unwrap() + airdp["high"]["evaluations"].as_u64().unwrap();
+    let evaluations = airdp["low"]["evaluations"].as_u64().unwrap()
+        + airdp["high"]["evaluations"].as_u64().unwrap();
     assert!(evaluations <= 8, "{evaluations} evaluations");
     let conclusions = json["conclusions"].as_array().unwrap();
     assert_eq!(conclusions.len(), 1);
@@ -165,7 +168,9 @@ fn a_profile_on_workers_equals_the_local_one_and_a_rerun_simulates_nothing() {
     let calibration = on_workers.calibration.unwrap();
     assert_eq!(
         simulations,
-        calibration.simulated + on_workers.stats.evaluations.simulated + on_workers.stats.trajectories
+        calibration.simulated
+            + on_workers.stats.evaluations.simulated
+            + on_workers.stats.trajectories
     );
     assert!(on_workers.stats.evaluations.simulated > 0);
     // Again on the same store: the best point from the campaign's record, every profile
@@ -174,7 +179,10 @@ fn a_profile_on_workers_equals_the_local_one_and_a_rerun_simulates_nothing() {
     assert_eq!(again.best_from, BestFrom::Store);
     assert!(again.calibration.is_none());
     assert_eq!(again.stats.evaluations.simulated, 0);
-    assert_eq!(again.stats.evaluations.cached, again.stats.evaluations.requested);
+    assert_eq!(
+        again.stats.evaluations.cached,
+        again.stats.evaluations.requested
+    );
     assert_eq!(again.stats.trajectories, 1 + 2 * 2);
     assert_eq!(again.profiles, local.profiles);
 }
@@ -205,11 +213,17 @@ fn the_command_prints_the_intervals_and_writes_a_plot_per_parameter() {
     );
     let table = String::from_utf8_lossy(&run.stdout);
     assert!(table.contains("calibrated first"), "{table}");
-    assert!(table.contains("Every profiled parameter is identifiable."), "{table}");
+    assert!(
+        table.contains("Every profiled parameter is identifiable."),
+        "{table}"
+    );
     for name in ["armFriction", "pendulumFriction"] {
-        let svg = std::fs::read_to_string(out.join(format!("clean/profile/profile_{name}.svg")))
-            .unwrap();
-        assert!(svg.contains("95% threshold") && svg.contains("linearised"), "{name}");
+        let svg =
+            std::fs::read_to_string(out.join(format!("clean/profile/profile_{name}.svg"))).unwrap();
+        assert!(
+            svg.contains("95% threshold") && svg.contains("linearised"),
+            "{name}"
+        );
     }
     let written: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("clean/profile/profile.json")).unwrap(),
@@ -238,4 +252,41 @@ fn the_command_prints_the_intervals_and_writes_a_plot_per_parameter() {
     ]);
     assert_eq!(wrong.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&wrong.stderr).contains("armFrction"));
+}
+
+#[test]
+fn diagnose_with_profile_gives_the_selected_effect_a_profile_interval() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let out = dir.path().join("out");
+    let campaign = repo().join("examples/furuta_viscous_arm.toml");
+    let json = json_of(&calib(&[
+        "diagnose",
+        campaign.to_str().unwrap(),
+        "--profile",
+        "--json",
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]));
+    assert_eq!(
+        json["selected"],
+        serde_json::json!(["viscous_friction.arm"])
+    );
+    let profiles = json["profiles"].as_array().unwrap();
+    assert_eq!(profiles.len(), 1, "{profiles:?}");
+    let p = &profiles[0];
+    assert_eq!(p["name"], "viscous_friction.arm");
+    assert_eq!(p["identifiable"], true);
+    let (low, high) = (
+        p["ci_low"].as_f64().unwrap(),
+        p["ci_high"].as_f64().unwrap(),
+    );
+    let linearised =
+        p["linearised"]["ci_high"].as_f64().unwrap() - p["linearised"]["ci_low"].as_f64().unwrap();
+    assert!((0.5..=2.0).contains(&((high - low) / linearised)), "{p}");
+    // The record was made with 0.002.
+    assert!(low < 0.002 && 0.002 < high, "[{low}, {high}]");
+    assert!(json["profile_threshold"]["delta"].as_f64().unwrap() > 0.0);
 }

@@ -73,9 +73,7 @@ pub fn run(args: Args) -> Outcome {
                 .0
                 .set_message("profiling the likelihood of the selected effects");
             match &workers {
-                Some(workers) => {
-                    diagnosis::profile_selected(&mut d, &workers.evaluator(), &store)?
-                }
+                Some(workers) => diagnosis::profile_selected(&mut d, &workers.evaluator(), &store)?,
                 None => diagnosis::profile_selected(&mut d, &LocalEvaluator, &store)?,
             }
         }
@@ -150,7 +148,11 @@ pub fn run(args: Args) -> Outcome {
             p.name,
             end(p.ci_low()),
             end(p.ci_high()),
-            if p.identifiable() { "" } else { "  (not identifiable)" }
+            if p.identifiable() {
+                ""
+            } else {
+                "  (not identifiable)"
+            }
         );
     }
     println!(

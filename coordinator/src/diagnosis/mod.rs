@@ -301,7 +301,12 @@ where
     campaign.free = fit.free.clone();
     let objective = Objective::new(&campaign, &d.measurement)?;
     let samples = objective.grid.len() * objective.outputs.len();
-    let threshold = Threshold::new(fit.objective, samples, fit.free.len(), fit.effective_samples);
+    let threshold = Threshold::new(
+        fit.objective,
+        samples,
+        fit.free.len(),
+        fit.effective_samples,
+    );
     let stored = StoredEngine::new(engine, store);
     let around = Around {
         objective: &objective,

@@ -297,8 +297,14 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
         fit_table(&mut s, &d.final_fit);
     }
     if !d.profiles.is_empty() {
-        let _ = writeln!(s, "## Profile likelihood intervals of the selected effects\n");
-        let _ = writeln!(s, "| effect | value | profile 95% interval | linearised 95% interval |");
+        let _ = writeln!(
+            s,
+            "## Profile likelihood intervals of the selected effects\n"
+        );
+        let _ = writeln!(
+            s,
+            "| effect | value | profile 95% interval | linearised 95% interval |"
+        );
         let _ = writeln!(s, "|---|---|---|---|");
         let end = |v: Option<f64>| v.map_or_else(|| "open".to_string(), |v| format!("{v:.6e}"));
         for p in &d.profiles {

@@ -247,7 +247,10 @@ pub struct Profiles {
 impl Profiles {
     /// One sentence per parameter that is not identifiable.
     pub fn conclusions(&self) -> Vec<String> {
-        self.profiles.iter().filter_map(|p| p.conclusion()).collect()
+        self.profiles
+            .iter()
+            .filter_map(|p| p.conclusion())
+            .collect()
     }
 }
 

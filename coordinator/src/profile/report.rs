@@ -109,7 +109,12 @@ pub fn table(s: &Profiles) -> String {
     let _ = writeln!(
         out,
         "  {:<width$} {:>13}  {:>31}  {:>31}  {:>12} {:>11}",
-        "parameter", "value", "profile 95% interval", "linearised 95% interval", "identifiable", "evaluations"
+        "parameter",
+        "value",
+        "profile 95% interval",
+        "linearised 95% interval",
+        "identifiable",
+        "evaluations"
     );
     for p in &s.profiles {
         let _ = writeln!(

@@ -338,7 +338,7 @@ impl Walker<'_, '_> {
                 &path[..]
             };
             let q = self.point_at(self.warm_start(path, u))?;
-            if !(q.objective < p.failure) {
+            if q.objective >= p.failure || q.objective.is_nan() {
                 break;
             }
             if q.rise >= p.threshold {

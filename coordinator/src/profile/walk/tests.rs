@@ -13,8 +13,7 @@ impl Quadratic {
     fn new() -> Self {
         Quadratic {
             c: DVector::from_vec(vec![0.4, 0.5, 0.6]),
-            h: DMatrix::from_row_slice(3, 3, &[2.0, 1.2, 0.0, 1.2, 1.0, 0.3, 0.0, 0.3, 0.5])
-                * 1e4,
+            h: DMatrix::from_row_slice(3, 3, &[2.0, 1.2, 0.0, 1.2, 1.0, 0.3, 0.0, 0.3, 0.5]) * 1e4,
             f0: 3.0,
         }
     }
@@ -119,7 +118,10 @@ fn a_coordinate_without_effect_is_open_on_both_sides_within_a_few_evaluations() 
         assert!(side.evaluations <= 4, "{} evaluations", side.evaluations);
         let last = side.points.last().unwrap();
         assert_eq!(last.unit[3], if direction > 0.0 { 1.0 } else { 0.0 });
-        assert!(side.points.iter().all(|pt| pt.rise == 0.0 && !pt.reoptimised));
+        assert!(side
+            .points
+            .iter()
+            .all(|pt| pt.rise == 0.0 && !pt.reoptimised));
     }
 }
 
@@ -160,7 +162,13 @@ fn failed_simulations_leave_a_side_open() {
     let batch = |points: &[Vec<f64>]| -> Result<Vec<f64>> {
         Ok(points
             .iter()
-            .map(|u| if u[0] > 0.6 { 1e30 } else { 1.0 + (u[0] - 0.5).powi(2) })
+            .map(|u| {
+                if u[0] > 0.6 {
+                    1e30
+                } else {
+                    1.0 + (u[0] - 0.5).powi(2)
+                }
+            })
             .collect())
     };
     let p = problem(&batch, vec![0.5], 1.0, vec![0.01]);
