@@ -41,6 +41,11 @@ enum Command {
     /// parameters over their bounds: Morris effects and Sobol indices, a table, bar charts
     /// and sensitivity.json, and the parameters that can be held fixed.
     Sensitivity(commands::sensitivity::Args),
+    /// Profile likelihoods of the free parameters around the campaign's best point: the
+    /// others re-optimised along a grid of each, 95% intervals where the objective rises by
+    /// the χ² threshold, profile.json and a plot per parameter, and which are not
+    /// identifiable.
+    Profile(commands::profile::Args),
     /// Serve the hosted models to coordinators (gRPC Simulator, health, reflection).
     Worker(commands::worker::Args),
     /// Serve the Calibration API (campaigns from `calib submit` and gRPC clients) and the
@@ -106,6 +111,7 @@ fn main() -> ExitCode {
         Command::Calibrate(args) => commands::calibrate::run(args),
         Command::Diagnose(args) => commands::diagnose::run(args),
         Command::Sensitivity(args) => commands::sensitivity::run(args),
+        Command::Profile(args) => commands::profile::run(args),
         Command::Worker(args) => commands::worker::run(args),
         Command::Coordinator(args) => commands::coordinator::run(args),
         Command::Health(args) => commands::health::run(args),

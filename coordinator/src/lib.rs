@@ -13,6 +13,7 @@ pub mod evaluator;
 pub mod measurement;
 pub mod objective;
 pub mod optim;
+pub mod profile;
 pub mod report;
 pub mod sensitivity;
 pub mod server;

@@ -27,6 +27,10 @@ pub struct Args {
     /// only the points it lacks [default: results/.calib-db beside the campaign file].
     #[arg(long, value_name = "DIR")]
     db: Option<PathBuf>,
+    /// Also profile the likelihood of each selected effect around the final fit (as `calib
+    /// profile` does, with the fit's noise level): its 95% interval beside the linearised one.
+    #[arg(long)]
+    profile: bool,
 }
 
 /// A spinner counting evaluations, drawn only on a terminal.
@@ -63,6 +67,18 @@ pub fn run(args: Args) -> Outcome {
         }
         None => diagnosis::diagnose_with_store(&campaign, &LocalEvaluator, &store, &spinner),
     };
+    let result = result.and_then(|mut d| {
+        if args.profile {
+            spinner
+                .0
+                .set_message("profiling the likelihood of the selected effects");
+            match &workers {
+                Some(workers) => diagnosis::profile_selected(&mut d, &workers.evaluator(), &store)?,
+                None => diagnosis::profile_selected(&mut d, &LocalEvaluator, &store)?,
+            }
+        }
+        Ok(d)
+    });
     spinner.0.finish_and_clear();
     let d = result?;
     // `--out` is a results root, as for `calib calibrate`: one `<name>/` per campaign.
@@ -121,6 +137,23 @@ pub fn run(args: Args) -> Outcome {
     }
     for note in report::bound_notes(&d.final_fit) {
         println!("  note: {note}");
+    }
+    if args.profile && d.profiles.is_empty() {
+        println!("  (no effect selected: nothing to profile)");
+    }
+    for p in &d.profiles {
+        let end = |v: Option<f64>| v.map_or_else(|| "open".to_string(), |v| format!("{v:.6e}"));
+        println!(
+            "  {:<28} profile 95% [{}, {}]{}",
+            p.name,
+            end(p.ci_low()),
+            end(p.ci_high()),
+            if p.identifiable() {
+                ""
+            } else {
+                "  (not identifiable)"
+            }
+        );
     }
     println!(
         "\nobjective {:.4e} -> {:.4e}, held out {:.4e} -> {:.4e}",

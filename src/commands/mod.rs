@@ -11,6 +11,7 @@ pub mod diagnose;
 pub mod fmu;
 pub mod health;
 pub mod models;
+pub mod profile;
 pub mod security;
 pub mod sensitivity;
 pub mod simulate;

@@ -139,6 +139,11 @@ pub struct Diagnosis {
     /// Evaluations simulated and answered by the store, trajectories simulated.
     pub stats: EngineStats,
     pub elapsed: Duration,
+    /// Profile likelihood intervals of the selected effects, when asked for
+    /// ([`profile_selected`]).
+    pub profiles: Vec<crate::profile::ParameterProfile>,
+    /// The threshold those profiles used.
+    pub profile_threshold: Option<crate::profile::Threshold>,
 }
 
 impl Diagnosis {
@@ -268,5 +273,62 @@ where
         explained_fraction,
         stats: EngineStats::default(),
         elapsed: started.elapsed(),
+        profiles: Vec::new(),
+        profile_threshold: None,
     })
+}
+
+/// Profile likelihood intervals of the effects the diagnosis selected, around its final
+/// fit (see [`crate::profile`]): the noise level and the linearised intervals are the
+/// fit's own, so nothing but the profiles' points is evaluated, through the store.
+pub fn profile_selected<E>(d: &mut Diagnosis, engine: &E, store: &dyn Store) -> Result<()>
+where
+    E: Evaluator + Simulator,
+{
+    use crate::profile::{profile_around, walk::DEFAULT_MAX_STEPS, Around, Threshold};
+    let fit = &d.final_fit;
+    let which: Vec<usize> = fit
+        .free
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.effect && d.selected.contains(&p.name))
+        .map(|(i, _)| i)
+        .collect();
+    if which.is_empty() {
+        return Ok(());
+    }
+    let mut campaign = d.campaign.clone();
+    campaign.free = fit.free.clone();
+    let objective = Objective::new(&campaign, &d.measurement)?;
+    let samples = objective.grid.len() * objective.outputs.len();
+    let threshold = Threshold::new(
+        fit.objective,
+        samples,
+        fit.free.len(),
+        fit.effective_samples,
+    );
+    let stored = StoredEngine::new(engine, store);
+    let around = Around {
+        objective: &objective,
+        free: &fit.free,
+        point: &fit.point,
+        best_objective: fit.objective,
+        threshold: threshold.delta,
+        linearised: &fit.parameters,
+        correlation: &fit.correlation,
+    };
+    let outcome = profile_around(&around, &which, &stored, DEFAULT_MAX_STEPS);
+    if let Some(e) = stored.error() {
+        return Err(e.into());
+    }
+    d.profiles = outcome?;
+    d.profile_threshold = Some(threshold);
+    let added = stored.stats();
+    let e = &mut d.stats.evaluations;
+    e.requested += added.evaluations.requested;
+    e.simulated += added.evaluations.simulated;
+    e.cached += added.evaluations.cached;
+    e.failed += added.evaluations.failed;
+    d.stats.trajectories += added.trajectories;
+    Ok(())
 }

@@ -112,6 +112,8 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "partial": d.verdict == Verdict::Partial,
         "explained_fraction": d.explained_fraction,
         "bound_notes": bound_notes(&d.final_fit),
+        "profiles": d.profiles.iter().map(crate::profile::report::parameter_json).collect::<Vec<_>>(),
+        "profile_threshold": d.profile_threshold,
         "evaluations": d.stats.evaluations.requested,
         "simulated": d.stats.evaluations.simulated,
         "cached": d.stats.evaluations.cached,
@@ -293,6 +295,37 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
     if !d.selected.is_empty() {
         let _ = writeln!(s, "## Final parameters (with {})\n", d.selected.join(" + "));
         fit_table(&mut s, &d.final_fit);
+    }
+    if !d.profiles.is_empty() {
+        let _ = writeln!(
+            s,
+            "## Profile likelihood intervals of the selected effects\n"
+        );
+        let _ = writeln!(
+            s,
+            "| effect | value | profile 95% interval | linearised 95% interval |"
+        );
+        let _ = writeln!(s, "|---|---|---|---|");
+        let end = |v: Option<f64>| v.map_or_else(|| "open".to_string(), |v| format!("{v:.6e}"));
+        for p in &d.profiles {
+            let _ = writeln!(
+                s,
+                "| `{}` | {:.6e} | [{}, {}] | [{:.6e}, {:.6e}] |",
+                p.name,
+                p.value,
+                end(p.ci_low()),
+                end(p.ci_high()),
+                p.linearised.ci_low,
+                p.linearised.ci_high
+            );
+        }
+        let _ = writeln!(s);
+        for p in &d.profiles {
+            if let Some(c) = p.conclusion() {
+                let _ = writeln!(s, "- {c}");
+            }
+        }
+        let _ = writeln!(s);
     }
     let _ = writeln!(s, "## Plots\n");
     for p in plots {

@@ -14,7 +14,7 @@ use crate::campaign::FreeParameter;
 use serde::Serialize;
 
 /// A fitted parameter with its 95% confidence interval.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Interval {
     pub name: String,
     pub value: f64,
