@@ -5,17 +5,45 @@ use argmin::core::{Error, Problem, Solver, State, TerminationReason, Termination
 /// The words of the budget's termination.
 pub const BUDGET_USED: &str = "evaluation budget used";
 
+/// The words of a stall's termination.
+pub const STALLED: &str = "objective stopped moving";
+
+/// Stop a run once its best objective has not fallen by more than `relative` (of itself)
+/// over the last `window` evaluations: the objective has stopped moving, and the rest of
+/// the budget would buy nothing a report can see.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stall {
+    pub window: u64,
+    pub relative: f64,
+}
+
 /// Wraps a solver so that it stops at the first iteration boundary at which the problem has
-/// been evaluated `max_evaluations` times or more.
+/// been evaluated `max_evaluations` times or more, or, with a [`Stall`] rule, at which its
+/// best objective has stopped moving.
 pub struct Budgeted<S> {
     pub inner: S,
     pub max_evaluations: u64,
+    pub stall: Option<Stall>,
+    /// The best objective when it last moved by more than the stall's share, and the
+    /// evaluations used then.
+    pub moved: Option<(f64, u64)>,
+}
+
+impl<S> Budgeted<S> {
+    pub fn new(inner: S, max_evaluations: u64, stall: Option<Stall>) -> Self {
+        Self {
+            inner,
+            max_evaluations,
+            stall,
+            moved: None,
+        }
+    }
 }
 
 impl<O, I, S> Solver<O, I> for Budgeted<S>
 where
     S: Solver<O, I>,
-    I: State,
+    I: State<Float = f64>,
 {
     fn name(&self) -> &str {
         self.inner.name()
@@ -43,6 +71,21 @@ where
             return TerminationStatus::Terminated(TerminationReason::SolverExit(
                 BUDGET_USED.into(),
             ));
+        }
+        if let Some(stall) = self.stall {
+            let best = state.get_best_cost();
+            match self.moved {
+                Some((last, _)) if !(best < last - stall.relative * last.abs()) => {}
+                _ if best.is_finite() => self.moved = Some((best, used)),
+                _ => {}
+            }
+            if let Some((_, at)) = self.moved {
+                if used >= at + stall.window {
+                    return TerminationStatus::Terminated(TerminationReason::SolverExit(
+                        STALLED.into(),
+                    ));
+                }
+            }
         }
         TerminationStatus::NotTerminated
     }
