@@ -1,5 +1,7 @@
-//! Steps 4 to 7 of a diagnosis: refit the best candidates alone and in pairs with the
-//! multistart, then select and judge ([`super::verdict`]).
+//! Steps 4 to 7 of a diagnosis: refit the best candidates, first each alone and locally
+//! (warm-started where the ranking left off, stopped when the objective stops moving), and
+//! when none of those leaves nothing but noise, alone and in pairs with the multistart; then
+//! select and judge ([`super::verdict`]).
 
 use super::candidates::refit_campaign;
 use super::fit::fit_of;
@@ -45,8 +47,9 @@ fn refit_all<E: Evaluator + Simulator>(
 /// after which a local refit stops, per free parameter plus one (a few simplex moves).
 pub const STALL_WINDOW_PER_PARAMETER: u64 = 10;
 /// See [`STALL_WINDOW_PER_PARAMETER`]. A parameter one standard error from its optimum
-/// raises the objective by about `1/n` of itself (n ≥ 100 samples here), so a move below
-/// 10⁻⁵ of it is far inside the confidence intervals the report gives.
+/// raises the objective by about `1/n` of itself (`n` the samples of the fitted window, a few
+/// hundred in the examples), so a move below 10⁻⁵ of it is far inside the confidence
+/// intervals the report gives.
 pub const STALL_RELATIVE: f64 = 1e-5;
 
 /// The local refit of a refit campaign: one Nelder–Mead run from the campaign's best-informed
@@ -106,15 +109,15 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
         .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
         .collect();
     let explains = |f: &Fit| verdict::explains(f, baseline, noise_floor);
-    // First the local refits, all candidates at once: when one of them already leaves
-    // nothing but noise, the multistart cannot change the selection.
+    // First the local refits, all candidates at once. When one of them already leaves
+    // nothing but noise, a multistart could at best find another effect that leaves noise
+    // too, and the selection stays with the local refits.
     let local: Vec<Campaign> = refit_campaigns.iter().map(local_refit).collect();
     let quick = refit_all(&local, &singles, engine, progress, holdout_objective)?;
     let settled = quick
         .iter()
         .any(|f| verdict::improves(f, baseline) && explains(f));
     let mut refits = if settled {
-        refit_campaigns = local;
         quick
     } else {
         refit_all(

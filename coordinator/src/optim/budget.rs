@@ -74,10 +74,14 @@ where
         }
         if let Some(stall) = self.stall {
             let best = state.get_best_cost();
-            match self.moved {
-                Some((last, _)) if !(best < last - stall.relative * last.abs()) => {}
-                _ if best.is_finite() => self.moved = Some((best, used)),
-                _ => {}
+            if best.is_finite() {
+                let moved = match self.moved {
+                    Some((last, _)) => best < last - stall.relative * last.abs(),
+                    None => true,
+                };
+                if moved {
+                    self.moved = Some((best, used));
+                }
             }
             if let Some((_, at)) = self.moved {
                 if used >= at + stall.window {
