@@ -320,6 +320,7 @@ fn search(
         max_evaluations: campaign.search.max_evaluations,
         progress,
         screening: &scales,
+        stall: campaign.search.stall,
     };
     let runs = multistart::run_all(&context, &plan).map_err(optimiser_error)?;
     let clusters = multistart::cluster(&runs, &space, CLUSTER_RADIUS);

@@ -1,7 +1,8 @@
 //! Median wall time of one 300 s simulation of each heat-exchanger model, all outputs on
-//! a 1 s and a 0.5 s grid, at the calibration tolerance.
+//! a 1 s and a 0.5 s grid, at the model's own tolerance (`--tight`: rtol 1e-8;
+//! `--rtol X`: rtol X).
 //!
-//! `cargo run --release -p calib-worker --example hx_timing`
+//! `cargo run --release -p calib-worker --example hx_timing [-- --tight]`
 
 use calib_worker::models::hx;
 use calib_worker::{Model, SolverOptions};
@@ -13,9 +14,24 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
-    let options = SolverOptions::default();
+    let args: Vec<String> = std::env::args().collect();
+    let tight = args.iter().any(|a| a == "--tight");
+    let rtol: Option<f64> = args
+        .iter()
+        .position(|a| a == "--rtol")
+        .and_then(|i| args.get(i + 1))
+        .map(|v| v.parse().expect("--rtol takes a number"));
     for model in [hx::highfi(), hx::lowfi()] {
         let info = model.info();
+        // The model's own (calibration) tolerance, or with `--tight` rtol 1e-8.
+        let mut options = if tight {
+            SolverOptions::default()
+        } else {
+            model.default_options()
+        };
+        if let Some(rtol) = rtol {
+            options.rtol = rtol;
+        }
         let params = info.default_vector();
         let outputs: Vec<usize> = (0..info.outputs.len()).collect();
         for step in [1.0, 0.5] {

@@ -139,6 +139,10 @@ pub struct Search {
     /// Further start points (physical values of the free parameters), tried after the
     /// nominal point; set by diagnosis, not by campaign files.
     pub extra_starts: Vec<Vec<f64>>,
+    /// Stop each run once its objective stops moving; set by diagnosis for its refits,
+    /// not by campaign files.
+    #[serde(skip)]
+    pub stall: Option<crate::optim::budget::Stall>,
 }
 
 /// A campaign checked against the model it names.

@@ -422,6 +422,7 @@ fn resolve_search(
             seed: 0,
             screening: None,
             extra_starts: Vec::new(),
+            stall: None,
         });
     };
     let span = s.span();
@@ -453,6 +454,7 @@ fn resolve_search(
         seed: s.seed,
         screening: s.screening,
         extra_starts: Vec::new(),
+        stall: None,
     })
 }
 

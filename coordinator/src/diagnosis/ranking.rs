@@ -106,8 +106,11 @@ pub fn rank<E: Evaluator + Simulator>(
     // The score is the share of the objective actually removed, simulated: first a scan of
     // the effect's size with the parameters at the baseline optimum, then a short
     // Gauss–Newton descent on the free parameters and the candidate together.
+    // Every candidate at once: each scan and descent is independent of the others, so
+    // their batches fill the workers together, and the result is the same in any order.
     let before = baseline.objective.max(f64::MIN_POSITIVE);
-    for (j, candidate) in candidates.iter_mut().enumerate() {
+    let (jacobian, sens, residual) = (&jacobian, &sens, &residual);
+    let score_one = |j: usize, candidate: &mut Candidate| -> Result<()> {
         let mut single = campaign.clone();
         single.free.push(specs[j].clone());
         let objective = Objective::new(&single, measurement)?;
@@ -167,7 +170,19 @@ pub fn rank<E: Evaluator + Simulator>(
             candidate.estimate = *v;
         }
         candidate.point = point;
-    }
+        Ok(())
+    };
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = candidates
+            .iter_mut()
+            .enumerate()
+            .map(|(j, candidate)| scope.spawn(move || score_one(j, candidate)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect::<Result<Vec<()>>>()
+    })?;
     Ok(candidates)
 }
 

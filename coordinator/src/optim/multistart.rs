@@ -10,7 +10,7 @@
 //! Hash-based Owen Scrambling", JCGT 9(4) (2020).
 
 use super::budget::Budgeted;
-use super::budget::BUDGET_USED;
+use super::budget::{Stall, BUDGET_USED, STALLED};
 use super::problem::{Progress, RunLog, RunProblem};
 use super::space::{self, UnitBox};
 use super::{differential_evolution, nelder_mead, powell};
@@ -114,6 +114,8 @@ pub struct RunContext<'a> {
     pub progress: &'a dyn Progress,
     /// How fresh points are drawn when a run restarts (see [`super::screening`]).
     pub screening: &'a [Option<f64>],
+    /// Stop each run when its objective stops moving, before its budget is used.
+    pub stall: Option<Stall>,
 }
 
 /// Most runs in flight at once. Runs spend their time waiting for evaluations (on this
@@ -169,42 +171,23 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
                 (problem.take_log(), 0, Termination::Plateau)
             } else {
                 let inner = nelder_mead::NelderMead::new(departure.simplex)?;
-                execute(
-                    problem,
-                    Budgeted {
-                        inner,
-                        max_evaluations: budget,
-                    },
-                    |s| s,
-                )?
+                execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
             }
         }
         Method::Powell => {
             let inner = powell::Powell::new(spec.start_unit.clone())
                 .with_initial_steps(space::initial_steps(&spec.start_unit))?;
             let start = spec.start_unit.clone();
-            execute(
-                problem,
-                Budgeted {
-                    inner,
-                    max_evaluations: budget,
-                },
-                |s| s.param(start),
-            )?
+            execute(problem, Budgeted::new(inner, budget, context.stall), |s| {
+                s.param(start)
+            })?
         }
         Method::DifferentialEvolution => {
             let inner = differential_evolution::DifferentialEvolution::new(
                 spec.start_unit.clone(),
                 spec.seed,
             );
-            execute(
-                problem,
-                Budgeted {
-                    inner,
-                    max_evaluations: budget,
-                },
-                |s| s,
-            )?
+            execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
     };
     let termination = if !log.best_objective.is_finite() || log.best_objective >= f64::MAX {
@@ -238,6 +221,8 @@ enum Termination {
     Collapsed,
     /// The evaluation budget was used up.
     Budget,
+    /// The best objective stopped moving (a [`Stall`] rule).
+    Stalled,
     /// No objective spread around any start point of the run.
     Plateau,
     /// Every simulation of the run failed.
@@ -254,6 +239,9 @@ impl Termination {
                 if why == BUDGET_USED =>
             {
                 Self::Budget
+            }
+            TerminationStatus::Terminated(TerminationReason::SolverExit(why)) if why == STALLED => {
+                Self::Stalled
             }
             TerminationStatus::Terminated(TerminationReason::SolverExit(why))
                 if why == nelder_mead::SIMPLEX_COLLAPSED =>
@@ -276,6 +264,7 @@ impl Termination {
             .into(),
             Self::Collapsed => "converged: simplex diameter below tolerance".into(),
             Self::Budget => "budget: evaluation budget used".into(),
+            Self::Stalled => "converged: objective stopped moving".into(),
             Self::Plateau => "plateau: no objective spread around any start".into(),
             Self::Failures => "failures: every simulation failed".into(),
             Self::Other(why) => why.clone(),
