@@ -528,3 +528,85 @@ fn a_repeated_diagnosis_is_served_from_the_store() {
         assert_eq!(first[key], second[key], "{key}");
     }
 }
+
+/// `calib bench --json` and `calib bench --cluster --json` print one JSON object whose named
+/// figures are all there and finite (their values are the benchmark's business, not the
+/// tests').
+#[test]
+fn bench_json_names_every_figure() {
+    let campaign = repo().join("examples/furuta.toml");
+    let campaign = campaign.to_str().unwrap();
+    let runs: [(&[&str], &[&str]); 2] = [
+        (
+            &["bench", "--repeat", "1", "--json", "--campaign", campaign],
+            &[
+                "furuta_ms",
+                "hx_highfi_ms",
+                "hx_lowfi_ms",
+                "hx_highfi_ratio_to_target",
+            ],
+        ),
+        (
+            &[
+                "bench",
+                "--cluster",
+                "--repeat",
+                "1",
+                "--json",
+                "--campaign",
+                campaign,
+            ],
+            &[
+                "coordinator_cpu_us_per_eval",
+                "coordinator_cpu_ratio_to_evaluation",
+                "grpc_overhead_ratio",
+                "furuta_in_process_us",
+                "dispatch_efficiency_100",
+                "dispatch_rate_100",
+            ],
+        ),
+    ];
+    for (args, keys) in runs {
+        let figures = json_of(&calib(args));
+        for key in keys {
+            let value = figures[key].as_f64();
+            assert!(
+                value.is_some_and(f64::is_finite),
+                "`calib {args:?}`: {key} is {:?} in {figures}",
+                figures.get(key)
+            );
+        }
+    }
+}
+
+/// `calib calibrate --cpu` reports the process's CPU time per simulated point.
+#[test]
+fn calibrate_reports_its_cpu_per_simulated_point() {
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\"]\nstarts = 1\nmax_evaluations = 40\nseed = 3";
+    let campaign = write(dir.path(), "c.toml", &clean_campaign(search));
+    let db = dir.path().join("db");
+    let out = calib(&[
+        "calibrate",
+        campaign.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--cpu",
+    ]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    let line = stderr
+        .lines()
+        .find(|l| l.starts_with("coordinator CPU: "))
+        .unwrap_or_else(|| panic!("no CPU line in:\n{stderr}"));
+    let per_point: f64 = line
+        .split(": ")
+        .nth(2)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no figure in {line:?}"));
+    assert!(per_point.is_finite() && per_point > 0.0, "{line}");
+    assert!(line.contains("simulated points"), "{line}");
+}

@@ -1,4 +1,6 @@
-//! A Simulator that simulates nothing: it answers every Evaluate after a nap per point.
+//! A Simulator that simulates nothing: it answers every Evaluate after a nap per point and
+//! slot, its slots shared by the requests it serves at once (a request queued behind
+//! another waits for its slots, as on a worker).
 //!
 //! For measuring the coordinator's dispatch without the cost of simulations, and for fault
 //! tests (a nap of `Duration::MAX` is a worker that hangs). It serves the health service
@@ -17,6 +19,8 @@ use tonic::{Request, Response, Status};
 pub struct NappingSimulator {
     nap: Duration,
     slots: u32,
+    /// The slots not napping.
+    free: tokio::sync::Semaphore,
     requests: AtomicU64,
     in_flight: AtomicU64,
     most_in_flight: AtomicU64,
@@ -57,6 +61,7 @@ pub async fn serve_napping(
     let simulator = Arc::new(NappingSimulator {
         nap,
         slots,
+        free: tokio::sync::Semaphore::new(slots.max(1) as usize),
         requests: AtomicU64::new(0),
         in_flight: AtomicU64::new(0),
         most_in_flight: AtomicU64::new(0),
@@ -127,7 +132,11 @@ impl Simulator for NappingSimulator {
         self.most_points
             .fetch_max(request.points.len() as u64, Ordering::SeqCst);
         let rounds = (request.points.len() as u32).div_ceil(self.slots.max(1));
-        tokio::time::sleep(self.nap.saturating_mul(rounds)).await;
+        {
+            let slots = (request.points.len() as u32).clamp(1, self.slots.max(1));
+            let _napping = self.free.acquire_many(slots).await;
+            tokio::time::sleep(self.nap.saturating_mul(rounds)).await;
+        }
         self.in_flight.fetch_sub(1, Ordering::SeqCst);
         let outputs = request.outputs.len();
         Ok(Response::new(proto::EvaluateResponse {

@@ -30,6 +30,10 @@ pub struct Args {
     /// simulates nothing [default: results/.calib-db beside the campaign file].
     #[arg(long, value_name = "DIR")]
     db: Option<PathBuf>,
+    /// Print on standard error the CPU time this process spent (user + system) per point it
+    /// had simulated: with `--workers`, the coordinator's own cost per evaluation.
+    #[arg(long)]
+    cpu: bool,
 }
 
 /// Set to `lines` to report progress as plain lines on standard error (for scripts and
@@ -171,7 +175,17 @@ pub fn run(args: Args) -> Outcome {
         },
     };
     bar.bar.finish_and_clear();
-    report_result(&args, &campaign, &result?)
+    let result = result?;
+    if args.cpu {
+        let cpu = super::cpu::process_cpu();
+        eprintln!(
+            "coordinator CPU: {:.3} s for {} simulated points: {:.1} us per simulated point",
+            cpu.as_secs_f64(),
+            result.stats.simulated,
+            super::cpu::us_per(cpu, result.stats.simulated)
+        );
+    }
+    report_result(&args, &campaign, &result)
 }
 
 /// The folder holding one `<name>/` per campaign: `--out`, else `results/` beside the

@@ -7,6 +7,7 @@ pub mod bench_fmu;
 pub mod bench_store;
 pub mod calibrate;
 pub mod coordinator;
+pub mod cpu;
 pub mod diagnose;
 pub mod fmu;
 pub mod health;

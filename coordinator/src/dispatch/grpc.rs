@@ -1,8 +1,10 @@
 //! [`GrpcEvaluator`]: evaluations and simulations spread over the pool's workers.
 //!
-//! A batch is cut into chunks of at most one point per slot of a worker, up to two chunks
-//! per worker at once (one running, one waiting in the worker's queue, so that no slot idles
-//! while an answer travels back); more points than that wait for the first chunk to return. A chunk whose worker fails
+//! A batch is cut into chunks sized by what is pending ([`WorkerPool::acquire`]): up to
+//! eight points per slot of a worker while much is left, one per slot at the tail; idle
+//! slots are filled first, then up to two chunks per worker at once (one running, one
+//! waiting in the worker's queue, so that no slot idles while an answer travels back); more
+//! points than that wait for a chunk to return. A chunk whose worker fails
 //! (unreachable, crashed, timed out, busy) goes back into the batch to be retried on another
 //! worker, and the worker is probed back in later; a chunk the worker rejects as invalid is
 //! never retried: its points fail with the worker's reason.

@@ -27,7 +27,7 @@ pub struct DispatchConfig {
     pub workers: Vec<WorkerAddress>,
     /// Deadline of one request to a worker (one chunk of a batch).
     pub deadline: Duration,
-    /// Chunks in flight per worker, each of at most one point per slot: 2 keeps a worker
+    /// Chunks in flight per worker (the second queued behind the first): 2 keeps a worker
     /// busy while an answer travels back.
     pub depth: usize,
     /// How often workers that are down or joining are probed.

@@ -3,8 +3,9 @@
 //! A worker enters as `Joining` and serves only once a probe (health check, then its
 //! capacity) succeeds. A worker that fails a request is marked `Down` and probed back in
 //! by the pool's maintenance task; one that speaks another protocol is set aside for good.
-//! Slots are leased to dispatchers point by point, spread evenly over the workers, so a
-//! batch fills every worker's slots and no worker is sent more than it can run at once.
+//! Slots are leased to dispatchers in chunks sized by what is pending (see
+//! [`WorkerPool::acquire`]): a batch fills every worker's idle slots first, large batches go
+//! in few requests, and the tail of a batch in chunks of one point per slot.
 
 use super::client::WorkerClient;
 use super::DispatchConfig;
@@ -76,7 +77,10 @@ struct Worker {
     origin: Origin,
     health: Health,
     slots: usize,
+    /// Points leased and not yet returned.
     busy: usize,
+    /// Chunks leased and not yet returned.
+    chunks: usize,
     evaluated: u64,
     probing: bool,
     /// Has been up at least once.
@@ -99,6 +103,9 @@ impl Worker {
         self.health = Health::Down { reason };
     }
 }
+
+/// Most points per slot of its worker one chunk holds (while many points are pending).
+pub const MAX_POINTS_PER_SLOT: usize = 8;
 
 /// Longest wait between two probes of a failing worker.
 const MAX_BACKOFF: std::time::Duration = std::time::Duration::from_secs(30);
@@ -182,6 +189,7 @@ impl WorkerPool {
             health: Health::Joining,
             slots: 0,
             busy: 0,
+            chunks: 0,
             evaluated: 0,
             probing: false,
             ever_up: false,
@@ -235,8 +243,17 @@ impl WorkerPool {
             .collect()
     }
 
-    /// Lease up to `wanted` points of capacity, one point at a time round the workers that are
-    /// up; a worker takes up to `depth` chunks of `slots` points at once.
+    /// Lease up to `wanted` points of capacity over the workers that are up, in chunks sized
+    /// by what is left (guided self-scheduling): while much is pending a chunk holds up to
+    /// [`MAX_POINTS_PER_SLOT`] points per slot of its worker, so that a large batch travels
+    /// in few requests; as the batch drains chunks shrink to one point per slot, so that the
+    /// last points spread over every worker instead of waiting behind one.
+    ///
+    /// Workers with an idle slot are served first; only when points are left over does a
+    /// worker take a chunk queued behind its running one (up to `depth` chunks at once), so
+    /// that no point waits in one worker's queue while another worker idles. A chunk queued
+    /// behind more than one round of work holds one point per slot: what waits in a worker's
+    /// queue is never more than a round, wherever the batch's tail falls.
     pub fn acquire(&self, wanted: usize) -> Vec<Lease> {
         let mut state = self.state.lock().expect("pool lock");
         let n = state.workers.len();
@@ -246,41 +263,66 @@ impl WorkerPool {
         let depth = self.config.depth.max(1);
         let start = state.cursor % n;
         state.cursor = state.cursor.wrapping_add(1);
-        let mut granted = vec![0usize; n];
+        let total_slots: usize = state
+            .workers
+            .iter()
+            .filter(|w| w.health == Health::Up)
+            .map(|w| w.slots)
+            .sum();
+        if total_slots == 0 {
+            return Vec::new();
+        }
+        let per_slot = |remaining: usize| {
+            remaining
+                .div_ceil(2 * total_slots)
+                .clamp(1, MAX_POINTS_PER_SLOT)
+        };
         let mut remaining = wanted;
-        while remaining > 0 {
-            let mut gave = false;
-            for k in 0..n {
-                let i = (start + k) % n;
-                let w = &state.workers[i];
-                if w.health == Health::Up && w.busy + granted[i] < w.slots * depth {
-                    granted[i] += 1;
-                    remaining -= 1;
-                    gave = true;
+        let mut leases = Vec::new();
+        // First one chunk to each worker with an idle slot, then chunks queued behind.
+        for queued in [false, true] {
+            loop {
+                let mut gave = false;
+                for k in 0..n {
                     if remaining == 0 {
                         break;
                     }
+                    let w = &mut state.workers[(start + k) % n];
+                    if w.health != Health::Up {
+                        continue;
+                    }
+                    let room = if queued {
+                        if w.chunks >= depth {
+                            continue;
+                        }
+                        // Behind a large chunk, one point per slot is enough to keep the
+                        // slots busy while an answer travels; behind a round or less, a
+                        // chunk as large as what is pending allows.
+                        if w.busy > w.slots {
+                            w.slots
+                        } else {
+                            w.slots * per_slot(remaining)
+                        }
+                    } else {
+                        if w.busy >= w.slots {
+                            continue;
+                        }
+                        (w.slots - w.busy) * per_slot(remaining)
+                    };
+                    let points = room.min(remaining);
+                    remaining -= points;
+                    w.busy += points;
+                    w.chunks += 1;
+                    leases.push(Lease {
+                        worker: w.id,
+                        client: w.client.clone(),
+                        points,
+                    });
+                    gave = true;
                 }
-            }
-            if !gave {
-                break;
-            }
-        }
-        // Chunks of at most one point per slot: the worker runs one while the next waits in
-        // its queue, so no slot idles while an answer travels back.
-        let mut leases = Vec::new();
-        for (i, &points) in granted.iter().enumerate() {
-            let w = &mut state.workers[i];
-            w.busy += points;
-            let mut left = points;
-            while left > 0 {
-                let chunk = left.min(w.slots);
-                left -= chunk;
-                leases.push(Lease {
-                    worker: w.id,
-                    client: w.client.clone(),
-                    points: chunk,
-                });
+                if !gave || remaining == 0 || !queued {
+                    break;
+                }
             }
         }
         leases
@@ -291,6 +333,7 @@ impl WorkerPool {
         let mut state = self.state.lock().expect("pool lock");
         if let Some(w) = state.workers.iter_mut().find(|w| w.id == lease.worker) {
             w.busy -= lease.points;
+            w.chunks -= 1;
             w.evaluated += answered as u64;
             if answered > 0 {
                 w.failures = 0;
