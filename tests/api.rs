@@ -759,4 +759,17 @@ fn a_sensitivity_analysis_over_the_api_equals_calib_sensitivitys_and_is_not_simu
         })
         .unwrap_err();
     assert_eq!(unknown.code(), tonic::Code::NotFound);
+    let no_campaign = coordinator
+        .runtime
+        .block_on(async {
+            client
+                .profile(pb::ProfileRequest {
+                    id: "0".repeat(64),
+                    ..Default::default()
+                })
+                .await
+                .map(|_| ())
+        })
+        .unwrap_err();
+    assert_eq!(no_campaign.code(), tonic::Code::NotFound);
 }

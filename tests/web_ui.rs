@@ -301,11 +301,47 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
             .contains("sensitivity of the objective"),
         "{shown}"
     );
+    // The profiles on the page, after the calibration, are `calib profile`'s on the
+    // reference's store (the same best point): the same intervals, bit for bit.
+    let cli = common::calib(&[
+        "profile",
+        repo().join("examples/furuta.toml").to_str().unwrap(),
+        "--json",
+        "--db",
+        dir.path().join("cli-db").to_str().unwrap(),
+        "--out",
+        dir.path().join("profile").to_str().unwrap(),
+    ]);
+    assert!(
+        cli.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cli.stderr)
+    );
+    let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    let shown = &page["profiles"];
+    for p in cli["parameters"].as_array().unwrap() {
+        let name = p["name"].as_str().unwrap();
+        let row = &shown["rows"][name];
+        for (side, key) in [("low", "ci_low"), ("high", "ci_high")] {
+            let on_page: f64 = row[side].as_str().unwrap().parse().unwrap();
+            assert_eq!(on_page, p[key].as_f64().unwrap(), "{name} {side}: {shown}");
+        }
+        assert_eq!(row["flag"], "identifiable", "{name}: {shown}");
+    }
+    assert!(
+        shown["conclusion"]
+            .as_str()
+            .unwrap()
+            .starts_with("Every profiled parameter is identifiable"),
+        "{shown}"
+    );
+    assert_eq!(shown["plots"].as_array().unwrap().len(), 2, "{shown}");
     for tab in [
         "model",
         "measurement",
         "sensitivity",
         "calibration",
+        "profiles",
         "diagnosis",
     ] {
         let png = std::fs::read(shots.join(format!("{tab}.png"))).unwrap();

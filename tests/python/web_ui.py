@@ -179,6 +179,23 @@ def workflow(url, data, shots, out):
         listed = [r.text for r in driver.find_elements(By.CSS_SELECTOR, "#campaigns tbody tr")]
         screenshot(driver, os.path.join(shots, "calibration.png"))
 
+        # After the calibration: which values the data pin down.
+        by_id(driver, "profile").click()
+        wait(driver, LONG).until(lambda d: by_id(d, "profile-conclusion").is_displayed()
+                                 or by_id(d, "profile-error").is_displayed())
+        no_error(driver, "profile-error")
+        profiles = {
+            "conclusion": by_id(driver, "profile-conclusion").text,
+            "rows": {row.get_attribute("data-parameter"): {
+                "low": row.find_element(By.CSS_SELECTOR, "td.profile").get_attribute("data-low"),
+                "high": row.find_element(By.CSS_SELECTOR, "td.profile").get_attribute("data-high"),
+                "flag": row.find_element(By.CSS_SELECTOR, "td.flag").text,
+            } for row in driver.find_elements(By.CSS_SELECTOR, "#profile-table tbody tr")},
+            "plots": [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#profile-plots figcaption")],
+        }
+        by_id(driver, "profiles").location_once_scrolled_into_view
+        screenshot(driver, os.path.join(shots, "profiles.png"))
+
         # Diagnosis of the finished campaign.
         tab(driver, "diagnosis")
         wait(driver).until(lambda d: Select(by_id(d, "diagnosis-campaign")).options)
@@ -216,6 +233,7 @@ def workflow(url, data, shots, out):
                 "diagnosis_plots": diagnosis_plots,
                 "reopened": reopened,
                 "sensitivity": sensitivity,
+                "profiles": profiles,
             }, f, indent=2)
     finally:
         driver.quit()

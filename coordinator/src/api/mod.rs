@@ -413,6 +413,32 @@ impl Calibration for CalibrationApi {
         })))
     }
 
+    type ProfileStream = AnalysisStream;
+
+    async fn profile(
+        &self,
+        request: Request<pb::ProfileRequest>,
+    ) -> Result<Response<Self::ProfileStream>, Status> {
+        let request = request.into_inner();
+        let settings = crate::profile::Settings {
+            parameters: request.parameters,
+            max_steps: match request.max_steps {
+                0 => crate::profile::walk::DEFAULT_MAX_STEPS,
+                n => n as usize,
+            },
+        };
+        let id = request.id;
+        let campaigns = self.campaigns.clone();
+        let watched = {
+            let id = id.clone();
+            blocking(move || campaigns.profile(&id, settings)).await?
+        };
+        let receiver = watched.ok_or_else(|| not_found(&id))?;
+        Ok(Response::new(follow(receiver, analysis_state, |s| {
+            s.phase.ended()
+        })))
+    }
+
     type WatchAnalysisStream = AnalysisStream;
 
     async fn watch_analysis(

@@ -1,6 +1,7 @@
 //! Analyses of a campaign run in the coordinator on its workers and followed like
 //! campaigns: the global sensitivity of a campaign before it is calibrated
-//! ([`crate::sensitivity`]).
+//! ([`crate::sensitivity`]), and the profile likelihoods of a finished one
+//! ([`crate::profile`]).
 //!
 //! An analysis is named by a hash of what it analyses (the campaign's identity, which
 //! covers its data) and how (method, samples, seed): asked again, the same analysis is
@@ -12,8 +13,9 @@ use super::{Campaigns, Phase};
 use crate::calibration;
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
+use crate::profile;
 use crate::sensitivity::{self, report, Methods, Settings};
-use crate::store::{hex, unhex32};
+use crate::store::{hex, unhex32, CampaignStatus};
 use calib_worker::content_hash::ContentHasher;
 use std::sync::Arc;
 use tokio::sync::watch;
@@ -85,6 +87,110 @@ impl Campaigns {
         Ok(receiver)
     }
 
+    /// Follow the profile likelihoods of the finished campaign `id` around its best point,
+    /// starting them unless they are under way or done; `None` when no campaign has that id.
+    pub fn profile(
+        self: &Arc<Self>,
+        id: &str,
+        settings: profile::Settings,
+    ) -> Result<Option<watch::Receiver<AnalysisSnapshot>>> {
+        let Some(campaign_key) = unhex32(id) else {
+            return Ok(None);
+        };
+        let Some(record) = self.store.campaign(&campaign_key)? else {
+            return Ok(None);
+        };
+        let running = self.is_live(&campaign_key)
+            && self
+                .live
+                .lock()
+                .expect("live lock")
+                .get(&campaign_key)
+                .is_some_and(|l| l.state.borrow().phase != Phase::Finished);
+        if running || record.status != CampaignStatus::Finished {
+            return Err(Error::InvalidRequest(format!(
+                "id: campaign `{id}` has not finished; profile it once it has"
+            )));
+        }
+        let campaign = Campaign::parse(&record.spec, &record.source)?;
+        let mut h = ContentHasher::new(b"calib.profile.v1\0");
+        h.bytes(&campaign_key)
+            .count(settings.max_steps)
+            .count(settings.parameters.len());
+        for name in &settings.parameters {
+            h.text(name);
+        }
+        let key = h.finish();
+        let mut analyses = self.analyses.lock().expect("analyses lock");
+        if let Some(state) = analyses.get(&key) {
+            return Ok(Some(state.subscribe()));
+        }
+        let (state, receiver) = watch::channel(AnalysisSnapshot {
+            id: hex(&key),
+            phase: Phase::Running,
+            evaluations: 0,
+            planned: 0,
+            failure: None,
+            report: None,
+            conclusion: String::new(),
+            files: Vec::new(),
+        });
+        analyses.insert(key, state.clone());
+        drop(analyses);
+        let this = self.clone();
+        std::thread::Builder::new()
+            .name(format!("profile {}", campaign.name))
+            .spawn(move || this.run_profile(key, campaign, settings, state))
+            .map_err(|e| Error::Dispatch(format!("cannot start an analysis thread: {e}")))?;
+        Ok(Some(receiver))
+    }
+
+    fn run_profile(
+        &self,
+        key: [u8; 32],
+        campaign: Campaign,
+        settings: profile::Settings,
+        state: watch::Sender<AnalysisSnapshot>,
+    ) {
+        let engine = &*self.engine;
+        match profile::profile(&campaign, &engine, &*self.store, &settings) {
+            Ok(p) => {
+                let folder = self.results.join("analyses").join(hex(&key));
+                let files = match profile::report::write(&p, &folder) {
+                    Ok(paths) => svg_files(paths),
+                    Err(e) => {
+                        tracing::error!(error = %e, "cannot write the profiles");
+                        Vec::new()
+                    }
+                };
+                let json = profile::report::profile_json(&p);
+                let conclusions = p.conclusions();
+                state.send_modify(|snapshot| {
+                    snapshot.phase = Phase::Finished;
+                    snapshot.evaluations = p.stats.evaluations.requested;
+                    snapshot.planned = snapshot.evaluations;
+                    snapshot.report = Some(json);
+                    snapshot.conclusion = if conclusions.is_empty() {
+                        "Every profiled parameter is identifiable: its profile crosses the \
+                         threshold on both sides."
+                            .into()
+                    } else {
+                        conclusions.join(" ")
+                    };
+                    snapshot.files = files;
+                });
+            }
+            Err(e) => {
+                tracing::error!(campaign = %campaign.name, error = %e, "profile failed");
+                self.analyses.lock().expect("analyses lock").remove(&key);
+                state.send_modify(|s| {
+                    s.phase = Phase::Failed;
+                    s.failure = Some(e.to_string());
+                });
+            }
+        }
+    }
+
     /// Follow the analysis `id` this coordinator started; `None` when it has none so named.
     pub fn watch_analysis(&self, id: &str) -> Option<watch::Receiver<AnalysisSnapshot>> {
         let key = unhex32(id)?;
@@ -108,19 +214,13 @@ impl Campaigns {
         match analysed {
             Ok(s) => {
                 let folder = self.results.join("analyses").join(hex(&key));
-                let mut files = Vec::new();
-                match report::write(&s, &folder) {
-                    Ok(paths) => {
-                        for path in paths {
-                            let svg = path.extension().is_some_and(|e| e == "svg");
-                            if let (true, Ok(text)) = (svg, std::fs::read_to_string(&path)) {
-                                let name = path.file_name().unwrap_or_default().to_string_lossy();
-                                files.push((name.into_owned(), text));
-                            }
-                        }
+                let files = match report::write(&s, &folder) {
+                    Ok(paths) => svg_files(paths),
+                    Err(e) => {
+                        tracing::error!(error = %e, "cannot write the sensitivity analysis");
+                        Vec::new()
                     }
-                    Err(e) => tracing::error!(error = %e, "cannot write the sensitivity analysis"),
-                }
+                };
                 let json = report::sensitivity_json(&s);
                 state.send_modify(|snapshot| {
                     snapshot.phase = Phase::Finished;
@@ -140,4 +240,17 @@ impl Campaigns {
             }
         }
     }
+}
+
+/// The SVG files among `paths`, by file name, with their text.
+fn svg_files(paths: Vec<std::path::PathBuf>) -> Vec<(String, String)> {
+    paths
+        .into_iter()
+        .filter(|p| p.extension().is_some_and(|e| e == "svg"))
+        .filter_map(|p| {
+            let text = std::fs::read_to_string(&p).ok()?;
+            let name = p.file_name()?.to_string_lossy().into_owned();
+            Some((name, text))
+        })
+        .collect()
 }

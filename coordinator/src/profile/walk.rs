@@ -227,15 +227,9 @@ impl Walker<'_, '_> {
             .and_then(|s| s.with_ftol(0.0, FTOL))
             .map_err(|e| Error::Optimiser(e.to_string()))?;
         let budget = 60 + 40 * others.len() as u64;
-        let result = Executor::new(
-            cost,
-            Budgeted {
-                inner: solver,
-                max_evaluations: budget,
-            },
-        )
-        .configure(|state| state.param(reduced).max_iters(100_000).counting(true))
-        .run();
+        let result = Executor::new(cost, Budgeted::new(solver, budget, None))
+            .configure(|state| state.param(reduced).max_iters(100_000).counting(true))
+            .run();
         let mut result = result.map_err(|e| match e.downcast::<Error>() {
             Ok(e) => e,
             Err(e) => Error::Optimiser(e.to_string()),

@@ -92,6 +92,7 @@ impl WebApp {
             .route("/api/v1/WatchCampaign/{id}", get(watch_campaign))
             .route("/api/v1/Diagnose/{id}", get(diagnose))
             .route("/api/v1/Sensitivity", post(sensitivity))
+            .route("/api/v1/Profile", post(profile))
             .route("/api/v1/WatchAnalysis/{id}", get(watch_analysis))
             .route("/api/v1/ListModels", post(list_models))
             .route("/api/v1/Describe", post(describe))
@@ -281,11 +282,31 @@ async fn diagnose(
 /// stream's first state, which names it; `WatchAnalysis/{id}` follows it.
 async fn sensitivity(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
     let request: pb::SensitivityRequest = decode(&body)?;
-    let mut stream = app
+    let stream = app
         .calibration
         .sensitivity(Request::new(request))
         .await?
         .into_inner();
+    first_state(stream).await
+}
+
+/// `POST /api/v1/Profile`: starts (or joins) the profiles and answers with the stream's
+/// first state, which names them; `WatchAnalysis/{id}` follows them.
+async fn profile(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
+    let request: pb::ProfileRequest = decode(&body)?;
+    let stream = app
+        .calibration
+        .profile(Request::new(request))
+        .await?
+        .into_inner();
+    first_state(stream).await
+}
+
+/// The first state of an analysis' stream as the JSON answer (the analysis goes on).
+async fn first_state<S>(mut stream: S) -> Result<Response, ApiError>
+where
+    S: Stream<Item = Result<pb::AnalysisState, Status>> + Unpin,
+{
     match stream.next().await {
         Some(first) => Ok(json(&first?)),
         None => Err(ApiError(Status::internal("the analysis sent no state"))),

@@ -439,6 +439,7 @@ function watch(id) {
   app.campaignId = id;
   app.history = [];
   $("result").hidden = true;
+  clearProfiles();
   $("progress-plot").replaceChildren();
   $("cancel").disabled = false;
   $("start").disabled = true;
@@ -660,6 +661,63 @@ function showSensitivity(a) {
   }
 }
 
+// ---- profile likelihoods, after a calibration --------------------------------------------
+
+function clearProfiles() {
+  showError("profile-error", "");
+  $("profile-status").textContent = "";
+  $("profile-conclusion").hidden = true;
+  $("profile-table").hidden = true;
+  $("profile-plots").replaceChildren();
+}
+
+async function profileParameters() {
+  if (!app.campaignId) return;
+  clearProfiles();
+  const shown = app.campaignId;
+  $("profile").disabled = true;
+  $("profile-status").textContent = "profiling…";
+  try {
+    const first = await call("Profile", { id: shown });
+    await follow(`/api/v1/WatchAnalysis/${first.id}`, (a) => {
+      if (app.campaignId !== shown) return; // another campaign is shown now
+      $("profile-status").textContent =
+        a.phase === 1 ? "running: re-optimising along each parameter's profile…"
+          : `${PHASES[a.phase] || a.phase}, ${a.evaluations} evaluations` + (a.failure ? ` (${a.failure})` : "");
+      if (a.phase === 2 && a.report_json) showProfiles(a);
+      if (a.phase === 3) showError("profile-error", a.failure);
+    });
+  } catch (e) {
+    showError("profile-error", e.message);
+  } finally {
+    $("profile").disabled = false;
+  }
+}
+
+function showProfiles(a) {
+  const report = JSON.parse(a.report_json);
+  $("profile-conclusion").textContent = a.conclusion;
+  $("profile-conclusion").hidden = false;
+  const interval = (low, high) => `[${low === null ? "open" : fmt(low, 7)}, ${high === null ? "open" : fmt(high, 7)}]`;
+  const body = $("profile-table").tBodies[0];
+  body.replaceChildren();
+  for (const p of report.parameters) {
+    body.append(el("tr", { "data-parameter": p.name },
+      el("th", { scope: "row", text: p.name }),
+      el("td", { class: "num", text: fmt(p.value, 8) }),
+      el("td", { class: "num profile", "data-low": String(p.ci_low), "data-high": String(p.ci_high), text: interval(p.ci_low, p.ci_high) }),
+      el("td", { class: "num", text: interval(p.linearised.ci_low, p.linearised.ci_high) }),
+      el("td", { class: "flag", text: p.identifiable ? "identifiable" : "not identifiable" })));
+  }
+  $("profile-table").hidden = false;
+  const plots = $("profile-plots");
+  plots.replaceChildren();
+  const files = a.files || {};
+  for (const name of Object.keys(files).filter((n) => n.endsWith(".svg")).sort()) {
+    plots.append(figure(files[name], `profile of ${name.replace(/^profile_/, "").replace(/\.svg$/, "")}: rise of the objective, threshold and linearised parabola`));
+  }
+}
+
 // ---- Diagnosis tab ----------------------------------------------------------------------
 
 async function diagnose() {
@@ -722,5 +780,6 @@ $("cancel").addEventListener("click", cancel);
 $("refresh-campaigns").addEventListener("click", refreshCampaigns);
 $("diagnose").addEventListener("click", diagnose);
 $("analyse").addEventListener("click", analyse);
+$("profile").addEventListener("click", profileParameters);
 loadModels();
 refreshCampaigns();
