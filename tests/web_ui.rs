@@ -252,13 +252,13 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
         );
     }
     // The sensitivity analysed on the page before calibrating is `calib sensitivity`'s on
-    // the campaign file (the same 32 samples, seed 1): the same sentence, the same flags,
+    // the campaign file (the same 128 samples, seed 1): the same sentence, the same flags,
     // the total indices shown to 3 digits.
     let cli = common::calib(&[
         "sensitivity",
         repo().join("examples/furuta.toml").to_str().unwrap(),
         "--samples",
-        "32",
+        "128",
         "--json",
         "--db",
         dir.path().join("sensitivity-db").to_str().unwrap(),

@@ -25,7 +25,7 @@ from selenium.webdriver.support.ui import Select, WebDriverWait
 
 # The campaign of examples/furuta.toml, typed into the page.
 THETA0 = "0.5235987755983"
-SENSITIVITY_SAMPLES = "32"  # base samples of the sensitivity asked on the Calibration tab
+SENSITIVITY_SAMPLES = "128"  # base samples of the sensitivity asked on the Calibration tab
 LONG = 900  # seconds a campaign or a diagnosis may take on a loaded machine
 
 
@@ -125,8 +125,9 @@ def workflow(url, data, shots, out):
         for name, nominal in (("armFriction", "0.012"), ("pendulumFriction", "0.002")):
             by_id(driver, f"free-{name}").click()
             type_into(driver, f"nominal-{name}", nominal)
-            type_into(driver, f"min-{name}", "0")
+            type_into(driver, f"min-{name}", "1e-4")
             type_into(driver, f"max-{name}", "0.9")
+            Select(by_id(driver, f"pscale-{name}")).select_by_value("log10")
         for method in ("powell", "differential-evolution"):
             driver.find_element(By.CSS_SELECTOR, f'input[name="method"][value="{method}"]').click()
         type_into(driver, "campaign-name", "furuta")
