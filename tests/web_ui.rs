@@ -265,12 +265,7 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
         "--out",
         dir.path().join("sensitivity").to_str().unwrap(),
     ]);
-    assert!(
-        cli.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cli.stderr)
-    );
-    let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    let cli = common::json_of(&cli);
     let shown = &page["sensitivity"];
     assert_eq!(shown["conclusion"], cli["conclusion"], "{shown}");
     assert!(
@@ -312,12 +307,7 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
         "--out",
         dir.path().join("profile").to_str().unwrap(),
     ]);
-    assert!(
-        cli.status.success(),
-        "{}",
-        String::from_utf8_lossy(&cli.stderr)
-    );
-    let cli: Value = serde_json::from_slice(&cli.stdout).unwrap();
+    let cli = common::json_of(&cli);
     let shown = &page["profiles"];
     for p in cli["parameters"].as_array().unwrap() {
         let name = p["name"].as_str().unwrap();

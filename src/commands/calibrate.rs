@@ -8,7 +8,6 @@ use calib_coordinator::store::SledStore;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
@@ -40,13 +39,18 @@ pub struct Args {
 /// tests) instead of a progress bar.
 pub const PROGRESS_ENV: &str = "CALIB_PROGRESS";
 
+/// The folder holding one `<name>/` per campaign: `out` (`--out`) when given, else
+/// `results/` beside the campaign file.
+pub fn results_root(campaign: &Path, out: Option<&Path>) -> PathBuf {
+    match out {
+        Some(out) => out.to_path_buf(),
+        None => campaign.parent().unwrap_or(Path::new(".")).join("results"),
+    }
+}
+
 /// The store a campaign uses when `--db` is not given.
 pub fn default_db(campaign: &Path) -> PathBuf {
-    campaign
-        .parent()
-        .unwrap_or(Path::new("."))
-        .join("results")
-        .join(".calib-db")
+    results_root(campaign, None).join(".calib-db")
 }
 
 /// A progress bar on standard error, drawn only when it is a terminal: the best objective
@@ -146,8 +150,8 @@ pub fn run(args: Args) -> Outcome {
     let status = |line: &str| {
         if drawn {
             bar.set_status(line);
-        } else if !line.is_empty() {
-            eprintln!("workers: {line}");
+        } else {
+            super::workers::print_status(line);
         }
     };
     let result = match &args.workers.workers {
@@ -155,17 +159,13 @@ pub fn run(args: Args) -> Outcome {
         Some(list) => match args.workers.connect_reporting(list, &status) {
             Ok(workers) => {
                 status("");
-                let stop = AtomicBool::new(false);
-                std::thread::scope(|scope| {
-                    scope.spawn(|| super::workers::watch(workers.pool(), &stop, &status));
-                    let result = calibration::calibrate_with_store(
+                super::workers::while_watching(&workers, &status, || {
+                    calibration::calibrate_with_store(
                         &campaign,
                         workers.evaluator(),
                         &store,
                         progress,
-                    );
-                    stop.store(true, Ordering::SeqCst);
-                    result
+                    )
                 })
             }
             Err(failure) => {
@@ -188,23 +188,12 @@ pub fn run(args: Args) -> Outcome {
     report_result(&args, &campaign, &result)
 }
 
-/// The folder holding one `<name>/` per campaign: `--out`, else `results/` beside the
-/// campaign file.
-fn results_root(args: &Args) -> PathBuf {
-    args.out.clone().unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("results")
-    })
-}
-
 fn report_result(
     args: &Args,
     campaign: &Campaign,
     calibration: &calibration::Calibration,
 ) -> Outcome {
-    let out = results_root(args).join(&campaign.name);
+    let out = results_root(&args.campaign, args.out.as_deref()).join(&campaign.name);
     let written = report::write(calibration, &out)?;
     if args.json {
         println!(

@@ -82,14 +82,7 @@ pub fn run(args: Args) -> Outcome {
     spinner.0.finish_and_clear();
     let d = result?;
     // `--out` is a results root, as for `calib calibrate`: one `<name>/` per campaign.
-    let out = args
-        .out
-        .unwrap_or_else(|| {
-            args.campaign
-                .parent()
-                .unwrap_or(std::path::Path::new("."))
-                .join("results")
-        })
+    let out = super::calibrate::results_root(&args.campaign, args.out.as_deref())
         .join(&campaign.name)
         .join("diagnosis");
     let written = report::write(&d, &out)?;

@@ -3,8 +3,7 @@ use calib_coordinator::campaign::Campaign;
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::profile::{self, report, walk::DEFAULT_MAX_STEPS, Settings};
 use calib_coordinator::store::SledStore;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -50,28 +49,16 @@ pub fn run(args: Args) -> Outcome {
     let result = match &args.workers.workers {
         None => profile::profile(&campaign, &LocalEvaluator, &store, &settings),
         Some(list) => {
-            let status = |line: &str| {
-                if !line.is_empty() {
-                    eprintln!("workers: {line}");
-                }
-            };
+            let status = super::workers::print_status;
             let workers = args.workers.connect_reporting(list, &status)?;
-            let stop = AtomicBool::new(false);
-            std::thread::scope(|scope| {
-                scope.spawn(|| super::workers::watch(workers.pool(), &stop, &status));
-                let result = profile::profile(&campaign, &workers.evaluator(), &store, &settings);
-                stop.store(true, Ordering::SeqCst);
-                result
+            super::workers::while_watching(&workers, &status, || {
+                profile::profile(&campaign, &workers.evaluator(), &store, &settings)
             })
         }
     }?;
-    let root = args.out.clone().unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("results")
-    });
-    let dir = root.join(&campaign.name).join("profile");
+    let dir = super::calibrate::results_root(&args.campaign, args.out.as_deref())
+        .join(&campaign.name)
+        .join("profile");
     let written = report::write(&result, &dir)?;
     if args.json {
         println!(

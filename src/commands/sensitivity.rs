@@ -3,8 +3,7 @@ use calib_coordinator::campaign::Campaign;
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::sensitivity::{self, report, Methods, Settings, DEFAULT_SAMPLES};
 use calib_coordinator::store::SledStore;
-use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::path::PathBuf;
 
 /// Which analysis to run.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
@@ -72,34 +71,22 @@ pub fn run(args: Args) -> Outcome {
             sensitivity::analyse_reporting(&campaign, LocalEvaluator, &store, settings, &progress)
         }
         Some(list) => {
-            let status = |line: &str| {
-                if !line.is_empty() {
-                    eprintln!("workers: {line}");
-                }
-            };
+            let status = super::workers::print_status;
             let workers = args.workers.connect_reporting(list, &status)?;
-            let stop = AtomicBool::new(false);
-            std::thread::scope(|scope| {
-                scope.spawn(|| super::workers::watch(workers.pool(), &stop, &status));
-                let result = sensitivity::analyse_reporting(
+            super::workers::while_watching(&workers, &status, || {
+                sensitivity::analyse_reporting(
                     &campaign,
                     workers.evaluator(),
                     &store,
                     settings,
                     &progress,
-                );
-                stop.store(true, Ordering::SeqCst);
-                result
+                )
             })
         }
     }?;
-    let root = args.out.clone().unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("results")
-    });
-    let dir = root.join(&campaign.name).join("sensitivity");
+    let dir = super::calibrate::results_root(&args.campaign, args.out.as_deref())
+        .join(&campaign.name)
+        .join("sensitivity");
     let written = report::write(&result, &dir)?;
     if args.json {
         println!(

@@ -287,13 +287,8 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
             )))
         }
     }
-    let root = args.out.clone().unwrap_or_else(|| {
-        args.campaign
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join("results")
-    });
-    let folder = root.join(&campaign.name);
+    let folder =
+        super::calibrate::results_root(&args.campaign, args.out.as_deref()).join(&campaign.name);
     std::fs::create_dir_all(&folder)
         .map_err(|e| Failure::internal(format!("{}: {e}", folder.display())))?;
     let mut written = Vec::new();

@@ -70,6 +70,29 @@ impl WorkersArgs {
     }
 }
 
+/// Run `work` while a thread [`watch`]es the pool of `workers`, telling `status`.
+pub fn while_watching<T>(
+    workers: &RemoteWorkers,
+    status: &(dyn Fn(&str) + Sync),
+    work: impl FnOnce() -> T,
+) -> T {
+    let stop = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        scope.spawn(|| watch(workers.pool(), &stop, status));
+        let result = work();
+        stop.store(true, Ordering::SeqCst);
+        result
+    })
+}
+
+/// A status line of [`watch`] on standard error, `workers: ` before it (the empty line
+/// that says a worker is back is left out).
+pub fn print_status(line: &str) {
+    if !line.is_empty() {
+        eprintln!("workers: {line}");
+    }
+}
+
 /// Watch `pool` until `stop` is set: whenever no worker is up, `status` hears what is
 /// awaited (each change once), and an empty line once a worker is back.
 pub fn watch(pool: &WorkerPool, stop: &AtomicBool, status: &dyn Fn(&str)) {

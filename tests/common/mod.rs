@@ -130,7 +130,6 @@ pub fn calib_with_input(args: &[&str], stdin: &[u8]) -> Output {
     child.wait_with_output().expect("run calib")
 }
 
-/// Standard output of a successful run, as JSON; panics with its standard error otherwise.
 /// `calib calibrate CAMPAIGN --db DB --out OUT --json` plus `extra` arguments, to completion;
 /// its result.json.
 pub fn calibrate_json(campaign: &Path, db: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
@@ -147,6 +146,7 @@ pub fn calibrate_json(campaign: &Path, db: &Path, out: &Path, extra: &[&str]) ->
     json_of(&calib(&args))
 }
 
+/// Standard output of a successful run, as JSON; panics with its standard error otherwise.
 pub fn json_of(out: &Output) -> serde_json::Value {
     assert!(
         out.status.success(),

@@ -212,6 +212,11 @@ where
     Box::pin(ReceiverStream::new(rx))
 }
 
+/// Every state of an analysis, to its end.
+fn follow_analysis(receiver: tokio::sync::watch::Receiver<AnalysisSnapshot>) -> AnalysisStream {
+    follow(receiver, analysis_state, |s| s.phase.ended())
+}
+
 type StateStream =
     Pin<Box<dyn tokio_stream::Stream<Item = Result<pb::CampaignState, Status>> + Send>>;
 
@@ -408,9 +413,7 @@ impl Calibration for CalibrationApi {
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let receiver = blocking(move || campaigns.sensitivity(&text, settings)).await?;
-        Ok(Response::new(follow(receiver, analysis_state, |s| {
-            s.phase.ended()
-        })))
+        Ok(Response::new(follow_analysis(receiver)))
     }
 
     type ProfileStream = AnalysisStream;
@@ -434,9 +437,7 @@ impl Calibration for CalibrationApi {
             blocking(move || campaigns.profile(&id, settings)).await?
         };
         let receiver = watched.ok_or_else(|| not_found(&id))?;
-        Ok(Response::new(follow(receiver, analysis_state, |s| {
-            s.phase.ended()
-        })))
+        Ok(Response::new(follow_analysis(receiver)))
     }
 
     type WatchAnalysisStream = AnalysisStream;
@@ -449,8 +450,6 @@ impl Calibration for CalibrationApi {
         let receiver = self.campaigns.watch_analysis(&id).ok_or_else(|| {
             Status::not_found(format!("id: no analysis `{id}` on this coordinator"))
         })?;
-        Ok(Response::new(follow(receiver, analysis_state, |s| {
-            s.phase.ended()
-        })))
+        Ok(Response::new(follow_analysis(receiver)))
     }
 }

@@ -15,8 +15,9 @@ use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 use crate::profile;
 use crate::sensitivity::{self, report, Methods, Settings};
-use crate::store::{hex, unhex32, CampaignStatus};
+use crate::store::{hex, unhex32};
 use calib_worker::content_hash::ContentHasher;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tokio::sync::watch;
 
@@ -29,12 +30,22 @@ pub struct AnalysisSnapshot {
     pub evaluations: u64,
     pub planned: u64,
     pub failure: Option<String>,
-    /// The report (`sensitivity.json`) once finished.
+    /// The report (`sensitivity.json`, `profile.json`) once finished.
     pub report: Option<serde_json::Value>,
     /// The sentence that sums it up, once finished.
     pub conclusion: String,
     /// The plots, by file name, once finished.
     pub files: Vec<(String, String)>,
+}
+
+/// What a finished analysis hands to those who follow it.
+struct Finished {
+    report: serde_json::Value,
+    conclusion: String,
+    /// Its SVG plots, by file name.
+    files: Vec<(String, String)>,
+    /// Evaluations in all, when it could not say beforehand (its `planned` was 0).
+    evaluations: Option<u64>,
 }
 
 impl Campaigns {
@@ -62,29 +73,27 @@ impl Campaigns {
             })
             .count(settings.samples)
             .bytes(&settings.seed.to_le_bytes());
-        let key = h.finish();
-        let mut analyses = self.analyses.lock().expect("analyses lock");
-        if let Some(state) = analyses.get(&key) {
-            return Ok(state.subscribe());
-        }
-        let (state, receiver) = watch::channel(AnalysisSnapshot {
-            id: hex(&key),
-            phase: Phase::Running,
-            evaluations: 0,
-            planned: sensitivity::planned(campaign.free.len(), settings) as u64,
-            failure: None,
-            report: None,
-            conclusion: String::new(),
-            files: Vec::new(),
-        });
-        analyses.insert(key, state.clone());
-        drop(analyses);
-        let this = self.clone();
-        std::thread::Builder::new()
-            .name(format!("sensitivity {}", campaign.name))
-            .spawn(move || this.run_sensitivity(key, campaign, settings, state))
-            .map_err(|e| Error::Dispatch(format!("cannot start an analysis thread: {e}")))?;
-        Ok(receiver)
+        let planned = sensitivity::planned(campaign.free.len(), settings) as u64;
+        let name = format!("sensitivity {}", campaign.name);
+        self.analysis(h.finish(), planned, name, move |this, state, folder| {
+            let progress = |done: usize, _planned: usize| {
+                state.send_modify(|s| s.evaluations = done as u64);
+            };
+            let engine = &*this.engine;
+            let s = sensitivity::analyse_reporting(
+                &campaign,
+                engine,
+                &*this.store,
+                settings,
+                &progress,
+            )?;
+            Ok(Finished {
+                report: report::sensitivity_json(&s),
+                conclusion: s.conclusion(),
+                files: svg_files(report::write(&s, folder)),
+                evaluations: None,
+            })
+        })
     }
 
     /// Follow the profile likelihoods of the finished campaign `id` around its best point,
@@ -97,22 +106,9 @@ impl Campaigns {
         let Some(campaign_key) = unhex32(id) else {
             return Ok(None);
         };
-        let Some(record) = self.store.campaign(&campaign_key)? else {
+        let Some(campaign) = self.finished(&campaign_key, id, "profile")? else {
             return Ok(None);
         };
-        let running = self.is_live(&campaign_key)
-            && self
-                .live
-                .lock()
-                .expect("live lock")
-                .get(&campaign_key)
-                .is_some_and(|l| l.state.borrow().phase != Phase::Finished);
-        if running || record.status != CampaignStatus::Finished {
-            return Err(Error::InvalidRequest(format!(
-                "id: campaign `{id}` has not finished; profile it once it has"
-            )));
-        }
-        let campaign = Campaign::parse(&record.spec, &record.source)?;
         let mut h = ContentHasher::new(b"calib.profile.v1\0");
         h.bytes(&campaign_key)
             .count(settings.max_steps)
@@ -120,75 +116,25 @@ impl Campaigns {
         for name in &settings.parameters {
             h.text(name);
         }
-        let key = h.finish();
-        let mut analyses = self.analyses.lock().expect("analyses lock");
-        if let Some(state) = analyses.get(&key) {
-            return Ok(Some(state.subscribe()));
-        }
-        let (state, receiver) = watch::channel(AnalysisSnapshot {
-            id: hex(&key),
-            phase: Phase::Running,
-            evaluations: 0,
-            planned: 0,
-            failure: None,
-            report: None,
-            conclusion: String::new(),
-            files: Vec::new(),
-        });
-        analyses.insert(key, state.clone());
-        drop(analyses);
-        let this = self.clone();
-        std::thread::Builder::new()
-            .name(format!("profile {}", campaign.name))
-            .spawn(move || this.run_profile(key, campaign, settings, state))
-            .map_err(|e| Error::Dispatch(format!("cannot start an analysis thread: {e}")))?;
+        let name = format!("profile {}", campaign.name);
+        let receiver = self.analysis(h.finish(), 0, name, move |this, _state, folder| {
+            let engine = &*this.engine;
+            let p = profile::profile(&campaign, &engine, &*this.store, &settings)?;
+            let conclusions = p.conclusions();
+            Ok(Finished {
+                report: profile::report::profile_json(&p),
+                conclusion: if conclusions.is_empty() {
+                    "Every profiled parameter is identifiable: its profile crosses the \
+                     threshold on both sides."
+                        .into()
+                } else {
+                    conclusions.join(" ")
+                },
+                files: svg_files(profile::report::write(&p, folder)),
+                evaluations: Some(p.stats.evaluations.requested),
+            })
+        })?;
         Ok(Some(receiver))
-    }
-
-    fn run_profile(
-        &self,
-        key: [u8; 32],
-        campaign: Campaign,
-        settings: profile::Settings,
-        state: watch::Sender<AnalysisSnapshot>,
-    ) {
-        let engine = &*self.engine;
-        match profile::profile(&campaign, &engine, &*self.store, &settings) {
-            Ok(p) => {
-                let folder = self.results.join("analyses").join(hex(&key));
-                let files = match profile::report::write(&p, &folder) {
-                    Ok(paths) => svg_files(paths),
-                    Err(e) => {
-                        tracing::error!(error = %e, "cannot write the profiles");
-                        Vec::new()
-                    }
-                };
-                let json = profile::report::profile_json(&p);
-                let conclusions = p.conclusions();
-                state.send_modify(|snapshot| {
-                    snapshot.phase = Phase::Finished;
-                    snapshot.evaluations = p.stats.evaluations.requested;
-                    snapshot.planned = snapshot.evaluations;
-                    snapshot.report = Some(json);
-                    snapshot.conclusion = if conclusions.is_empty() {
-                        "Every profiled parameter is identifiable: its profile crosses the \
-                         threshold on both sides."
-                            .into()
-                    } else {
-                        conclusions.join(" ")
-                    };
-                    snapshot.files = files;
-                });
-            }
-            Err(e) => {
-                tracing::error!(campaign = %campaign.name, error = %e, "profile failed");
-                self.analyses.lock().expect("analyses lock").remove(&key);
-                state.send_modify(|s| {
-                    s.phase = Phase::Failed;
-                    s.failure = Some(e.to_string());
-                });
-            }
-        }
     }
 
     /// Follow the analysis `id` this coordinator started; `None` when it has none so named.
@@ -198,52 +144,78 @@ impl Campaigns {
         analyses.get(&key).map(|s| s.subscribe())
     }
 
-    fn run_sensitivity(
-        &self,
+    /// Follow the analysis `key`, starting `work` on a thread of its own (`name`) unless it
+    /// is under way or done. `work` writes its files into the folder it is given
+    /// (`<results>/analyses/<key>/`). A failed analysis is not kept: asked again, it starts
+    /// afresh (its evaluations are stored).
+    fn analysis(
+        self: &Arc<Self>,
         key: [u8; 32],
-        campaign: Campaign,
-        settings: Settings,
-        state: watch::Sender<AnalysisSnapshot>,
-    ) {
-        let engine = &*self.engine;
-        let progress = |done: usize, _planned: usize| {
-            state.send_modify(|s| s.evaluations = done as u64);
-        };
-        let analysed =
-            sensitivity::analyse_reporting(&campaign, engine, &*self.store, settings, &progress);
-        match analysed {
-            Ok(s) => {
-                let folder = self.results.join("analyses").join(hex(&key));
-                let files = match report::write(&s, &folder) {
-                    Ok(paths) => svg_files(paths),
-                    Err(e) => {
-                        tracing::error!(error = %e, "cannot write the sensitivity analysis");
-                        Vec::new()
-                    }
-                };
-                let json = report::sensitivity_json(&s);
-                state.send_modify(|snapshot| {
-                    snapshot.phase = Phase::Finished;
-                    snapshot.report = Some(json);
-                    snapshot.conclusion = s.conclusion();
-                    snapshot.files = files;
-                });
-            }
-            Err(e) => {
-                tracing::error!(campaign = %campaign.name, error = %e, "sensitivity analysis failed");
-                // Not kept: asked again, it starts afresh (its evaluations are stored).
-                self.analyses.lock().expect("analyses lock").remove(&key);
-                state.send_modify(|s| {
-                    s.phase = Phase::Failed;
-                    s.failure = Some(e.to_string());
-                });
-            }
+        planned: u64,
+        name: String,
+        work: impl FnOnce(&Campaigns, &watch::Sender<AnalysisSnapshot>, &Path) -> Result<Finished>
+            + Send
+            + 'static,
+    ) -> Result<watch::Receiver<AnalysisSnapshot>> {
+        let mut analyses = self.analyses.lock().expect("analyses lock");
+        if let Some(state) = analyses.get(&key) {
+            return Ok(state.subscribe());
         }
+        let (state, receiver) = watch::channel(AnalysisSnapshot {
+            id: hex(&key),
+            phase: Phase::Running,
+            evaluations: 0,
+            planned,
+            failure: None,
+            report: None,
+            conclusion: String::new(),
+            files: Vec::new(),
+        });
+        analyses.insert(key, state.clone());
+        drop(analyses);
+        let this = self.clone();
+        let thread = name.clone();
+        let run = move || {
+            let folder = this.results.join("analyses").join(hex(&key));
+            match work(&this, &state, &folder) {
+                Ok(done) => state.send_modify(|s| {
+                    s.phase = Phase::Finished;
+                    if let Some(evaluations) = done.evaluations {
+                        s.evaluations = evaluations;
+                        s.planned = evaluations;
+                    }
+                    s.report = Some(done.report);
+                    s.conclusion = done.conclusion;
+                    s.files = done.files;
+                }),
+                Err(e) => {
+                    tracing::error!(analysis = %name, error = %e, "analysis failed");
+                    this.analyses.lock().expect("analyses lock").remove(&key);
+                    state.send_modify(|s| {
+                        s.phase = Phase::Failed;
+                        s.failure = Some(e.to_string());
+                    });
+                }
+            }
+        };
+        std::thread::Builder::new()
+            .name(thread)
+            .spawn(run)
+            .map_err(|e| Error::Dispatch(format!("cannot start an analysis thread: {e}")))?;
+        Ok(receiver)
     }
 }
 
-/// The SVG files among `paths`, by file name, with their text.
-fn svg_files(paths: Vec<std::path::PathBuf>) -> Vec<(String, String)> {
+/// The SVG files a report wrote, by file name, with their text; none (and the reason
+/// logged) when it could not write them.
+fn svg_files(written: Result<Vec<PathBuf>>) -> Vec<(String, String)> {
+    let paths = match written {
+        Ok(paths) => paths,
+        Err(e) => {
+            tracing::error!(error = %e, "cannot write the analysis' files");
+            return Vec::new();
+        }
+    };
     paths
         .into_iter()
         .filter(|p| p.extension().is_some_and(|e| e == "svg"))

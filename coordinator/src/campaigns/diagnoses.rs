@@ -6,7 +6,7 @@ use crate::campaign::Campaign;
 use crate::diagnosis::{self, report};
 use crate::error::{Error, Result};
 use crate::optim::problem::Progress;
-use crate::store::{hex, unhex32, CampaignId, CampaignStatus};
+use crate::store::{hex, unhex32, CampaignId};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tokio::sync::watch;
@@ -39,27 +39,9 @@ impl Campaigns {
         if let Some(state) = diagnoses.get(&key) {
             return Ok(Some(state.subscribe()));
         }
-        let live_phase = self
-            .live
-            .lock()
-            .expect("live lock")
-            .get(&key)
-            .map(|l| l.state.borrow().phase);
-        if let Some(phase) = live_phase.filter(|p| *p != Phase::Finished) {
-            return Err(Error::InvalidRequest(format!(
-                "id: campaign `{id}` has not finished ({phase:?}); diagnose it once it has"
-            )));
-        }
-        let Some(record) = self.store.campaign(&key)? else {
+        let Some(campaign) = self.finished(&key, id, "diagnose")? else {
             return Ok(None);
         };
-        if record.status != CampaignStatus::Finished {
-            return Err(Error::InvalidRequest(format!(
-                "id: campaign `{id}` has not finished ({:?}); diagnose it once it has",
-                record.status
-            )));
-        }
-        let campaign = Campaign::parse(&record.spec, &record.source)?;
         let (state, receiver) = watch::channel(DiagnosisSnapshot {
             campaign_id: hex(&key),
             phase: Phase::Running,

@@ -149,6 +149,38 @@ impl Campaigns {
         }
     }
 
+    /// The campaign `key` (`id` as the client gave it) once it has finished, for what is
+    /// done to finished campaigns only (`verb` it: diagnose, profile); `None` when the store
+    /// has no such campaign, an error naming its phase when it has not finished.
+    pub(crate) fn finished(
+        &self,
+        key: &CampaignId,
+        id: &str,
+        verb: &str,
+    ) -> Result<Option<Campaign>> {
+        let live_phase = self
+            .live
+            .lock()
+            .expect("live lock")
+            .get(key)
+            .map(|l| l.state.borrow().phase);
+        if let Some(phase) = live_phase.filter(|p| *p != Phase::Finished) {
+            return Err(Error::InvalidRequest(format!(
+                "id: campaign `{id}` has not finished ({phase:?}); {verb} it once it has"
+            )));
+        }
+        let Some(record) = self.store.campaign(key)? else {
+            return Ok(None);
+        };
+        if record.status != CampaignStatus::Finished {
+            return Err(Error::InvalidRequest(format!(
+                "id: campaign `{id}` has not finished ({:?}); {verb} it once it has",
+                record.status
+            )));
+        }
+        Ok(Some(Campaign::parse(&record.spec, &record.source)?))
+    }
+
     /// Whether this coordinator runs campaign `id` (the store's resume leaves it alone).
     pub fn is_live(&self, id: &CampaignId) -> bool {
         self.live.lock().expect("live lock").contains_key(id)
