@@ -91,6 +91,15 @@ fn main() -> ExitCode {
         .clone()
         .or_else(|| std::env::var("RUST_LOG").ok())
         .unwrap_or_else(|| "warn".into());
+    // The store (sled) logs at trace level from closures its epoch collector may run while
+    // a thread is being torn down, when the log writer's thread-local buffer is gone: such a
+    // line panicked the process at exit under `--log trace`. Its traces stay off unless
+    // asked for by name.
+    let filter = if filter.contains("sled") {
+        filter
+    } else {
+        format!("{filter},sled=info")
+    };
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_new(&filter)
