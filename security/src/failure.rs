@@ -59,5 +59,30 @@ pub fn plain_to_tls_hint(status: &tonic::Status) -> Option<&'static str> {
         status.code() == tonic::Code::Internal && status.message().contains("h2 protocol error");
     let closed = status.code() == tonic::Code::Cancelled
         && status.message().contains("operation was canceled");
-    (garbled || closed).then_some("if the server serves TLS, dial it with https://")
+    let dropped = status.code() == tonic::Code::Unknown && status.message() == "transport error";
+    (garbled || closed || dropped).then_some("if the server serves TLS, dial it with https://")
+}
+
+#[cfg(test)]
+mod plain_to_tls_tests {
+    use super::plain_to_tls_hint;
+    use tonic::Status;
+
+    #[test]
+    fn each_way_a_tls_server_answers_plain_http2_gets_the_hint() {
+        for status in [
+            Status::internal("h2 protocol error: frame with invalid size"),
+            Status::cancelled("operation was canceled: connection closed"),
+            Status::unknown("transport error"),
+        ] {
+            assert!(plain_to_tls_hint(&status).is_some(), "{status:?}");
+        }
+        for status in [
+            Status::unknown("something else"),
+            Status::unavailable("transport error"),
+            Status::invalid_argument("transport error"),
+        ] {
+            assert!(plain_to_tls_hint(&status).is_none(), "{status:?}");
+        }
+    }
 }
