@@ -115,13 +115,14 @@ impl SimulatorService {
         let times = Arc::new(times);
         let grid = times.clone();
         let wanted = outputs.clone();
-        let handle = self
+        let outcome = self
             .pool
-            .start(&admission, move || {
+            .run(&admission, 1, move |_| {
                 model.simulate(&params, &grid, &wanted, &solver)
             })
-            .await?;
-        let outcome = SimulationPool::finish(handle).await?;
+            .await?
+            .pop()
+            .expect("one simulation");
         let info = model.info();
         let times = Arc::unwrap_or_clone(times);
         Ok(match outcome {
@@ -177,12 +178,10 @@ impl SimulatorService {
         let count = evaluation.points.len();
         let admission = self.pool.admit(count)?;
         let evaluation = Arc::new(evaluation);
-        let mut handles = Vec::with_capacity(count);
-        for i in 0..count {
-            let (evaluation, measured) = (evaluation.clone(), measured.clone());
-            let handle = self
-                .pool
-                .start(&admission, move || {
+        let outcomes = {
+            let evaluation = evaluation.clone();
+            self.pool
+                .run(&admission, count, move |i| {
                     let target = Target {
                         grid: &measured.times,
                         outputs: &evaluation.outputs,
@@ -196,12 +195,11 @@ impl SimulatorService {
                         &target,
                     )
                 })
-                .await?;
-            handles.push(handle);
-        }
+                .await?
+        };
         let mut results = Vec::with_capacity(count);
-        for handle in handles {
-            results.push(match SimulationPool::finish(handle).await? {
+        for outcome in outcomes {
+            results.push(match outcome {
                 Ok(e) => proto::PointResult {
                     objective: e.objective,
                     sse: e.sse,
