@@ -231,7 +231,9 @@ fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
         WorkerAddress::Url(hanging_url),
     ]);
     config.probe_interval = Duration::from_millis(100);
-    config.deadline = Duration::from_millis(300);
+    // Long enough for the good worker's chunks, queued behind each other on its one slot,
+    // to be answered on a loaded machine (a timed-out chunk is retried: simulated twice).
+    config.deadline = Duration::from_millis(1500);
     let remote = RemoteWorkers::connect(config).unwrap();
     assert!(remote.wait_until_up(2, Duration::from_secs(10)));
     let points: Vec<Vec<f64>> = (0..8)
@@ -520,8 +522,17 @@ fn a_registration_lapses_after_missed_renewals() {
     runtime.block_on(coordinator.shutdown());
 }
 
-#[test]
-fn each_worker_has_two_chunks_in_flight_sized_by_what_is_pending() {
+/// A coordinator's pool on one napping worker of two slots that sleeps `nap` per point,
+/// once the worker has answered a first point (so that its speed is known).
+fn napping_pool(
+    nap: Duration,
+) -> (
+    tokio::runtime::Runtime,
+    std::sync::Arc<calib_sandbox::NappingSimulator>,
+    calib_coordinator::dispatch::RemoteWorkers,
+    calib_coordinator::objective::Objective,
+    tempfile::TempDir,
+) {
     use calib_coordinator::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
@@ -532,11 +543,10 @@ fn each_worker_has_two_chunks_in_flight_sized_by_what_is_pending() {
         .enable_all()
         .build()
         .unwrap();
-    // A worker of two slots that takes half a second per chunk.
     let (url, napper) = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let url = format!("http://{}", listener.local_addr().unwrap());
-        let napper = calib_sandbox::serve_napping(listener, Duration::from_millis(500), 2).await;
+        let napper = calib_sandbox::serve_napping(listener, nap, 2).await;
         (url, napper)
     });
     let mut config = DispatchConfig::new(vec![WorkerAddress::Url(url)]);
@@ -548,17 +558,57 @@ fn each_worker_has_two_chunks_in_flight_sized_by_what_is_pending() {
         .evaluator()
         .evaluate(&objective, &[vec![0.01, 0.002]])
         .unwrap();
+    (runtime, napper, remote, objective, dir)
+}
+
+fn distinct_points(n: u32) -> Vec<Vec<f64>> {
+    (0..n)
+        .map(|i| vec![0.01 + 1e-6 * f64::from(i), 0.002])
+        .collect()
+}
+
+#[test]
+fn a_slow_workers_chunks_hold_a_point_per_slot_two_in_flight() {
+    use calib_coordinator::evaluator::Evaluator;
+    // Half a second per point: far beyond the 50 ms of work a chunk holds per slot.
+    let (_runtime, napper, remote, objective, _dir) = napping_pool(Duration::from_millis(500));
     let before = napper.requests();
-    let points: Vec<Vec<f64>> = (0..10)
-        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
-        .collect();
-    let answered = remote.evaluator().evaluate(&objective, &points).unwrap();
+    let answered = remote
+        .evaluator()
+        .evaluate(&objective, &distinct_points(10))
+        .unwrap();
     assert_eq!(answered.len(), 10);
-    // Ten points on two slots: a first chunk of three points per slot (ten left, four slots
-    // of two chunks each), then chunks of one point per slot for the last four.
-    assert_eq!(napper.requests() - before, 3, "chunks of 6, 2 and 2 points");
-    assert_eq!(napper.most_points(), 6, "at most three points per slot");
+    assert_eq!(
+        napper.requests() - before,
+        5,
+        "five chunks of one point per slot"
+    );
+    assert_eq!(napper.most_points(), 2, "one point per slot");
     assert_eq!(napper.most_in_flight(), 2, "one chunk runs, the next waits");
+}
+
+#[test]
+fn a_fast_workers_chunks_grow_past_eight_points_per_slot() {
+    use calib_coordinator::evaluator::Evaluator;
+    let (_runtime, napper, remote, objective, _dir) = napping_pool(Duration::from_millis(1));
+    // A millisecond per point: chunks of up to 50 ms per slot, far more than the eight
+    // points per slot a worker of unknown speed is sent.
+    let before = napper.requests();
+    let answered = remote
+        .evaluator()
+        .evaluate(&objective, &distinct_points(1024))
+        .unwrap();
+    assert_eq!(answered.len(), 1024);
+    assert!(
+        napper.most_points() > 16,
+        "chunks of {} points at most",
+        napper.most_points()
+    );
+    let requests = napper.requests() - before;
+    assert!(
+        requests < 1024 / 16,
+        "{requests} requests for 1,024 points: fewer than at eight points per slot"
+    );
 }
 
 #[test]

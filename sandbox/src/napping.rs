@@ -168,6 +168,8 @@ impl Simulator for NappingSimulator {
             protocol_version: calib_proto::PROTOCOL_VERSION,
             release: env!("CARGO_PKG_VERSION").into(),
             slots: self.slots,
+            // Requests wait for slots without bound; this is what the dispatcher is told.
+            queue_bound: 64 * self.slots,
             ..Default::default()
         }))
     }

@@ -16,6 +16,8 @@ use tonic_health::pb::health_client::HealthClient;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct WorkerStatus {
     pub slots: usize,
+    /// Points queued beyond the slots before a request is refused.
+    pub queue_bound: usize,
 }
 
 /// An objective in the form workers take it, built once per objective.
@@ -228,6 +230,7 @@ impl WorkerClient {
         }
         Ok(WorkerStatus {
             slots: (status.slots as usize).max(1),
+            queue_bound: status.queue_bound as usize,
         })
     }
 

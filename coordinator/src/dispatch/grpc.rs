@@ -1,7 +1,8 @@
 //! [`GrpcEvaluator`]: evaluations and simulations spread over the pool's workers.
 //!
 //! A batch is cut into chunks sized by what is pending ([`WorkerPool::acquire`]): up to
-//! eight points per slot of a worker while much is left, one per slot at the tail; idle
+//! about 50 ms of work per slot of a worker while much is left (as its answers have taken;
+//! eight points before the first), one point per slot at the tail; idle
 //! slots are filled first, then up to two chunks per worker at once (one running, one
 //! waiting in the worker's queue, so that no slot idles while an answer travels back); more
 //! points than that wait for a chunk to return. A chunk whose worker fails
@@ -18,6 +19,7 @@
 //! [`Handle::block_on`].
 
 use super::client::{WireObjective, WireSimulation, WorkerClient};
+use super::coalesce::Coalescer;
 use super::error::WorkerError;
 use super::pool::{Lease, WorkerPool};
 use crate::evaluator::{Evaluator, Fault, Outputs, Simulator};
@@ -34,6 +36,8 @@ pub struct GrpcEvaluator {
     runtime: Handle,
     /// Objectives already put in wire form, by fingerprint.
     wire: Mutex<HashMap<[u8; 32], Arc<WireObjective>>>,
+    /// Concurrent callers' points, sent together.
+    coalescer: Coalescer<[u8; 32]>,
 }
 
 impl GrpcEvaluator {
@@ -43,11 +47,21 @@ impl GrpcEvaluator {
             pool,
             runtime,
             wire: Mutex::new(HashMap::new()),
+            coalescer: Coalescer::default(),
         }
     }
 
     pub fn pool(&self) -> &Arc<WorkerPool> {
         &self.pool
+    }
+
+    /// The wire form of an objective already seen, by fingerprint.
+    fn wire_of(&self, fingerprint: &[u8; 32]) -> Option<Arc<WireObjective>> {
+        self.wire
+            .lock()
+            .expect("wire lock")
+            .get(fingerprint)
+            .cloned()
     }
 
     fn wire(&self, objective: &Objective) -> Arc<WireObjective> {
@@ -68,8 +82,47 @@ impl Evaluator for GrpcEvaluator {
             return Ok(Vec::new());
         }
         let wire = self.wire(objective);
-        self.runtime
-            .block_on(dispatch(self.pool.clone(), wire, points.to_vec()))
+        // Every group of a round is one objective: sent side by side, each its own batch.
+        self.coalescer
+            .evaluate(objective.fingerprint(), points.to_vec(), |groups| {
+                let count = groups.len();
+                let batches: Vec<_> = groups
+                    .into_iter()
+                    .map(|(fingerprint, points)| {
+                        let wire = self.wire_of(&fingerprint).unwrap_or_else(|| wire.clone());
+                        dispatch(self.pool.clone(), wire, points)
+                    })
+                    .collect();
+                self.runtime.block_on(async move {
+                    if count == 1 {
+                        let batch = batches.into_iter().next().expect("one group");
+                        return vec![batch.await];
+                    }
+                    let mut running = JoinSet::new();
+                    for (i, batch) in batches.into_iter().enumerate() {
+                        running.spawn(async move { (i, batch.await) });
+                    }
+                    let mut answers: Vec<Option<Result<Vec<Evaluation>, Fault>>> =
+                        (0..count).map(|_| None).collect();
+                    while let Some(joined) = running.join_next().await {
+                        match joined {
+                            Ok((i, answer)) => answers[i] = Some(answer),
+                            Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
+                            Err(_) => {}
+                        }
+                    }
+                    answers
+                        .into_iter()
+                        .map(|a| {
+                            a.unwrap_or_else(|| {
+                                Err(Fault::unavailable(
+                                    "dispatch stopped: the coordinator is shutting down",
+                                ))
+                            })
+                        })
+                        .collect()
+                })
+            })
     }
 }
 
@@ -89,6 +142,9 @@ impl Simulator for GrpcEvaluator {
 pub trait Work: Send + Sync + 'static {
     type Answer: Send + 'static;
 
+    /// Most points per slot of a worker in one chunk (see [`WorkerPool::acquire`]).
+    const MOST_PER_SLOT: usize;
+
     /// Ask `client` for `points`: one answer each, in order.
     fn ask(
         self: Arc<Self>,
@@ -100,6 +156,8 @@ pub trait Work: Send + Sync + 'static {
 
 impl Work for WireObjective {
     type Answer = Evaluation;
+    /// An answer is a few numbers per point: as large as the worker's speed allows.
+    const MOST_PER_SLOT: usize = super::pool::MAX_POINTS_PER_SLOT_FAST;
 
     async fn ask(
         self: Arc<Self>,
@@ -113,6 +171,8 @@ impl Work for WireObjective {
 
 impl Work for WireSimulation {
     type Answer = Outputs;
+    /// An answer is a whole trajectory per point, all requested at once.
+    const MOST_PER_SLOT: usize = super::pool::MAX_POINTS_PER_SLOT;
 
     /// Every point of the chunk at once, one request each: the chunk holds at most as many
     /// points as the worker has slots (twice, with the chunk queued behind it).
@@ -146,6 +206,8 @@ struct ChunkOutcome<A> {
     lease: Lease,
     indices: Vec<usize>,
     result: Result<Vec<A>, WorkerError>,
+    /// From request to answer.
+    took: Duration,
 }
 
 /// Do `work` at `points` on the pool's workers, retrying what failed elsewhere. A batch
@@ -174,17 +236,19 @@ pub async fn dispatch<W: Work>(
         let changed = pool.notified();
         tokio::pin!(changed);
         changed.as_mut().enable();
-        for lease in pool.acquire(pending.len()) {
+        for lease in pool.acquire(pending.len(), W::MOST_PER_SLOT) {
             let indices: Vec<usize> = pending.drain(..lease.points).collect();
             let chunk: Vec<Vec<f64>> = indices.iter().map(|&i| points[i].clone()).collect();
             let work = work.clone();
             let deadline = config.deadline;
             in_flight.spawn(async move {
+                let asked = Instant::now();
                 let result = work.ask(lease.client.clone(), chunk, deadline).await;
                 ChunkOutcome {
                     lease,
                     indices,
                     result,
+                    took: asked.elapsed(),
                 }
             });
         }
@@ -217,6 +281,7 @@ pub async fn dispatch<W: Work>(
             lease,
             indices,
             result,
+            took,
         } = match joined {
             Ok(outcome) => outcome,
             // The runtime is shutting down (the coordinator stops): no answer will come.
@@ -229,14 +294,14 @@ pub async fn dispatch<W: Work>(
         };
         match result {
             Ok(done) => {
-                pool.release(&lease, indices.len());
+                pool.release(&lease, indices.len(), took);
                 for (i, e) in indices.into_iter().zip(done) {
                     answers[i] = Some(e);
                 }
             }
             // Asking again, here or elsewhere, gives the same answer: the batch stops.
             Err(error) if !error.is_retryable() => {
-                pool.release(&lease, 0);
+                pool.release(&lease, 0, took);
                 tracing::warn!(worker = %lease.client.url(), %error, "worker refused a request for good");
                 let url = lease.client.url();
                 fault.get_or_insert(Fault::rejected(match error {
@@ -252,7 +317,7 @@ pub async fn dispatch<W: Work>(
                 pending.clear();
             }
             Err(error) => {
-                pool.release(&lease, 0);
+                pool.release(&lease, 0, took);
                 match &error {
                     WorkerError::Incompatible(reason) => {
                         pool.mark_incompatible(lease.worker, reason.clone())

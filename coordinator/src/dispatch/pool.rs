@@ -5,7 +5,9 @@
 //! by the pool's maintenance task; one that speaks another protocol is set aside for good.
 //! Slots are leased to dispatchers in chunks sized by what is pending (see
 //! [`WorkerPool::acquire`]): a batch fills every worker's idle slots first, large batches go
-//! in few requests, and the tail of a batch in chunks of one point per slot.
+//! in few requests, and the tail of a batch in chunks of one point per slot. How large a
+//! chunk may be follows how long the worker takes per point: about [`CHUNK_SECONDS`] of
+//! work per slot, so that a fast model travels in large requests and a slow one in small.
 
 use super::client::WorkerClient;
 use super::DispatchConfig;
@@ -77,6 +79,11 @@ struct Worker {
     origin: Origin,
     health: Health,
     slots: usize,
+    /// Points the worker queues beyond its slots before it refuses a request.
+    queue_bound: usize,
+    /// Seconds of one point on one slot, as the worker's answers have taken (a running
+    /// average; `None` until the first answer).
+    point_seconds: Option<f64>,
     /// Points leased and not yet returned.
     busy: usize,
     /// Chunks leased and not yet returned.
@@ -104,8 +111,17 @@ impl Worker {
     }
 }
 
-/// Most points per slot of its worker one chunk holds (while many points are pending).
+/// Most points per slot of its worker one chunk holds (while many points are pending), as
+/// long as the worker's speed is not known.
 pub const MAX_POINTS_PER_SLOT: usize = 8;
+
+/// Work per slot a chunk holds at most once the worker's speed is known: long enough that a
+/// request's cost (a few hundred microseconds of both processes' CPU) is a small part of
+/// it, short enough that a batch's tail and a failed worker's retries stay small.
+pub const CHUNK_SECONDS: f64 = 0.05;
+
+/// Most points per slot of a chunk however fast the model.
+pub const MAX_POINTS_PER_SLOT_FAST: usize = 64;
 
 /// Longest wait between two probes of a failing worker.
 const MAX_BACKOFF: std::time::Duration = std::time::Duration::from_secs(30);
@@ -188,6 +204,8 @@ impl WorkerPool {
             origin,
             health: Health::Joining,
             slots: 0,
+            queue_bound: 0,
+            point_seconds: None,
             busy: 0,
             chunks: 0,
             evaluated: 0,
@@ -244,17 +262,19 @@ impl WorkerPool {
     }
 
     /// Lease up to `wanted` points of capacity over the workers that are up, in chunks sized
-    /// by what is left (guided self-scheduling): while much is pending a chunk holds up to
-    /// [`MAX_POINTS_PER_SLOT`] points per slot of its worker, so that a large batch travels
-    /// in few requests; as the batch drains chunks shrink to one point per slot, so that the
-    /// last points spread over every worker instead of waiting behind one.
+    /// by what is left (guided self-scheduling): while much is pending a chunk holds about
+    /// [`CHUNK_SECONDS`] of work per slot of its worker (up to [`MAX_POINTS_PER_SLOT_FAST`]
+    /// points; [`MAX_POINTS_PER_SLOT`] until the worker has answered once), so that a large
+    /// batch travels in few requests; as the batch drains chunks shrink to one point per
+    /// slot, so that the last points spread over every worker instead of waiting behind one.
     ///
     /// Workers with an idle slot are served first; only when points are left over does a
-    /// worker take a chunk queued behind its running one (up to `depth` chunks at once), so
-    /// that no point waits in one worker's queue while another worker idles. A chunk queued
-    /// behind more than one round of work holds one point per slot: what waits in a worker's
-    /// queue is never more than a round, wherever the batch's tail falls.
-    pub fn acquire(&self, wanted: usize) -> Vec<Lease> {
+    /// worker take a chunk queued behind its running one (up to `depth` chunks at once, and
+    /// never more points than the worker queues before it refuses), so that no point waits
+    /// in one worker's queue while another worker idles.
+    ///
+    /// `most_per_slot` bounds a chunk for work whose answers are large (whole trajectories).
+    pub fn acquire(&self, wanted: usize, most_per_slot: usize) -> Vec<Lease> {
         let mut state = self.state.lock().expect("pool lock");
         let n = state.workers.len();
         if n == 0 || wanted == 0 {
@@ -272,10 +292,16 @@ impl WorkerPool {
         if total_slots == 0 {
             return Vec::new();
         }
-        let per_slot = |remaining: usize| {
+        let per_slot = |remaining: usize, w: &Worker| {
+            let most = match w.point_seconds {
+                Some(t) if t > 0.0 => {
+                    ((CHUNK_SECONDS / t) as usize).clamp(1, MAX_POINTS_PER_SLOT_FAST)
+                }
+                _ => MAX_POINTS_PER_SLOT,
+            };
             remaining
                 .div_ceil(2 * total_slots)
-                .clamp(1, MAX_POINTS_PER_SLOT)
+                .clamp(1, most.min(most_per_slot.max(1)))
         };
         let mut remaining = wanted;
         let mut leases = Vec::new();
@@ -292,22 +318,21 @@ impl WorkerPool {
                         continue;
                     }
                     let room = if queued {
+                        // Queued behind what runs: as large as what is pending allows, within
+                        // what the worker queues before it refuses.
                         if w.chunks >= depth {
                             continue;
                         }
-                        // Behind a large chunk, one point per slot is enough to keep the
-                        // slots busy while an answer travels; behind a round or less, a
-                        // chunk as large as what is pending allows.
-                        if w.busy > w.slots {
-                            w.slots
-                        } else {
-                            w.slots * per_slot(remaining)
+                        let capacity = w.slots + w.queue_bound;
+                        if w.busy >= capacity {
+                            continue;
                         }
+                        (w.slots * per_slot(remaining, w)).min(capacity - w.busy)
                     } else {
                         if w.busy >= w.slots {
                             continue;
                         }
-                        (w.slots - w.busy) * per_slot(remaining)
+                        (w.slots - w.busy) * per_slot(remaining, w)
                     };
                     let points = room.min(remaining);
                     remaining -= points;
@@ -328,8 +353,9 @@ impl WorkerPool {
         leases
     }
 
-    /// Return a lease's slots; `answered` points were evaluated by the worker.
-    pub fn release(&self, lease: &Lease, answered: usize) {
+    /// Return a lease's slots; `answered` points were evaluated by the worker, in `took`
+    /// from request to answer.
+    pub fn release(&self, lease: &Lease, answered: usize, took: std::time::Duration) {
         let mut state = self.state.lock().expect("pool lock");
         if let Some(w) = state.workers.iter_mut().find(|w| w.id == lease.worker) {
             w.busy -= lease.points;
@@ -337,6 +363,14 @@ impl WorkerPool {
             w.evaluated += answered as u64;
             if answered > 0 {
                 w.failures = 0;
+                // The chunk's points ran side by side on up to `slots` slots; a chunk that
+                // waited behind another counts its wait too, which errs towards small chunks.
+                let parallel = answered.min(w.slots.max(1)) as f64;
+                let seconds = took.as_secs_f64() * parallel / answered as f64;
+                w.point_seconds = Some(match w.point_seconds {
+                    Some(before) => 0.7 * before + 0.3 * seconds,
+                    None => seconds,
+                });
             }
         }
         drop(state);
@@ -428,6 +462,7 @@ impl WorkerPool {
                 w.health = Health::Up;
                 w.ever_up = true;
                 w.slots = status.slots;
+                w.queue_bound = status.queue_bound;
             }
             Err(super::error::WorkerError::Incompatible(reason)) => {
                 tracing::error!(worker = %w.client.url(), %reason, "incompatible worker set aside");
