@@ -1,0 +1,379 @@
+//! One dispatch for the points of many callers: the runs of a campaign each ask for a point
+//! or two at a time (a Nelder–Mead step, a Powell line search), and a request per ask costs
+//! both processes more than the point's own share of the work. [`Coalescer::evaluate`]
+//! sends what every caller asks while the earlier requests travel, together.
+//!
+//! No timer: a caller that finds fewer than [`LEADERS`] rounds under way sends a round at
+//! once (its own points and whatever else waits); a caller that finds them all busy leaves
+//! its points in the queue. When a round is answered its leader returns to its own work and
+//! hands the baton to the first caller still waiting, which sends everything then waiting.
+//! A lone caller therefore waits for nothing, many callers share requests, up to `LEADERS`
+//! rounds travel at once (the workers' queues stay fed) and no caller's own work waits
+//! while it serves others'. Each point's answer is the worker's answer for that point
+//! alone, so how points are grouped changes no number.
+
+use crate::evaluator::Fault;
+use crate::objective::Evaluation;
+use std::sync::{Arc, Condvar, Mutex};
+
+/// Points to send, grouped by key: each group one batch.
+pub type Groups<K> = Vec<(K, Vec<Vec<f64>>)>;
+
+/// Each group's answers (a point each, in order) or the fault that stopped it.
+pub type Answers = Vec<Result<Vec<Evaluation>, Fault>>;
+
+/// Dispatches under way at once: one whose answers travel back while the next runs.
+pub const LEADERS: usize = 2;
+
+/// What one caller waits on: its answer, and perhaps first the baton (it leads a round).
+struct Reply {
+    state: Mutex<ReplyState>,
+    ready: Condvar,
+}
+
+#[derive(Default)]
+struct ReplyState {
+    /// Lead the next round (taken once).
+    lead: bool,
+    answer: Option<Result<Vec<Evaluation>, Fault>>,
+}
+
+impl Reply {
+    fn new() -> Self {
+        Self {
+            state: Mutex::new(ReplyState::default()),
+            ready: Condvar::new(),
+        }
+    }
+
+    fn hand_baton(&self) {
+        self.state.lock().expect("reply lock").lead = true;
+        self.ready.notify_all();
+    }
+
+    fn answer(&self, answer: Result<Vec<Evaluation>, Fault>) {
+        self.state.lock().expect("reply lock").answer = Some(answer);
+        self.ready.notify_all();
+    }
+
+    /// The baton (`None`: lead a round) if handed, else the answer once it is in.
+    fn wait(&self) -> Option<Result<Vec<Evaluation>, Fault>> {
+        let mut state = self.state.lock().expect("reply lock");
+        loop {
+            if std::mem::take(&mut state.lead) {
+                return None;
+            }
+            if let Some(answer) = state.answer.take() {
+                return Some(answer);
+            }
+            state = self.ready.wait(state).expect("reply lock");
+        }
+    }
+}
+
+/// One caller's points, waiting to be sent.
+struct Ask<K> {
+    key: K,
+    points: Vec<Vec<f64>>,
+    reply: Arc<Reply>,
+    /// Handed the baton already (it will take this round itself).
+    leads: bool,
+}
+
+struct Queue<K> {
+    waiting: Vec<Ask<K>>,
+    /// Dispatches under way or handed to a waiting caller.
+    leaders: usize,
+}
+
+/// Gathers the points of concurrent callers into shared dispatches. `K` names what points
+/// may share a request (the objective); points of different keys go in batches of their
+/// own, sent side by side.
+pub struct Coalescer<K> {
+    queue: Mutex<Queue<K>>,
+}
+
+impl<K> Default for Coalescer<K> {
+    fn default() -> Self {
+        Self {
+            queue: Mutex::new(Queue {
+                waiting: Vec::new(),
+                leaders: 0,
+            }),
+        }
+    }
+}
+
+/// Answers the callers of a round that ended without answering them (the dispatch
+/// panicked), so that none waits for ever.
+struct Unanswered(Vec<Arc<Reply>>);
+
+impl Drop for Unanswered {
+    fn drop(&mut self) {
+        for reply in &self.0 {
+            let unanswered = reply.state.lock().expect("reply lock").answer.is_none();
+            if unanswered {
+                reply.answer(Err(Fault::unavailable("the dispatch of this batch failed")));
+            }
+        }
+    }
+}
+
+/// Ends a leader's round, also when it panics: the baton goes to a caller still waiting, or
+/// the leader's place is given up.
+struct EndOfRound<'a, K>(&'a Coalescer<K>);
+
+impl<K> Drop for EndOfRound<'_, K> {
+    fn drop(&mut self) {
+        let mut queue = match self.0.queue.lock() {
+            Ok(queue) => queue,
+            Err(poisoned) => poisoned.into_inner(),
+        };
+        match queue.waiting.iter_mut().find(|ask| !ask.leads) {
+            Some(next) => {
+                next.leads = true;
+                next.reply.hand_baton();
+            }
+            None => queue.leaders -= 1,
+        }
+    }
+}
+
+impl<K: Clone + PartialEq> Coalescer<K> {
+    /// Evaluate `points` of `key`: `send` dispatches groups of points (each of one key) and
+    /// answers each point in order; it is called on this thread with this caller's points
+    /// and others', or not at all when another caller's round takes them along.
+    pub fn evaluate<S>(
+        &self,
+        key: K,
+        points: Vec<Vec<f64>>,
+        send: S,
+    ) -> Result<Vec<Evaluation>, Fault>
+    where
+        S: Fn(Groups<K>) -> Answers,
+    {
+        let reply = Arc::new(Reply::new());
+        let mut queue = self.queue.lock().expect("coalescer lock");
+        let lead = queue.leaders < LEADERS;
+        if lead {
+            queue.leaders += 1;
+        }
+        queue.waiting.push(Ask {
+            key,
+            points,
+            reply: reply.clone(),
+            leads: lead,
+        });
+        drop(queue);
+        if !lead {
+            if let Some(answer) = reply.wait() {
+                return answer;
+            }
+        }
+        // This caller leads a round: everything waiting (its own points among them, unless
+        // a round begun since took them along).
+        let round = std::mem::take(&mut self.queue.lock().expect("coalescer lock").waiting);
+        {
+            let _end = EndOfRound(self);
+            self.send_round(round, &send);
+        }
+        loop {
+            if let Some(answer) = reply.wait() {
+                return answer;
+            }
+        }
+    }
+
+    /// Dispatch one round: its asks grouped by key, each group as one batch; then every
+    /// ask's share of its group's answers.
+    fn send_round<S>(&self, round: Vec<Ask<K>>, send: &S)
+    where
+        S: Fn(Groups<K>) -> Answers,
+    {
+        if round.is_empty() {
+            return;
+        }
+        let _unanswered = Unanswered(round.iter().map(|ask| ask.reply.clone()).collect());
+        // Groups of asks by key, in order of first appearance.
+        let mut groups: Vec<(K, Vec<usize>)> = Vec::new();
+        for (i, ask) in round.iter().enumerate() {
+            match groups.iter_mut().find(|(k, _)| *k == ask.key) {
+                Some((_, members)) => members.push(i),
+                None => groups.push((ask.key.clone(), vec![i])),
+            }
+        }
+        let mut round: Vec<Option<Ask<K>>> = round.into_iter().map(Some).collect();
+        let mut sizes: Vec<Vec<usize>> = Vec::with_capacity(groups.len());
+        let batches: Groups<K> = groups
+            .iter()
+            .map(|(key, members)| {
+                let mut points = Vec::new();
+                let mut counts = Vec::with_capacity(members.len());
+                for &i in members {
+                    let ask = round[i].as_mut().expect("each ask in one group");
+                    counts.push(ask.points.len());
+                    points.append(&mut ask.points);
+                }
+                sizes.push(counts);
+                (key.clone(), points)
+            })
+            .collect();
+        tracing::trace!(
+            asks = round.len(),
+            points = batches.iter().map(|(_, p)| p.len()).sum::<usize>(),
+            "round"
+        );
+        let answers = send(batches);
+        for (((_, members), counts), answer) in groups.iter().zip(&sizes).zip(answers) {
+            match answer {
+                Ok(evaluations) => {
+                    let mut evaluations = evaluations.into_iter();
+                    for (&i, &n) in members.iter().zip(counts) {
+                        let share: Vec<Evaluation> = evaluations.by_ref().take(n).collect();
+                        let ask = round[i].take().expect("answered once");
+                        ask.reply.answer(Ok(share));
+                    }
+                }
+                Err(fault) => {
+                    for &i in members {
+                        let ask = round[i].take().expect("answered once");
+                        ask.reply.answer(Err(fault.clone()));
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::time::Duration;
+
+    fn evaluation(x: f64) -> Evaluation {
+        Evaluation {
+            objective: x,
+            sse: vec![x],
+            failure: None,
+        }
+    }
+
+    /// A dispatch that answers each point with its first coordinate, slowly, counting calls.
+    fn slow_send<'a>(
+        calls: &'a AtomicUsize,
+        largest: &'a AtomicUsize,
+    ) -> impl Fn(Groups<u8>) -> Answers + 'a {
+        move |groups| {
+            calls.fetch_add(1, Ordering::SeqCst);
+            std::thread::sleep(Duration::from_millis(20));
+            groups
+                .into_iter()
+                .map(|(_, points)| {
+                    largest.fetch_max(points.len(), Ordering::SeqCst);
+                    Ok(points.iter().map(|p| evaluation(p[0])).collect())
+                })
+                .collect()
+        }
+    }
+
+    #[test]
+    fn a_lone_caller_is_sent_at_once_and_answered_in_order() {
+        let coalescer = Coalescer::<u8>::default();
+        let (calls, largest) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let answer = coalescer
+            .evaluate(0, vec![vec![1.0], vec![2.0]], slow_send(&calls, &largest))
+            .unwrap();
+        assert_eq!(answer, vec![evaluation(1.0), evaluation(2.0)]);
+        assert_eq!(calls.load(Ordering::SeqCst), 1);
+    }
+
+    #[test]
+    fn many_callers_share_dispatches_and_each_gets_its_own_answers() {
+        let coalescer = Coalescer::<u8>::default();
+        let (calls, largest) = (AtomicUsize::new(0), AtomicUsize::new(0));
+        let callers = 12;
+        let rounds = 10;
+        std::thread::scope(|scope| {
+            for c in 0..callers {
+                let (coalescer, calls, largest) = (&coalescer, &calls, &largest);
+                scope.spawn(move || {
+                    for r in 0..rounds {
+                        let x = (100 * c + r) as f64;
+                        let answer = coalescer
+                            .evaluate(0, vec![vec![x], vec![x + 0.5]], slow_send(calls, largest))
+                            .unwrap();
+                        assert_eq!(answer, vec![evaluation(x), evaluation(x + 0.5)]);
+                    }
+                });
+            }
+        });
+        let calls = calls.load(Ordering::SeqCst);
+        assert!(
+            calls < callers * rounds / 2,
+            "{calls} dispatches for {} asks",
+            callers * rounds
+        );
+        assert!(largest.load(Ordering::SeqCst) > 2, "asks were grouped");
+    }
+
+    #[test]
+    fn points_of_different_keys_go_in_separate_groups() {
+        let coalescer = Coalescer::<u8>::default();
+        let mixed = AtomicUsize::new(0);
+        let send = |groups: Vec<(u8, Vec<Vec<f64>>)>| {
+            std::thread::sleep(Duration::from_millis(10));
+            groups
+                .into_iter()
+                .map(|(key, points)| {
+                    if points.iter().any(|p| p[1] as u8 != key) {
+                        mixed.fetch_add(1, Ordering::SeqCst);
+                    }
+                    Ok(points.iter().map(|p| evaluation(p[0])).collect())
+                })
+                .collect()
+        };
+        std::thread::scope(|scope| {
+            for c in 0..8u8 {
+                let (coalescer, send) = (&coalescer, &send);
+                scope.spawn(move || {
+                    for r in 0..5 {
+                        let x = f64::from(10 * c + r);
+                        let key = c % 3;
+                        let answer = coalescer
+                            .evaluate(key, vec![vec![x, f64::from(key)]], send)
+                            .unwrap();
+                        assert_eq!(answer, vec![evaluation(x)]);
+                    }
+                });
+            }
+        });
+        assert_eq!(mixed.load(Ordering::SeqCst), 0);
+    }
+
+    #[test]
+    fn a_fault_reaches_every_caller_of_its_group_and_a_panic_answers_the_waiting() {
+        let coalescer = Coalescer::<u8>::default();
+        let fault = coalescer.evaluate(0, vec![vec![1.0]], |groups| {
+            groups
+                .into_iter()
+                .map(|_| Err(Fault::unavailable("no worker")))
+                .collect()
+        });
+        assert_eq!(fault.unwrap_err().message, "no worker");
+        let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            coalescer.evaluate(0, vec![vec![1.0]], |_| panic!("dispatch broke"))
+        }));
+        assert!(panicked.is_err());
+        // The leader's place was given back: the next caller dispatches.
+        let answer = coalescer
+            .evaluate(0, vec![vec![3.0]], |groups| {
+                groups
+                    .into_iter()
+                    .map(|(_, p)| Ok(p.iter().map(|p| evaluation(p[0])).collect()))
+                    .collect()
+            })
+            .unwrap();
+        assert_eq!(answer, vec![evaluation(3.0)]);
+    }
+}
