@@ -81,46 +81,33 @@ impl Evaluator for GrpcEvaluator {
         if points.is_empty() {
             return Ok(Vec::new());
         }
-        let wire = self.wire(objective);
+        // Put in wire form before the round: whichever caller leads it finds it by key.
+        self.wire(objective);
         // Every group of a round is one objective: sent side by side, each its own batch.
         self.coalescer
             .evaluate(objective.fingerprint(), points.to_vec(), |groups| {
-                let count = groups.len();
-                let batches: Vec<_> = groups
-                    .into_iter()
-                    .map(|(fingerprint, points)| {
-                        let wire = self.wire_of(&fingerprint).unwrap_or_else(|| wire.clone());
-                        dispatch(self.pool.clone(), wire, points)
-                    })
-                    .collect();
+                let mut batches = groups.into_iter().map(|(fingerprint, points)| {
+                    let wire = self
+                        .wire_of(&fingerprint)
+                        .expect("each caller puts its objective in wire form first");
+                    dispatch(self.pool.clone(), wire, points)
+                });
                 self.runtime.block_on(async move {
-                    if count == 1 {
-                        let batch = batches.into_iter().next().expect("one group");
-                        return vec![batch.await];
+                    if batches.len() == 1 {
+                        return vec![batches.next().expect("one group").await];
                     }
-                    let mut running = JoinSet::new();
-                    for (i, batch) in batches.into_iter().enumerate() {
-                        running.spawn(async move { (i, batch.await) });
-                    }
-                    let mut answers: Vec<Option<Result<Vec<Evaluation>, Fault>>> =
-                        (0..count).map(|_| None).collect();
-                    while let Some(joined) = running.join_next().await {
-                        match joined {
-                            Ok((i, answer)) => answers[i] = Some(answer),
+                    let running: Vec<_> = batches.map(tokio::spawn).collect();
+                    let mut answers = Vec::with_capacity(running.len());
+                    for batch in running {
+                        answers.push(match batch.await {
+                            Ok(answer) => answer,
                             Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
-                            Err(_) => {}
-                        }
+                            Err(_) => Err(Fault::unavailable(
+                                "dispatch stopped: the coordinator is shutting down",
+                            )),
+                        });
                     }
                     answers
-                        .into_iter()
-                        .map(|a| {
-                            a.unwrap_or_else(|| {
-                                Err(Fault::unavailable(
-                                    "dispatch stopped: the coordinator is shutting down",
-                                ))
-                            })
-                        })
-                        .collect()
                 })
             })
     }
