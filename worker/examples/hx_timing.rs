@@ -1,6 +1,8 @@
 //! Median wall time of one 300 s simulation of each heat-exchanger model, all outputs on
 //! a 1 s and a 0.5 s grid, at the model's own tolerance (`--tight`: rtol 1e-8;
-//! `--rtol X`: rtol X).
+//! `--rtol X`: rtol X), with the solver's step and right-hand-side counts. The models
+//! integrate by Runge–Kutta–Chebyshev at rtol ≥ 1e-6 and by Dormand–Prince at tighter
+//! tolerances (see the `hx` module documentation).
 //!
 //! `cargo run --release -p calib-worker --example hx_timing [-- --tight]`
 

@@ -21,6 +21,9 @@
 //! at once, ends the simulation with [`SimulationError::Chattering`] naming the time and the
 //! event.
 //!
+//! For mildly stiff systems whose step size this method's stability would set, the
+//! Runge–Kutta–Chebyshev method of [`rkc`] takes the same systems, grids and events.
+//!
 //! References:
 //! - J. R. Dormand, P. J. Prince, "A family of embedded Runge–Kutta formulae",
 //!   J. Comp. Appl. Math. 6 (1980) 19–26.
@@ -30,6 +33,8 @@
 //!   Computers & Mathematics with Applications 39 (2000) 43–54.
 
 use crate::model::{SimulationError, SolverOptions, SolverStats};
+
+pub mod rkc;
 
 /// A system of first-order ODEs, possibly with discrete modes switched at events.
 pub trait HybridSystem {
@@ -182,7 +187,15 @@ impl Dense {
             r: std::array::from_fn(|_| vec![0.0; n]),
         }
     }
+}
 
+/// A continuous extension of one accepted step, on which events are located.
+trait Interpolant {
+    /// The state at time `t` inside the step.
+    fn eval(&self, t: f64, out: &mut [f64]);
+}
+
+impl Interpolant for Dense {
     fn eval(&self, t: f64, out: &mut [f64]) {
         let theta = (t - self.t0) / self.h;
         let theta1 = 1.0 - theta;
@@ -347,21 +360,9 @@ where
         }
         let t_new = if last_step { t_end } else { t + h };
 
-        // Events: the earliest event function to change sign from ≥ 0 to < 0.
-        let mut event: Option<(usize, f64)> = None;
-        if ne > 0 {
-            system.events(t_new, &ynew, &mut g_new);
-            for e in 0..ne {
-                if g_old[e] >= 0.0 && g_new[e] < 0.0 {
-                    let te = locate_event(
-                        system, &dense, e, t, t_new, g_old[e], g_new[e], &mut ytmp, &mut g_tmp,
-                    );
-                    if event.is_none_or(|(_, best)| te < best) {
-                        event = Some((e, te));
-                    }
-                }
-            }
-        }
+        let event = first_event(
+            system, &dense, t, t_new, &ynew, &g_old, &mut g_new, &mut ytmp, &mut g_tmp,
+        );
 
         let t_stop = event.map_or(t_new, |(_, te)| te);
         while next_out < grid.len() && grid[next_out] <= t_stop {
@@ -397,20 +398,7 @@ where
                 stats.events += 1;
                 dense.eval(te, &mut y);
                 t = te;
-                system.on_event(t, &mut y, e);
-                let resolved = match zeno.record(t) {
-                    Zeno::Clear => true,
-                    Zeno::Accumulating => system.on_chattering(t, &mut y, e),
-                    Zeno::Persisting => false,
-                };
-                if !resolved {
-                    return Err(SimulationError::Chattering {
-                        time: t,
-                        event: system.event_name(e),
-                        events: ZENO_EVENTS,
-                        span: zeno.span,
-                    });
-                }
+                switch_mode(system, &mut zeno, t, &mut y, e)?;
                 if next_out == grid.len() {
                     return Ok(stats);
                 }
@@ -427,12 +415,70 @@ where
     }
 }
 
+/// The earliest event of the accepted step `[t, t_new]` (state `ynew` at its end, event
+/// functions `g_old` at its start): the first event function to change sign from `≥ 0` to
+/// `< 0`, located on the step's continuous extension. Leaves the event functions at
+/// `t_new` in `g_new`.
+#[allow(clippy::too_many_arguments)]
+fn first_event<S: HybridSystem, D: Interpolant>(
+    system: &S,
+    dense: &D,
+    t: f64,
+    t_new: f64,
+    ynew: &[f64],
+    g_old: &[f64],
+    g_new: &mut [f64],
+    ytmp: &mut [f64],
+    g_tmp: &mut [f64],
+) -> Option<(usize, f64)> {
+    let mut event: Option<(usize, f64)> = None;
+    if !g_old.is_empty() {
+        system.events(t_new, ynew, g_new);
+        for e in 0..g_old.len() {
+            if g_old[e] >= 0.0 && g_new[e] < 0.0 {
+                let te = locate_event(system, dense, e, t, t_new, g_old[e], g_new[e], ytmp, g_tmp);
+                if event.is_none_or(|(_, best)| te < best) {
+                    event = Some((e, te));
+                }
+            }
+        }
+    }
+    event
+}
+
+/// Let the system switch mode at the located event `e` (time `t`, state `y`), or take the
+/// mode that accumulating events approximate; fails when they accumulate and it has none.
+fn switch_mode<S: HybridSystem>(
+    system: &mut S,
+    zeno: &mut ZenoGuard,
+    t: f64,
+    y: &mut [f64],
+    e: usize,
+) -> Result<(), SimulationError> {
+    system.on_event(t, y, e);
+    let resolved = match zeno.record(t) {
+        Zeno::Clear => true,
+        Zeno::Accumulating => system.on_chattering(t, y, e),
+        Zeno::Persisting => false,
+    };
+    if resolved {
+        Ok(())
+    } else {
+        Err(SimulationError::Chattering {
+            time: t,
+            event: system.event_name(e),
+            events: ZENO_EVENTS,
+            span: zeno.span,
+        })
+    }
+}
+
 /// Time of the zero of event `e` in `[ta, tb]`, where `g(ta) ≥ 0 > g(tb)`: the returned time
 /// is on the negative side, so the event condition holds there.
 #[allow(clippy::too_many_arguments)]
-fn locate_event<S: HybridSystem>(
+fn locate_event<S: HybridSystem, D: Interpolant>(
     system: &S,
-    dense: &Dense,
+    dense: &D,
     e: usize,
     mut ta: f64,
     mut tb: f64,

@@ -19,7 +19,7 @@ use super::correlations::{
 };
 use super::geometry::Geometry;
 use super::pressure_drop;
-use super::refrigerant::{self, saturation, vapour, Saturation};
+use super::refrigerant::{self, saturation, Saturation};
 use super::NOMINAL;
 
 /// Which pressure-drop model, and how fine the segmentation.
@@ -155,14 +155,14 @@ const PRESSURE_ITER: usize = 60;
 const WALL_TOL: f64 = 1e-9;
 const WALL_ITER: usize = 200;
 
-/// Specific volume (homogeneous in the two-phase region) at `(p, h)`, given the saturation
-/// state at `p`.
-fn specific_volume_at(s: &refrigerant::Saturation, p: f64, h: f64) -> f64 {
+/// Specific volume (homogeneous in the two-phase region) at enthalpy `h` and the pressure of
+/// the saturation state `s`.
+fn specific_volume_at(s: &refrigerant::Saturation, h: f64) -> f64 {
     if h < s.h_v {
         let x = s.quality(h).clamp(0.0, 1.0);
         x / s.rho_v + (1.0 - x) / s.rho_l
     } else {
-        1.0 / vapour(p, h, s.h_v).rho
+        1.0 / s.vapour(h).rho
     }
 }
 
@@ -385,7 +385,7 @@ impl Evaporator {
                 let h_out = s.h_v + q_v / mdot;
                 let dp = if high {
                     let v_in = 1.0 / s.homogeneous_density(x_in);
-                    let v_out = 1.0 / vapour(p, h_out, s.h_v).rho;
+                    let v_out = 1.0 / s.vapour(h_out).rho;
                     st.cf_ref_dp
                         * (pressure_drop::friedel(&s, 0.5 * (x_in.max(0.0) + 1.0), g, d, f * len)
                             + pressure_drop::single_phase(s.rho_v, s.mu_v, g, d, (1.0 - f) * len))
@@ -396,13 +396,13 @@ impl Evaporator {
                 (to_dew + q_v, h_out, dp)
             }
         } else {
-            let v = vapour(p, h, s.h_v);
+            let v = s.vapour(h);
             let alpha = st.cf_ref_ht * nusselt_gnielinski(g * d / v.mu, v.prandtl()) * v.k / d;
             let c_ref = mdot * v.cp;
             let q = c_ref * (tw - v.t) * (1.0 - (-alpha * a / c_ref).exp());
             let h_out = h + q / mdot;
             let dp = if high {
-                let v_out = 1.0 / vapour(p, h_out, s.h_v).rho;
+                let v_out = 1.0 / s.vapour(h_out).rho;
                 st.cf_ref_dp * pressure_drop::single_phase(v.rho, v.mu, g, d, len)
                     + pressure_drop::acceleration(g, 1.0 / v.rho, v_out)
             } else {
@@ -413,7 +413,7 @@ impl Evaporator {
         let v_mid = if high {
             0.0
         } else {
-            specific_volume_at(&s, p, 0.5 * (h + h_out))
+            specific_volume_at(&s, 0.5 * (h + h_out))
         };
         Segment {
             q_ref,
@@ -444,11 +444,7 @@ impl Evaporator {
         mdot: f64,
     ) -> Result<(f64, Segment), String> {
         let s = saturation(p);
-        let t_ref = if h < s.h_v {
-            s.t
-        } else {
-            vapour(p, h, s.h_v).t
-        };
+        let t_ref = if h < s.h_v { s.t } else { s.vapour(h).t };
         let t_amb = self.settings.t_ambient;
         let lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
         let hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
@@ -642,7 +638,7 @@ impl Evaporator {
         if h < s.h_v {
             (s.t, 0.0)
         } else {
-            let t = vapour(p, h, s.h_v).t;
+            let t = s.vapour(h).t;
             (t, t - s.t)
         }
     }

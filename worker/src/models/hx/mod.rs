@@ -66,16 +66,46 @@
 //!
 //! # Time integration
 //!
-//! States: `N` wall temperatures and the inlet pressure, integrated with the crate's
-//! Dormand–Prince 5(4) ([`crate::ode`]) at the caller's tolerance. The fastest wall mode
-//! (wall to boiling refrigerant, whose heat flux grows like the square of the wall
-//! superheat in Chen's nucleate term, over the wall capacity) has a time constant of about
-//! 0.1–0.3 s, so the explicit method takes steps of about 0.3 s. A fixed-step
-//! Rosenbrock–W method (ROS2, Verwer et al. 1999, Jacobian by finite differences) was
-//! tried and measured against DoPri5 at rtol 10⁻⁸: the dry-out front crossing segment
-//! boundaries makes the right-hand side only piecewise smooth, and at steps of 0.25–1 s
-//! ROS2 was off by up to 5 % in heat flow and diverged at 0.5 s in the 40-segment model, so
-//! the error-controlled explicit method stays.
+//! States: `N` wall temperatures and the inlet pressure. The fastest wall mode (wall to
+//! boiling refrigerant, whose heat flux grows like the square of the wall superheat in
+//! Chen's nucleate term, over the wall capacity) has a time constant of about 0.1–0.3 s:
+//! the spectral radius of the Jacobian is 8–10 s⁻¹ over the bench cycle at the defaults.
+//! That holds the crate's Dormand–Prince 5(4) ([`crate::ode`]) to its stability bound of
+//! about 3.3/ρ, steps of about 0.4 s, wherever the solution is smooth, almost whatever
+//! the tolerance (549, 599 and 734 steps for the 300 s cycle at rtol 10⁻⁵, 10⁻⁶, 10⁻⁷).
+//! So the integrator depends on the tolerance:
+//! - at rtol ≥ 10⁻⁶ ([`RKC_MAX_ACCURACY`], the models' own tolerance and looser): the
+//!   Runge–Kutta–Chebyshev method of [`crate::ode::rkc`] (Sommeijer, Shampine & Verwer
+//!   1998), explicit and of second order, whose stability interval grows with the square
+//!   of its stage count, with the spectral radius from a power iteration on the
+//!   right-hand side. Where the solution is smooth it takes steps of 1–10 s at a few
+//!   right-hand sides each; where the dry-out front crosses a segment boundary (the
+//!   right-hand side bends within a few millikelvin of wall temperature) its steps shrink
+//!   to about 0.02 s at two right-hand sides each, which over such a stretch costs about
+//!   what Dormand–Prince's stability-limited steps do. Being explicit, the bend costs it
+//!   accuracy-controlled small steps and nothing more. It runs at 0.3 times the requested
+//!   tolerances ([`RKC_TOLERANCE_SCALE`]): a second-order method uses up its tolerance
+//!   where Dormand–Prince, held back by stability, stays well inside it, and at the full
+//!   tolerance its wall temperatures ended up three times further from a reference at
+//!   rtol 10⁻⁹ (the air-side heat flow 0.072 W off in the heavy case of
+//!   `outputs_at_the_model_tolerance_stay_near_the_reference`, over that test's 0.06 W);
+//!   at 0.3 every output of that test stays within its bound, the refrigerant heat flow
+//!   closer to the reference than with Dormand–Prince at the same requested tolerance in
+//!   every case and the pressure drop in all but one (`hx_lowfi`, diagnosis truth: 0.58
+//!   against 0.52 Pa);
+//! - at tighter tolerances: Dormand–Prince, as its fifth order gains on the second order
+//!   of RKC, whose steps grow like `rtol^(−1/3)`. Measured on `hx_highfi` (`hx_lowfi`),
+//!   right-hand sides of RKC against Dormand–Prince at a requested rtol of 10⁻⁷: 5 004
+//!   against 4 604 (2 774 against 3 236); at 10⁻⁸: 9 590 against 6 332 (5 510 against
+//!   4 244).
+//!
+//! Both locate the event of a state leaving the property tables (below) on their
+//! continuous extension, and a simulation that leaves them fails the same way with either.
+//! A fixed-step Rosenbrock–W method (ROS2, Verwer et al. 1999, Jacobian by finite
+//! differences) was tried and measured against DoPri5 at rtol 10⁻⁸: the dry-out front
+//! crossing segment boundaries makes the right-hand side only piecewise smooth, and at
+//! steps of 0.25–1 s ROS2 was off by up to 5 % in heat flow and diverged at 0.5 s in the
+//! 40-segment model.
 //!
 //! The initial state is the steady state at the inputs of t = 0, solved directly: for a
 //! given inlet pressure, each segment's wall balance is a scalar equation in `T_w,i`
@@ -92,23 +122,37 @@
 //! state of the march leaves them, located by the solver's event search; trial stages of
 //! the solver are not counted.
 //!
-//! **Cost** (300 s at rtol 10⁻⁸, release build, `examples/hx_timing.rs`): measured at
-//! first 150 ms for `hx_highfi` and 16 ms for `hx_lowfi`, two thirds of it in `powf` inside
+//! **Cost** (300 s, release build, `examples/hx_timing.rs`): measured at first 150 ms for
+//! `hx_highfi` and 16 ms for `hx_lowfi` at rtol 10⁻⁸, two thirds of it in `powf` inside
 //! the correlations. The pressure-only property groups now come interpolated from the
 //! saturation table ([`refrigerant::Groups`]), the remaining powers are exponentials of
 //! shared logarithms, the air side is recomputed only when the air inputs move, and the
-//! flat first minute is not integrated: 141 → 66 ms and 15 → 4.8 ms (best medians, old
-//! and new binaries run in turn on the same machine), with 6 374 and 4 898 evaluations of
-//! the right-hand side (1 001 and 802 steps). What is left is the step count, and it is set
-//! by accuracy, not stability: with the same solver the ramps take 857 steps at rtol 10⁻⁸
-//! against 432 at 10⁻⁶ (the flat stretches take stability-limited steps of ~0.45 s). A
-//! Rosenbrock method with error control (RODAS4, Hairer & Wanner 1996) was measured: on
-//! `hx_lowfi` it needs 445 steps instead of 802 but 14 evaluations per step (the
-//! Jacobian by differences), so it is no faster at equal tolerance, and on `hx_highfi` it
-//! fails (tens of thousands of rejected steps): around the dry-out segment the
-//! right-hand side bends within a few millikelvin of wall temperature (a 1 mK step
-//! changes its slope by 14 %), so the linearly implicit stages are wrong at any useful
-//! step, where the explicit method only sees a kink in time.
+//! flat first minute is not integrated: 141 → 66 ms and 15 → 4.8 ms at rtol 10⁻⁸ (best
+//! medians, old and new binaries run in turn on the same machine), with 6 374 and 4 898
+//! evaluations of the right-hand side (1 001 and 802 steps). A Rosenbrock method with
+//! error control (RODAS4, Hairer & Wanner 1996) was measured: on `hx_lowfi` it needs 445
+//! steps instead of 802 but 14 evaluations per step (the Jacobian by differences), so it
+//! is no faster at equal tolerance, and on `hx_highfi` it fails (tens of thousands of
+//! rejected steps): around the dry-out segment the right-hand side bends within a few
+//! millikelvin of wall temperature (a 1 mK step changes its slope by 14 %), so the
+//! linearly implicit stages are wrong at any useful step, where an explicit method only
+//! sees a kink in time.
+//!
+//! At the models' own tolerance (rtol 10⁻⁶, 1 s output grid, all outputs) RKC replaced
+//! Dormand–Prince: `hx_highfi` 599 steps (24 rejected, 3 740 right-hand sides) → 1 034
+//! steps (72 rejected, 2 840 right-hand sides, 8 % of them in the power iteration),
+//! 32.1 → 24.3 ms; `hx_lowfi` 451 steps (13 rejected, 2 786) → 498 (9 rejected, 1 543),
+//! 2.64 → 1.57 ms (medians over five runs of 21, old and new binaries in turn, on a
+//! machine shared with other builds). About half of RKC's right-hand sides go to the
+//! 70 s (of 240 s integrated) where the dry-out front crosses segment boundaries. The
+//! outputs of the flat first minute come from one evaluation, and a vapour lookup shares
+//! the saturation lookup's `ln p`. Measured and not kept: re-estimating the spectral
+//! radius every 50 steps instead of 25 (more rejections, no fewer right-hand sides), and
+//! putting a due estimate off while the steps keep two stages (more rejections, 2 866
+//! right-hand sides). Of an `hx_highfi` right-hand side,
+//! `Evaporator::segment` with the correlations inlined takes 23 %, `log` 23 %, `exp` 19 %,
+//! the saturation-table interpolation 15 %, Friedel 6 %, the vapour table 4 %, `pow` 4 %;
+//! the solver 1 %.
 //!
 //! # Boundary conditions
 //!
@@ -145,7 +189,7 @@ use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
     SolverOptions, Trajectory,
 };
-use crate::ode::{integrate, HybridSystem};
+use crate::ode::{integrate, rkc, HybridSystem};
 use boundary::{Inputs, Ramps};
 use evaporator::{describe_out_of_range, Evaporator, Fidelity, NominalPoint, Settings};
 use geometry::Geometry;
@@ -461,7 +505,7 @@ impl HxModel {
         Self {
             info: ModelInfo {
                 name: name.into(),
-                version: 4,
+                version: 5,
                 description: description.into(),
                 parameters,
                 outputs,
@@ -518,6 +562,15 @@ impl HxModel {
         })
     }
 }
+
+/// The tightest relative tolerance integrated by RKC ([`rkc`]); tighter ones go to
+/// Dormand–Prince, which takes fewer steps there. See the module documentation.
+pub const RKC_MAX_ACCURACY: f64 = 1e-6;
+/// RKC runs at this fraction of the requested tolerances: being of second order, it uses up
+/// the tolerance where Dormand–Prince, held back by its stability, stays well inside it, so
+/// at the same tolerance its wall temperatures (and with them the air-side heat flow) would
+/// be about three times further from the exact solution. See the module documentation.
+pub const RKC_TOLERANCE_SCALE: f64 = 0.3;
 
 /// Time constant (s) of the inlet-pressure lag; see the module documentation.
 pub const PRESSURE_LAG: f64 = 1.0;
@@ -631,7 +684,9 @@ impl Model for HxModel {
 
     /// rtol 1e-6: over the 300 s bench cycle its outputs stay within 3.5 Pa and 0.75 W of a
     /// run at 1e-8 (`hx_highfi`), far below what pressure and heat-flow sensors resolve,
-    /// at half the steps.
+    /// at half the steps. Integrated by RKC since (see the module documentation): within
+    /// 0.63 Pa and 0.34 W of a run at rtol 1e-9, with 45 % of the right-hand sides of a run
+    /// at 1e-8.
     fn default_options(&self) -> SolverOptions {
         SolverOptions {
             rtol: 1e-6,
@@ -670,20 +725,36 @@ impl Model for HxModel {
         };
         let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
         let mut scratch = vec![0.0; evap.segments()];
+        // Up to the first ramp the inputs hold their start values exactly and the state is
+        // `y0`: one evaluation of the outputs serves every time there.
+        let flat = grid.partition_point(|&t| t <= t0);
+        if flat > 0 {
+            let all = outputs_at(&evap, grid[0], &y0, &mut scratch);
+            for (v, &o) in values.iter_mut().zip(outputs) {
+                v.resize(flat, all[o]);
+            }
+        }
         let mut record = |t: f64, y: &[f64]| {
             let all = outputs_at(&evap, t, y, &mut scratch);
             for (v, &o) in values.iter_mut().zip(outputs) {
                 v.push(all[o]);
             }
         };
-        let flat = grid.partition_point(|&t| t <= t0);
-        for &t in &grid[..flat] {
-            record(t, &y0);
-        }
         let rest: Vec<f64> = grid[flat..].iter().map(|t| t - t0).collect();
-        let result = integrate(&mut system, &y0, &rest, options, |i, y| {
-            record(grid[flat + i], y)
-        });
+        let result = if options.rtol >= RKC_MAX_ACCURACY {
+            let options = SolverOptions {
+                rtol: RKC_TOLERANCE_SCALE * options.rtol,
+                atol: RKC_TOLERANCE_SCALE * options.atol,
+                ..*options
+            };
+            rkc::integrate(&mut system, &y0, &rest, &options, |i, y| {
+                record(grid[flat + i], y)
+            })
+        } else {
+            integrate(&mut system, &y0, &rest, options, |i, y| {
+                record(grid[flat + i], y)
+            })
+        };
         if let Some((time, (p, h))) = system.left {
             return Err(failed(time)(describe_out_of_range(p, h)));
         }

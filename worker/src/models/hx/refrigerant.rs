@@ -37,6 +37,9 @@ const VAP_COLS: usize = 5;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Saturation {
     pub p: f64,
+    /// `ln p` of the pressure asked for, before clamping to the table (shared with the
+    /// vapour table, which is uniform in `ln p` too).
+    pub ln_p: f64,
     /// Saturation temperature (K).
     pub t: f64,
     /// dT_sat/dp (K/Pa).
@@ -105,6 +108,12 @@ impl Saturation {
     /// Thermodynamic quality of enthalpy `h` (may lie outside [0, 1]).
     pub fn quality(&self, h: f64) -> f64 {
         (h - self.h_l) / self.h_lv()
+    }
+
+    /// Superheated-vapour properties at this pressure and enthalpy `h` (J/kg); below the
+    /// dew line the saturated-vapour values are returned.
+    pub fn vapour(&self, h: f64) -> Vapour {
+        vapour(self.ln_p, h, self.h_v)
     }
 
     /// Homogeneous (no-slip) density at quality `x`, clamped to [0, 1].
@@ -312,6 +321,7 @@ pub fn saturation(p: f64) -> Saturation {
     let p_eff = p.clamp(tb.sat_p_min, tb.sat_p_max);
     Saturation {
         p: p_eff,
+        ln_p: s,
         t: v[0],
         // dT/dp = dT/ds · ds/dp, ds = ln p.
         dt_dp: dt / tb.ds / p_eff,
@@ -338,13 +348,11 @@ pub fn saturation(p: f64) -> Saturation {
     }
 }
 
-/// Superheated-vapour properties at pressure `p` (Pa) and enthalpy `h` (J/kg), given the
-/// dew-point enthalpy `h_v` at `p` (from [`saturation`]). Below the dew line the
-/// saturated-vapour values are returned.
-pub fn vapour(p: f64, h: f64, h_v: f64) -> Vapour {
+/// Superheated-vapour properties at `ln p` (p in Pa) and enthalpy `h` (J/kg), given the
+/// dew-point enthalpy `h_v` at `p`; see [`Saturation::vapour`].
+fn vapour(ln_p: f64, h: f64, h_v: f64) -> Vapour {
     let tb = tables();
-    let s = p.max(1.0).ln();
-    let (i, tp) = locate(s, tb.vs0, tb.vds, tb.np);
+    let (i, tp) = locate(ln_p, tb.vs0, tb.vds, tb.np);
     let u = (h - h_v).max(0.0);
     let (j, tu) = locate(u, 0.0, tb.du, tb.nu);
     let (wp, _) = weights(tp);
@@ -411,7 +419,7 @@ mod tests {
                 }
             } else {
                 n_vap += 1;
-                let v = vapour(p, h, saturation(p).h_v);
+                let v = saturation(p).vapour(h);
                 let got = [v.t, v.rho, v.mu, v.k, v.cp];
                 for (g, e) in got.iter().zip(&r[2..7]) {
                     worst_vap = worst_vap.max(rel(*g, *e));

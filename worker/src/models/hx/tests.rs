@@ -323,6 +323,23 @@ fn leaving_the_property_table_fails_at_the_crossing() {
     assert!((h_in - h_l).abs() < 20.0, "h_in {h_in} vs h_l {h_l}");
 }
 
+/// The same crossing at the model's own tolerance, integrated by RKC: the same failure,
+/// at the same instant as with Dormand–Prince at rtol 1e-8 to within 0.1 s.
+#[test]
+fn leaving_the_property_table_fails_at_the_crossing_at_the_model_tolerance() {
+    let model = lowfi();
+    let mut p = model.info().default_vector();
+    p[7] = 180.0; // h_in_end (kJ/kg)
+    let times = grid(1.0, 0.0, 300.0);
+    let (reference, _) = failure(&model, &p, &times);
+    let r = model.simulate(&p, &times, &all_outputs(), &model.default_options());
+    let Err(SimulationError::Failed { time, reason }) = r else {
+        panic!("expected a failed simulation, got {r:?}");
+    };
+    assert!(reason.contains("subcooled"), "reason: {reason}");
+    assert!((time - reference).abs() < 0.1, "{time} vs {reference}");
+}
+
 #[test]
 fn table_margin_is_negative_exactly_outside() {
     let (p_min, p_max) = refrigerant::pressure_range();
