@@ -73,6 +73,14 @@ pub trait Evaluator: Send + Sync {
         objective: &Objective,
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault>;
+
+    /// Whether a batch sent now would find capacity idle (a free worker slot, room in a
+    /// worker's queue). Callers that gather many runs' points into shared batches send a
+    /// second batch while one travels only when it has somewhere to go; otherwise its points
+    /// wait to join the next, larger batch. A hint: it never changes an answer.
+    fn has_room(&self) -> bool {
+        true
+    }
 }
 
 impl<E: Evaluator + ?Sized> Evaluator for &E {
@@ -82,6 +90,10 @@ impl<E: Evaluator + ?Sized> Evaluator for &E {
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
         (**self).evaluate(objective, points)
+    }
+
+    fn has_room(&self) -> bool {
+        (**self).has_room()
     }
 }
 

@@ -6,6 +6,7 @@ pub mod api;
 pub mod calibration;
 pub mod campaign;
 pub mod campaigns;
+pub mod coalesce;
 pub mod diagnosis;
 pub mod dispatch;
 pub mod error;

@@ -512,6 +512,10 @@ impl<E: Evaluator + ?Sized> Evaluator for Cancellable<'_, E> {
         }
         self.inner.evaluate(objective, points)
     }
+
+    fn has_room(&self) -> bool {
+        self.inner.has_room()
+    }
 }
 
 /// The folder beside `store` that holds uploaded datasets and results, by default.

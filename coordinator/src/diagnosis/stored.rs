@@ -57,6 +57,10 @@ impl<E: Evaluator + Simulator> Evaluator for StoredEngine<'_, E> {
     ) -> Result<Vec<Evaluation>, Fault> {
         self.evaluator.evaluate(objective, points)
     }
+
+    fn has_room(&self) -> bool {
+        self.evaluator.has_room()
+    }
 }
 
 impl<E: Evaluator + Simulator> Simulator for StoredEngine<'_, E> {

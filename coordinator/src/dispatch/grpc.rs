@@ -19,9 +19,9 @@
 //! [`Handle::block_on`].
 
 use super::client::{WireObjective, WireSimulation, WorkerClient};
-use super::coalesce::Coalescer;
 use super::error::WorkerError;
 use super::pool::{Lease, WorkerPool};
+use crate::coalesce::Coalescer;
 use crate::evaluator::{Evaluator, Fault, Outputs, Simulator};
 use crate::objective::{Evaluation, Objective};
 use std::collections::{HashMap, VecDeque};
@@ -84,8 +84,11 @@ impl Evaluator for GrpcEvaluator {
         // Put in wire form before the round: whichever caller leads it finds it by key.
         self.wire(objective);
         // Every group of a round is one objective: sent side by side, each its own batch.
-        self.coalescer
-            .evaluate(objective.fingerprint(), points.to_vec(), |groups| {
+        self.coalescer.evaluate(
+            objective.fingerprint(),
+            points.to_vec(),
+            self.has_room(),
+            |groups| {
                 let mut batches = groups.into_iter().map(|(fingerprint, points)| {
                     let wire = self
                         .wire_of(&fingerprint)
@@ -109,7 +112,12 @@ impl Evaluator for GrpcEvaluator {
                     }
                     answers
                 })
-            })
+            },
+        )
+    }
+
+    fn has_room(&self) -> bool {
+        self.pool.has_room()
     }
 }
 

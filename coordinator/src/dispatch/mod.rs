@@ -5,7 +5,6 @@
 //! [`Evaluator`]: crate::evaluator::Evaluator
 
 pub mod client;
-pub mod coalesce;
 pub mod discovery;
 pub mod error;
 pub mod grpc;

@@ -414,6 +414,17 @@ impl WorkerPool {
         self.changed.notified()
     }
 
+    /// Whether a chunk acquired now would find room: a worker up with an idle slot, or one
+    /// that may take another chunk into its queue (see [`WorkerPool::acquire`]).
+    pub fn has_room(&self) -> bool {
+        let state = self.state.lock().expect("pool lock");
+        let depth = self.config.depth.max(1);
+        state.workers.iter().any(|w| {
+            w.health == Health::Up
+                && (w.busy < w.slots || (w.chunks < depth && w.busy < w.slots + w.queue_bound))
+        })
+    }
+
     /// False when every known worker is set aside for good (another protocol, a refused
     /// token or certificate); an empty pool may still fill.
     pub fn has_prospects(&self) -> bool {

@@ -1,6 +1,7 @@
 //! The evaluator the optimisers talk to: the store first, the simulator for the misses.
 
 use super::{evaluation_key, EvaluationKey, Store, StoreError};
+use crate::coalesce::{Answers, Coalescer, Groups};
 use crate::evaluator::{CacheStats, Evaluator, Fault};
 use crate::objective::{Evaluation, Objective};
 use std::collections::HashMap;
@@ -10,7 +11,9 @@ use std::sync::{Arc, Condvar, Mutex};
 /// Answers each point from the store when it is there; simulates the others with the inner
 /// evaluator, stores them durably, and only then answers. A point that another thread is
 /// already simulating is waited for, not simulated again, so concurrent runs that ask for
-/// the same point share one simulation.
+/// the same point share one simulation. The missing points of concurrent callers go
+/// together in rounds ([`crate::coalesce`]): one batch per objective to the inner evaluator,
+/// one write and one flush to the store for all of them.
 ///
 /// A store failure does not stop the optimisers (their answers are still right), but the
 /// first one is kept and reported by [`StoredEvaluator::error`].
@@ -18,10 +21,38 @@ pub struct StoredEvaluator<'s, E> {
     inner: E,
     store: &'s dyn Store,
     in_flight: Mutex<HashMap<EvaluationKey, Arc<Slot>>>,
+    /// Concurrent callers' missing points, resolved together: one claim, one lookup, one
+    /// durable write per round.
+    rounds: Coalescer<[u8; 32], Missing>,
+    /// The objectives of the callers so far, by fingerprint (a round's leader simulates
+    /// others' points with them).
+    objectives: Mutex<HashMap<[u8; 32], Arc<Objective>>>,
+    /// Releases of claimed keys with stored outcomes so far: a key claimed while this has
+    /// not moved since its caller looked it up cannot have been stored by this evaluator
+    /// meanwhile, so it is not looked up again.
+    releases: AtomicU64,
     requested: AtomicU64,
     simulated: AtomicU64,
     failed: AtomicU64,
     error: Mutex<Option<StoreError>>,
+}
+
+/// What a claim of keys (by position) found.
+struct Claim {
+    /// Claimed: no one else simulates them until they are released.
+    mine: Vec<usize>,
+    /// Being simulated by another thread: their slots, to wait on.
+    theirs: Vec<(usize, Arc<Slot>)>,
+    /// [`StoredEvaluator::releases`] at the claim.
+    releases: u64,
+}
+
+/// A point its caller found missing from the store, and [`StoredEvaluator::releases`] just
+/// before that lookup.
+struct Missing {
+    key: EvaluationKey,
+    point: Vec<f64>,
+    looked: u64,
 }
 
 /// A point being simulated by some thread.
@@ -46,6 +77,9 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
             inner,
             store,
             in_flight: Mutex::new(HashMap::new()),
+            rounds: Coalescer::default(),
+            objectives: Mutex::new(HashMap::new()),
+            releases: AtomicU64::new(0),
             requested: AtomicU64::new(0),
             simulated: AtomicU64::new(0),
             failed: AtomicU64::new(0),
@@ -83,8 +117,9 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
     }
 
     /// Claim the keys nobody is simulating; the others' slots are returned to wait on.
-    fn claim(&self, keys: &[EvaluationKey]) -> (Vec<usize>, Vec<(usize, Arc<Slot>)>) {
+    fn claim(&self, keys: &[EvaluationKey]) -> Claim {
         let mut in_flight = self.in_flight.lock().expect("in-flight lock");
+        let releases = self.releases.load(Ordering::SeqCst);
         let mut mine = Vec::new();
         let mut theirs = Vec::new();
         for (i, key) in keys.iter().enumerate() {
@@ -96,16 +131,23 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                 }
             }
         }
-        (mine, theirs)
+        Claim {
+            mine,
+            theirs,
+            releases,
+        }
     }
 
     /// Publish the outcome of claimed keys (`None`: abandoned) and release them.
-    fn release(&self, keys: &[EvaluationKey], outcomes: Option<&[Evaluation]>) {
+    fn release(&self, keys: &[EvaluationKey], outcomes: &[Option<Evaluation>]) {
         let mut in_flight = self.in_flight.lock().expect("in-flight lock");
-        for (i, key) in keys.iter().enumerate() {
+        if outcomes.iter().any(Option::is_some) {
+            self.releases.fetch_add(1, Ordering::SeqCst);
+        }
+        for (key, outcome) in keys.iter().zip(outcomes) {
             if let Some(slot) = in_flight.remove(key) {
-                *slot.outcome.lock().expect("slot lock") = match outcomes {
-                    Some(o) => SlotState::Done(o[i].clone()),
+                *slot.outcome.lock().expect("slot lock") = match outcome {
+                    Some(e) => SlotState::Done(e.clone()),
                     None => SlotState::Abandoned,
                 };
                 slot.ready.notify_all();
@@ -113,93 +155,247 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
         }
     }
 
-    /// Evaluate distinct keys absent from the store at the last look. A fault of the inner
-    /// evaluator stores nothing: the claimed keys are abandoned (whoever waits on them tries
-    /// for itself) and the fault returned.
-    fn resolve_missing(
-        &self,
-        objective: &Objective,
-        keys: &[EvaluationKey],
-        points: &[&Vec<f64>],
-    ) -> Result<(Vec<Evaluation>, u64), Fault> {
-        let mut simulated_here = 0;
-        let mut answers: Vec<Option<Evaluation>> = vec![None; keys.len()];
-        let mut open: Vec<usize> = (0..keys.len()).collect();
+    /// The objective of a fingerprint met before (every caller remembers its own before it
+    /// joins a round).
+    fn objective_of(&self, fingerprint: &[u8; 32]) -> Arc<Objective> {
+        self.objectives
+            .lock()
+            .expect("objectives lock")
+            .get(fingerprint)
+            .cloned()
+            .expect("each caller remembers its objective before its round")
+    }
+
+    fn remember(&self, objective: &Objective) {
+        self.objectives
+            .lock()
+            .expect("objectives lock")
+            .entry(objective.fingerprint())
+            .or_insert_with(|| Arc::new(objective.clone()));
+    }
+
+    /// One round of many callers' missing points (one group per objective): claimed
+    /// together, looked up again, simulated group by group side by side, written in one
+    /// batch made durable by one flush, then published. Keys another thread is simulating
+    /// are waited for; keys it abandons are tried again.
+    fn resolve_round(&self, groups: Groups<[u8; 32], Missing>) -> Answers {
+        let groups: Vec<RoundGroup> = groups
+            .into_iter()
+            .map(|(fingerprint, points)| RoundGroup::new(self.objective_of(&fingerprint), points))
+            .collect();
+        let mut answers: Vec<Vec<Option<Evaluation>>> =
+            groups.iter().map(|g| vec![None; g.keys.len()]).collect();
+        let mut faults: Vec<Option<Fault>> = vec![None; groups.len()];
+        let mut simulated: Vec<u64> = vec![0; groups.len()];
+        // Open (group, distinct key index) pairs.
+        let mut open: Vec<(usize, usize)> = groups
+            .iter()
+            .enumerate()
+            .flat_map(|(g, group)| (0..group.keys.len()).map(move |k| (g, k)))
+            .collect();
         while !open.is_empty() {
-            let open_keys: Vec<EvaluationKey> = open.iter().map(|&i| keys[i]).collect();
-            let (mine, theirs) = self.claim(&open_keys);
-            let mine: Vec<usize> = mine.into_iter().map(|j| open[j]).collect();
-            let theirs: Vec<(usize, Arc<Slot>)> =
-                theirs.into_iter().map(|(j, s)| (open[j], s)).collect();
+            let open_keys: Vec<EvaluationKey> =
+                open.iter().map(|&(g, k)| groups[g].keys[k]).collect();
+            let Claim {
+                mine,
+                theirs,
+                releases,
+            } = self.claim(&open_keys);
+            let mine: Vec<(usize, usize)> = mine.into_iter().map(|j| open[j]).collect();
             let mut retry = Vec::new();
             if !mine.is_empty() {
-                let my_keys: Vec<EvaluationKey> = mine.iter().map(|&i| keys[i]).collect();
+                let my_keys: Vec<EvaluationKey> =
+                    mine.iter().map(|&(g, k)| groups[g].keys[k]).collect();
                 let guard = ReleaseOnPanic {
                     evaluator: self,
                     keys: &my_keys,
                     armed: true,
                 };
-                // Another thread may have stored it between our lookup and our claim.
-                let again = self.lookup(&my_keys);
-                let to_simulate: Vec<usize> =
-                    (0..mine.len()).filter(|&j| again[j].is_none()).collect();
-                let mut outcomes: Vec<Option<Evaluation>> = again;
-                if !to_simulate.is_empty() {
-                    let batch: Vec<Vec<f64>> = to_simulate
-                        .iter()
-                        .map(|&j| points[mine[j]].clone())
-                        .collect();
-                    // On a fault, `guard` abandons the claimed keys as it drops.
-                    let fresh = self.inner.evaluate(objective, &batch)?;
-                    self.simulated
-                        .fetch_add(to_simulate.len() as u64, Ordering::Relaxed);
-                    simulated_here += to_simulate.len() as u64;
-                    let failed: Vec<&String> =
-                        fresh.iter().filter_map(|e| e.failure.as_ref()).collect();
-                    if let Some(first) = failed.first() {
-                        tracing::info!(failed = failed.len(), first = %first, "simulations failed");
-                        self.failed
-                            .fetch_add(failed.len() as u64, Ordering::Relaxed);
+                // Another round may have stored some between their callers' lookups and
+                // this claim: only then are they looked up again.
+                let stale: Vec<usize> = (0..mine.len())
+                    .filter(|&j| {
+                        let (g, k) = mine[j];
+                        groups[g].looked[k] != releases
+                    })
+                    .collect();
+                let mut outcomes: Vec<Option<Evaluation>> = vec![None; mine.len()];
+                if !stale.is_empty() {
+                    let keys: Vec<EvaluationKey> = stale.iter().map(|&j| my_keys[j]).collect();
+                    for (j, found) in stale.into_iter().zip(self.lookup(&keys)) {
+                        outcomes[j] = found;
                     }
-                    let entries: Vec<(EvaluationKey, Evaluation)> = to_simulate
-                        .iter()
-                        .zip(fresh)
-                        .map(|(&j, e)| (my_keys[j], e))
-                        .collect();
+                }
+                // Per group, the positions in `mine` still to simulate.
+                let mut to_simulate: Vec<Vec<usize>> = vec![Vec::new(); groups.len()];
+                for (j, &(g, _)) in mine.iter().enumerate() {
+                    if outcomes[j].is_none() {
+                        to_simulate[g].push(j);
+                    }
+                }
+                let batches: Vec<(usize, Vec<Vec<f64>>)> = to_simulate
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, js)| !js.is_empty())
+                    .map(|(g, js)| {
+                        let points = js
+                            .iter()
+                            .map(|&j| groups[g].points[mine[j].1].clone())
+                            .collect();
+                        (g, points)
+                    })
+                    .collect();
+                let fresh = self.simulate_side_by_side(&groups, &batches);
+                let mut entries: Vec<(EvaluationKey, Evaluation)> = Vec::new();
+                for ((g, _), result) in batches.iter().zip(fresh) {
+                    match result {
+                        Ok(evaluations) => {
+                            let failed = evaluations.iter().filter(|e| e.failure.is_some());
+                            let failed = failed.count() as u64;
+                            if failed > 0 {
+                                let first = evaluations.iter().find_map(|e| e.failure.as_ref());
+                                tracing::info!(failed, first = ?first, "simulations failed");
+                                self.failed.fetch_add(failed, Ordering::Relaxed);
+                            }
+                            let n = evaluations.len() as u64;
+                            self.simulated.fetch_add(n, Ordering::Relaxed);
+                            simulated[*g] += n;
+                            for (&j, e) in to_simulate[*g].iter().zip(evaluations) {
+                                entries.push((my_keys[j], e.clone()));
+                                outcomes[j] = Some(e);
+                            }
+                        }
+                        Err(fault) => faults[*g] = Some(fault),
+                    }
+                }
+                if !entries.is_empty() {
                     if let Err(e) = self.store.put_evaluations(&entries) {
                         self.note(e);
                     }
-                    for (j, e) in to_simulate.iter().zip(entries.into_iter().map(|(_, e)| e)) {
-                        outcomes[*j] = Some(e);
-                    }
                 }
-                let outcomes: Vec<Evaluation> = outcomes
-                    .into_iter()
-                    .map(|o| o.expect("every claimed point resolved"))
-                    .collect();
+                // A faulted group stores nothing: its claimed keys are abandoned (whoever
+                // waits on them tries for itself).
                 guard.disarm();
-                self.release(&my_keys, Some(&outcomes));
-                for (&i, e) in mine.iter().zip(outcomes) {
-                    answers[i] = Some(e);
+                self.release(&my_keys, &outcomes);
+                for (&(g, k), outcome) in mine.iter().zip(outcomes) {
+                    answers[g][k] = outcome;
                 }
             }
-            for (i, slot) in theirs {
+            for (j, slot) in theirs {
+                let (g, k) = open[j];
+                if faults[g].is_some() {
+                    continue;
+                }
                 let mut state = slot.outcome.lock().expect("slot lock");
                 while matches!(*state, SlotState::Pending) {
                     state = slot.ready.wait(state).expect("slot lock");
                 }
                 match &*state {
-                    SlotState::Done(e) => answers[i] = Some(e.clone()),
-                    _ => retry.push(i),
+                    SlotState::Done(e) => answers[g][k] = Some(e.clone()),
+                    _ => retry.push((g, k)),
                 }
             }
-            open = retry;
+            open = retry
+                .into_iter()
+                .filter(|&(g, _)| faults[g].is_none())
+                .collect();
         }
-        let answers = answers
+        // Every point asked of an answered group that this round did not simulate came from
+        // the store or from another thread's simulation.
+        let hits: u64 = groups
+            .iter()
+            .zip(&faults)
+            .filter(|(_, fault)| fault.is_none())
+            .map(|(group, _)| group.distinct.len() as u64)
+            .sum::<u64>()
+            - simulated
+                .iter()
+                .zip(&faults)
+                .filter(|(_, fault)| fault.is_none())
+                .map(|(n, _)| n)
+                .sum::<u64>();
+        self.store.count_lookups(hits, simulated.iter().sum());
+        groups
+            .iter()
+            .zip(answers)
+            .zip(faults)
+            .map(|((group, answers), fault)| match fault {
+                Some(fault) => Err(fault),
+                None => Ok(group
+                    .distinct
+                    .iter()
+                    .map(|&k| answers[k].clone().expect("every point answered"))
+                    .collect()),
+            })
+            .collect()
+    }
+
+    /// Each batch (a group's points) simulated with its group's objective; more than one
+    /// at once, each from its own thread, so that they travel side by side.
+    fn simulate_side_by_side(
+        &self,
+        groups: &[RoundGroup],
+        batches: &[(usize, Vec<Vec<f64>>)],
+    ) -> Vec<Result<Vec<Evaluation>, Fault>> {
+        let run = |(g, points): &(usize, Vec<Vec<f64>>)| {
+            self.inner.evaluate(&groups[*g].objective, points)
+        };
+        match batches {
+            [] => Vec::new(),
+            [one] => vec![run(one)],
+            [first, rest @ ..] => std::thread::scope(|scope| {
+                let others: Vec<_> = rest.iter().map(|b| scope.spawn(move || run(b))).collect();
+                let mut results = vec![run(first)];
+                for other in others {
+                    match other.join() {
+                        Ok(result) => results.push(result),
+                        Err(panic) => std::panic::resume_unwind(panic),
+                    }
+                }
+                results
+            }),
+        }
+    }
+}
+
+/// One objective's points in a round: their distinct keys, and for each point which.
+struct RoundGroup {
+    objective: Arc<Objective>,
+    /// Distinct keys, each with the first point that has it and the earliest
+    /// [`StoredEvaluator::releases`] its callers looked it up at.
+    keys: Vec<EvaluationKey>,
+    points: Vec<Vec<f64>>,
+    looked: Vec<u64>,
+    /// For each point of the round, the index of its key in `keys`.
+    distinct: Vec<usize>,
+}
+
+impl RoundGroup {
+    fn new(objective: Arc<Objective>, asked: Vec<Missing>) -> Self {
+        let mut index: HashMap<EvaluationKey, usize> = HashMap::with_capacity(asked.len());
+        let mut keys = Vec::new();
+        let mut points = Vec::new();
+        let mut looked: Vec<u64> = Vec::new();
+        let distinct = asked
             .into_iter()
-            .map(|a| a.expect("every point answered"))
+            .map(|missing| {
+                let k = *index.entry(missing.key).or_insert_with(|| {
+                    keys.push(missing.key);
+                    points.push(missing.point);
+                    looked.push(missing.looked);
+                    keys.len() - 1
+                });
+                looked[k] = looked[k].min(missing.looked);
+                k
+            })
             .collect();
-        Ok((answers, simulated_here))
+        Self {
+            objective,
+            keys,
+            points,
+            looked,
+            distinct,
+        }
     }
 }
 
@@ -220,7 +416,8 @@ impl<E: Evaluator> ReleaseOnPanic<'_, '_, E> {
 impl<E: Evaluator> Drop for ReleaseOnPanic<'_, '_, E> {
     fn drop(&mut self) {
         if self.armed {
-            self.evaluator.release(self.keys, None);
+            let abandoned = vec![None; self.keys.len()];
+            self.evaluator.release(self.keys, &abandoned);
         }
     }
 }
@@ -237,34 +434,41 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
             .iter()
             .map(|p| evaluation_key(objective, p))
             .collect();
+        let looked = self.releases.load(Ordering::SeqCst);
         let mut answers = self.lookup(&keys);
-        // Distinct keys still missing, each with the first point that asked for it.
-        let mut missing: Vec<EvaluationKey> = Vec::new();
-        let mut missing_points: Vec<&Vec<f64>> = Vec::new();
-        for (i, answer) in answers.iter().enumerate() {
-            if answer.is_none() && !missing.contains(&keys[i]) {
-                missing.push(keys[i]);
-                missing_points.push(&points[i]);
-            }
-        }
-        let mut simulated = 0;
-        if !missing.is_empty() {
-            let (resolved, simulated_here) =
-                self.resolve_missing(objective, &missing, &missing_points)?;
-            simulated = simulated_here;
-            let by_key: HashMap<EvaluationKey, Evaluation> =
-                missing.into_iter().zip(resolved).collect();
-            for (answer, key) in answers.iter_mut().zip(&keys) {
-                if answer.is_none() {
-                    *answer = by_key.get(key).cloned();
-                }
-            }
-        }
+        let missing: Vec<usize> = (0..points.len())
+            .filter(|&i| answers[i].is_none())
+            .collect();
+        // Hits of the first look; the round counts its own.
         self.store
-            .count_lookups(points.len() as u64 - simulated, simulated);
+            .count_lookups((points.len() - missing.len()) as u64, 0);
+        if !missing.is_empty() {
+            self.remember(objective);
+            let asked: Vec<Missing> = missing
+                .iter()
+                .map(|&i| Missing {
+                    key: keys[i],
+                    point: points[i].clone(),
+                    looked,
+                })
+                .collect();
+            let resolved = self.rounds.evaluate(
+                objective.fingerprint(),
+                asked,
+                self.inner.has_room(),
+                |groups| self.resolve_round(groups),
+            )?;
+            for (i, evaluation) in missing.into_iter().zip(resolved) {
+                answers[i] = Some(evaluation);
+            }
+        }
         Ok(answers
             .into_iter()
             .map(|a| a.expect("every point answered"))
             .collect())
+    }
+
+    fn has_room(&self) -> bool {
+        self.inner.has_room()
     }
 }

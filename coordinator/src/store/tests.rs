@@ -210,12 +210,14 @@ fn export_and_import_carry_every_entry() {
 #[derive(Default)]
 struct Counting {
     simulated: AtomicUsize,
+    batches: AtomicUsize,
 }
 
 impl Evaluator for Counting {
     fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Result<Vec<Evaluation>, Fault> {
         std::thread::sleep(Duration::from_millis(20));
         self.simulated.fetch_add(points.len(), Ordering::SeqCst);
+        self.batches.fetch_add(1, Ordering::SeqCst);
         Ok(points
             .iter()
             .map(|p| Evaluation {
@@ -395,4 +397,150 @@ fn a_fault_stores_nothing_and_the_points_are_simulated_once_workers_are_back() {
     assert_eq!(answers[2].objective, 0.2);
     assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 3);
     assert_eq!(store.stats().unwrap().evaluations, 3);
+}
+
+#[test]
+fn concurrent_runs_share_one_durable_write_per_round() {
+    let dir = tempfile::tempdir().unwrap();
+    let store = SledStore::open(dir.path()).unwrap();
+    let inner = Counting::default();
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let (runs, calls) = (8, 5);
+    let flushes_before = store.flushes();
+    std::thread::scope(|scope| {
+        for r in 0..runs {
+            let (evaluator, objective) = (&evaluator, &objective);
+            scope.spawn(move || {
+                for c in 0..calls {
+                    let x = (r * 100 + c) as f64;
+                    let answers = evaluator
+                        .evaluate(objective, &[vec![x], vec![x + 0.5]])
+                        .unwrap();
+                    assert_eq!(answers[0].objective, x);
+                    assert_eq!(answers[1].objective, x + 0.5);
+                }
+            });
+        }
+    });
+    let asks = runs * calls;
+    assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
+    let batches = inner.batches.load(Ordering::SeqCst);
+    let flushes = store.flushes() - flushes_before;
+    assert!(batches < asks / 2, "{batches} batches for {asks} asks");
+    assert!(
+        flushes <= batches as u64,
+        "{flushes} flushes for {batches} rounds"
+    );
+    assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
+}
+
+/// Has no worker for one objective (by fingerprint); scores the others as [`Counting`].
+struct UnavailableFor {
+    fingerprint: [u8; 32],
+    inner: Counting,
+}
+
+impl Evaluator for UnavailableFor {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        if objective.fingerprint() == self.fingerprint {
+            std::thread::sleep(Duration::from_millis(20));
+            return Err(Fault::unavailable("no worker for this one"));
+        }
+        self.inner.evaluate(objective, points)
+    }
+}
+
+#[test]
+fn a_round_of_two_objectives_stores_the_answered_one_and_faults_only_the_other() {
+    let store = MemoryStore::new();
+    let (good, bad) = (objective(false), objective_with_other_data());
+    let inner = UnavailableFor {
+        fingerprint: bad.fingerprint(),
+        inner: Counting::default(),
+    };
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let (answered, faulted) = std::thread::scope(|scope| {
+        let callers: Vec<_> = (0..6)
+            .map(|c| {
+                let (evaluator, objective) = (&evaluator, if c % 2 == 0 { &good } else { &bad });
+                scope.spawn(move || {
+                    (0..4)
+                        .map(|r| {
+                            let x = f64::from(c * 10 + r);
+                            evaluator
+                                .evaluate(objective, &[vec![x]])
+                                .map(|a| (a[0].objective, x))
+                        })
+                        .collect::<Vec<_>>()
+                })
+            })
+            .collect();
+        let mut answered = 0;
+        let mut faulted = 0;
+        for (c, caller) in callers.into_iter().enumerate() {
+            for result in caller.join().unwrap() {
+                match result {
+                    Ok((objective, x)) => {
+                        assert_eq!(c % 2, 0, "the unavailable objective was answered");
+                        assert_eq!(objective, x);
+                        answered += 1;
+                    }
+                    Err(fault) => {
+                        assert_eq!(c % 2, 1, "the answered objective faulted: {fault}");
+                        faulted += 1;
+                    }
+                }
+            }
+        }
+        (answered, faulted)
+    });
+    assert_eq!((answered, faulted), (12, 12));
+    // Only the answered objective's points were stored.
+    assert_eq!(store.stats().unwrap().evaluations, 12);
+    assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 12);
+}
+
+#[test]
+fn overlapping_asks_of_many_runs_simulate_each_point_once() {
+    let store = MemoryStore::new();
+    let inner = Counting::default();
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let pool: Vec<Vec<f64>> = (0..40).map(|i| vec![f64::from(i)]).collect();
+    let asked = std::sync::Mutex::new(std::collections::HashSet::new());
+    std::thread::scope(|scope| {
+        for t in 0..8usize {
+            let (evaluator, objective, pool, asked) = (&evaluator, &objective, &pool, &asked);
+            scope.spawn(move || {
+                for c in 0..12usize {
+                    // Three points each, overlapping other runs' asks and earlier rounds.
+                    let batch: Vec<Vec<f64>> = (0..3)
+                        .map(|k| pool[(t * 7 + c * 5 + k * 11) % pool.len()].clone())
+                        .collect();
+                    for p in &batch {
+                        asked.lock().unwrap().insert(p[0].to_bits());
+                    }
+                    let answers = evaluator.evaluate(objective, &batch).unwrap();
+                    for (p, a) in batch.iter().zip(answers) {
+                        assert_eq!(a.objective, p[0]);
+                    }
+                }
+            });
+        }
+    });
+    let distinct = asked.lock().unwrap().len();
+    assert_eq!(inner.simulated.load(Ordering::SeqCst), distinct);
+    let stats = evaluator.stats();
+    assert_eq!(stats.requested, 8 * 12 * 3);
+    assert_eq!(stats.simulated, distinct as u64);
+    let store_stats = store.stats().unwrap();
+    assert_eq!(
+        (store_stats.hits, store_stats.misses),
+        (stats.requested - distinct as u64, distinct as u64)
+    );
 }

@@ -1,28 +1,35 @@
-//! One dispatch for the points of many callers: the runs of a campaign each ask for a point
-//! or two at a time (a Nelder–Mead step, a Powell line search), and a request per ask costs
-//! both processes more than the point's own share of the work. [`Coalescer::evaluate`]
-//! sends what every caller asks while the earlier requests travel, together.
+//! One round of work for the points of many callers: the runs of a campaign each ask for a
+//! point or two at a time (a Nelder–Mead step, a Powell line search), and a request, a
+//! store write or a flush per ask costs more than the point's own share of the work.
+//! [`Coalescer::evaluate`] gathers what every caller asks while earlier rounds are under way
+//! and hands it to one caller as one round. The evaluation store resolves a round's missing
+//! points with one lookup, one batch of simulations per objective and one durable write
+//! ([`crate::store::StoredEvaluator`]); the gRPC evaluator sends a round as one batch per
+//! objective ([`crate::dispatch::GrpcEvaluator`]).
 //!
-//! No timer: a caller that finds fewer than [`LEADERS`] rounds under way sends a round at
-//! once (its own points and whatever else waits); a caller that finds them all busy leaves
-//! its points in the queue. When a round is answered its leader returns to its own work and
-//! hands the baton to the first caller still waiting, which sends everything then waiting.
-//! A lone caller therefore waits for nothing, many callers share requests, up to `LEADERS`
-//! rounds travel at once (the workers' queues stay fed) and no caller's own work waits
-//! while it serves others'. Each point's answer is the worker's answer for that point
-//! alone, so how points are grouped changes no number.
+//! No timer: a caller that finds no round under way sends one at once (its own points and
+//! whatever else waits); a caller that finds one under way sends a second only when the
+//! workers have room for it ([`crate::evaluator::Evaluator::has_room`]) and fewer than
+//! [`LEADERS`] travel, else it leaves its points in the queue. When a round is answered its
+//! leader returns to its own work and hands the baton to the first caller still waiting,
+//! which sends everything then waiting. A lone caller therefore waits for nothing, many
+//! callers share rounds, a second round fills idle workers while the first travels, and no
+//! caller's own work waits while it serves others'. Each point's answer is the answer for
+//! that point alone, so how points are grouped changes no number.
 
 use crate::evaluator::Fault;
 use crate::objective::Evaluation;
 use std::sync::{Arc, Condvar, Mutex};
 
-/// Points to send, grouped by key: each group one batch.
-pub type Groups<K> = Vec<(K, Vec<Vec<f64>>)>;
+/// Points to send, grouped by key: each group one batch. A point is the values of the free
+/// parameters unless the caller attaches more to it (`P`).
+pub type Groups<K, P = Vec<f64>> = Vec<(K, Vec<P>)>;
 
 /// Each group's answers (a point each, in order) or the fault that stopped it.
 pub type Answers = Vec<Result<Vec<Evaluation>, Fault>>;
 
-/// Dispatches under way at once: one whose answers travel back while the next runs.
+/// Rounds under way at once at most: a second fills idle workers while the first's answers
+/// travel back.
 pub const LEADERS: usize = 2;
 
 /// What one caller waits on: its answer, and perhaps first the baton (it leads a round).
@@ -72,28 +79,28 @@ impl Reply {
 }
 
 /// One caller's points, waiting to be sent.
-struct Ask<K> {
+struct Ask<K, P> {
     key: K,
-    points: Vec<Vec<f64>>,
+    points: Vec<P>,
     reply: Arc<Reply>,
     /// Handed the baton already (it will take this round itself).
     leads: bool,
 }
 
-struct Queue<K> {
-    waiting: Vec<Ask<K>>,
-    /// Dispatches under way or handed to a waiting caller.
+struct Queue<K, P> {
+    waiting: Vec<Ask<K, P>>,
+    /// Rounds under way or handed to a waiting caller.
     leaders: usize,
 }
 
 /// Gathers the points of concurrent callers into shared dispatches. `K` names what points
 /// may share a request (the objective); points of different keys go in batches of their
 /// own, sent side by side.
-pub struct Coalescer<K> {
-    queue: Mutex<Queue<K>>,
+pub struct Coalescer<K, P = Vec<f64>> {
+    queue: Mutex<Queue<K, P>>,
 }
 
-impl<K> Default for Coalescer<K> {
+impl<K, P> Default for Coalescer<K, P> {
     fn default() -> Self {
         Self {
             queue: Mutex::new(Queue {
@@ -121,9 +128,9 @@ impl Drop for Unanswered {
 
 /// Ends a leader's round, also when it panics: the baton goes to a caller still waiting, or
 /// the leader's place is given up.
-struct EndOfRound<'a, K>(&'a Coalescer<K>);
+struct EndOfRound<'a, K, P>(&'a Coalescer<K, P>);
 
-impl<K> Drop for EndOfRound<'_, K> {
+impl<K, P> Drop for EndOfRound<'_, K, P> {
     fn drop(&mut self) {
         let mut queue = match self.0.queue.lock() {
             Ok(queue) => queue,
@@ -139,22 +146,28 @@ impl<K> Drop for EndOfRound<'_, K> {
     }
 }
 
-impl<K: Clone + PartialEq> Coalescer<K> {
+impl<K: Clone + PartialEq, P> Coalescer<K, P> {
     /// Evaluate `points` of `key`: `send` dispatches groups of points (each of one key) and
     /// answers each point in order; it is called on this thread with this caller's points
     /// and others', or not at all when another caller's round takes them along.
+    ///
+    /// `room`: whether a round sent now would find capacity idle (see
+    /// [`crate::evaluator::Evaluator::has_room`]). A round starts at once when none travels;
+    /// a second one only when there is room for it, else this caller's points wait for the
+    /// next round, which then takes more points in one dispatch.
     pub fn evaluate<S>(
         &self,
         key: K,
-        points: Vec<Vec<f64>>,
+        points: Vec<P>,
+        room: bool,
         send: S,
     ) -> Result<Vec<Evaluation>, Fault>
     where
-        S: Fn(Groups<K>) -> Answers,
+        S: Fn(Groups<K, P>) -> Answers,
     {
         let reply = Arc::new(Reply::new());
         let mut queue = self.queue.lock().expect("coalescer lock");
-        let lead = queue.leaders < LEADERS;
+        let lead = queue.leaders == 0 || (room && queue.leaders < LEADERS);
         if lead {
             queue.leaders += 1;
         }
@@ -186,9 +199,9 @@ impl<K: Clone + PartialEq> Coalescer<K> {
 
     /// Dispatch one round: its asks grouped by key, each group as one batch; then every
     /// ask's share of its group's answers.
-    fn send_round<S>(&self, round: Vec<Ask<K>>, send: &S)
+    fn send_round<S>(&self, round: Vec<Ask<K, P>>, send: &S)
     where
-        S: Fn(Groups<K>) -> Answers,
+        S: Fn(Groups<K, P>) -> Answers,
     {
         if round.is_empty() {
             return;
@@ -202,9 +215,9 @@ impl<K: Clone + PartialEq> Coalescer<K> {
                 None => groups.push((ask.key.clone(), vec![i])),
             }
         }
-        let mut round: Vec<Option<Ask<K>>> = round.into_iter().map(Some).collect();
+        let mut round: Vec<Option<Ask<K, P>>> = round.into_iter().map(Some).collect();
         let mut sizes: Vec<Vec<usize>> = Vec::with_capacity(groups.len());
-        let batches: Groups<K> = groups
+        let batches: Groups<K, P> = groups
             .iter()
             .map(|(key, members)| {
                 let mut points = Vec::new();
@@ -282,7 +295,12 @@ mod tests {
         let coalescer = Coalescer::<u8>::default();
         let (calls, largest) = (AtomicUsize::new(0), AtomicUsize::new(0));
         let answer = coalescer
-            .evaluate(0, vec![vec![1.0], vec![2.0]], slow_send(&calls, &largest))
+            .evaluate(
+                0,
+                vec![vec![1.0], vec![2.0]],
+                true,
+                slow_send(&calls, &largest),
+            )
             .unwrap();
         assert_eq!(answer, vec![evaluation(1.0), evaluation(2.0)]);
         assert_eq!(calls.load(Ordering::SeqCst), 1);
@@ -301,7 +319,12 @@ mod tests {
                     for r in 0..rounds {
                         let x = (100 * c + r) as f64;
                         let answer = coalescer
-                            .evaluate(0, vec![vec![x], vec![x + 0.5]], slow_send(calls, largest))
+                            .evaluate(
+                                0,
+                                vec![vec![x], vec![x + 0.5]],
+                                true,
+                                slow_send(calls, largest),
+                            )
                             .unwrap();
                         assert_eq!(answer, vec![evaluation(x), evaluation(x + 0.5)]);
                     }
@@ -315,6 +338,40 @@ mod tests {
             callers * rounds
         );
         assert!(largest.load(Ordering::SeqCst) > 2, "asks were grouped");
+    }
+
+    #[test]
+    fn without_room_a_second_round_waits_and_takes_more_points() {
+        for room in [true, false] {
+            let coalescer = Coalescer::<u8>::default();
+            let (travelling, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
+            let (calls, largest) = (AtomicUsize::new(0), AtomicUsize::new(0));
+            let send = |groups: Groups<u8>| {
+                let now = travelling.fetch_add(1, Ordering::SeqCst) + 1;
+                most.fetch_max(now, Ordering::SeqCst);
+                let answers = slow_send(&calls, &largest)(groups);
+                travelling.fetch_sub(1, Ordering::SeqCst);
+                answers
+            };
+            std::thread::scope(|scope| {
+                for c in 0..8 {
+                    let (coalescer, send) = (&coalescer, &send);
+                    scope.spawn(move || {
+                        for r in 0..5 {
+                            let x = f64::from(10 * c + r);
+                            let answer = coalescer.evaluate(0, vec![vec![x]], room, send).unwrap();
+                            assert_eq!(answer, vec![evaluation(x)]);
+                        }
+                    });
+                }
+            });
+            let most = most.load(Ordering::SeqCst);
+            if room {
+                assert!(most <= LEADERS, "{most} rounds at once");
+            } else {
+                assert_eq!(most, 1, "a second round went without room");
+            }
+        }
     }
 
     #[test]
@@ -341,7 +398,7 @@ mod tests {
                         let x = f64::from(10 * c + r);
                         let key = c % 3;
                         let answer = coalescer
-                            .evaluate(key, vec![vec![x, f64::from(key)]], send)
+                            .evaluate(key, vec![vec![x, f64::from(key)]], true, send)
                             .unwrap();
                         assert_eq!(answer, vec![evaluation(x)]);
                     }
@@ -354,7 +411,7 @@ mod tests {
     #[test]
     fn a_fault_reaches_every_caller_of_its_group_and_a_panic_answers_the_waiting() {
         let coalescer = Coalescer::<u8>::default();
-        let fault = coalescer.evaluate(0, vec![vec![1.0]], |groups| {
+        let fault = coalescer.evaluate(0, vec![vec![1.0]], true, |groups| {
             groups
                 .into_iter()
                 .map(|_| Err(Fault::unavailable("no worker")))
@@ -362,12 +419,12 @@ mod tests {
         });
         assert_eq!(fault.unwrap_err().message, "no worker");
         let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            coalescer.evaluate(0, vec![vec![1.0]], |_| panic!("dispatch broke"))
+            coalescer.evaluate(0, vec![vec![1.0]], true, |_| panic!("dispatch broke"))
         }));
         assert!(panicked.is_err());
         // The leader's place was given back: the next caller dispatches.
         let answer = coalescer
-            .evaluate(0, vec![vec![3.0]], |groups| {
+            .evaluate(0, vec![vec![3.0]], true, |groups| {
                 groups
                     .into_iter()
                     .map(|(_, p)| Ok(p.iter().map(|p| evaluation(p[0])).collect()))
