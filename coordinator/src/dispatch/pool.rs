@@ -262,7 +262,10 @@ impl WorkerPool {
     }
 
     /// Lease up to `wanted` points of capacity over the workers that are up, in chunks sized
-    /// by what is left (guided self-scheduling): while much is pending a chunk holds about
+    /// by what is left (guided self-scheduling): a chunk takes an even share per slot of what
+    /// is pending over every slot up, so a batch that fits the idle slots goes in one request
+    /// per worker (a request costs both processes more than a cheap point); while much is
+    /// pending a chunk holds about
     /// [`CHUNK_SECONDS`] of work per slot of its worker (up to [`MAX_POINTS_PER_SLOT_FAST`]
     /// points; [`MAX_POINTS_PER_SLOT`] until the worker has answered once), so that a large
     /// batch travels in few requests; as the batch drains chunks shrink to one point per
@@ -300,7 +303,7 @@ impl WorkerPool {
                 _ => MAX_POINTS_PER_SLOT,
             };
             remaining
-                .div_ceil(2 * total_slots)
+                .div_ceil(total_slots)
                 .clamp(1, most.min(most_per_slot.max(1)))
         };
         let mut remaining = wanted;
