@@ -612,6 +612,36 @@ fn a_fast_workers_chunks_grow_past_eight_points_per_slot() {
 }
 
 #[test]
+fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let nappers = calib_sandbox::NappingCluster::start(2, Duration::from_millis(20), 2).unwrap();
+    let remote = nappers.try_connect().unwrap();
+    assert!(remote.wait_until_up(2, Duration::from_secs(10)));
+    let batch = |k: u32| -> Vec<Vec<f64>> {
+        (0..8)
+            .map(|i| vec![0.01 + 1e-4 * f64::from(8 * k + i), 0.002])
+            .collect()
+    };
+    // The workers get the measurement first.
+    remote.evaluator().evaluate(&objective, &batch(0)).unwrap();
+    let requests = || -> Vec<u64> { nappers.simulators.iter().map(|n| n.requests()).collect() };
+    for k in 1..4 {
+        let before = requests();
+        let answered = remote.evaluator().evaluate(&objective, &batch(k)).unwrap();
+        assert_eq!(answered.len(), 8);
+        let sent: Vec<u64> = requests().iter().zip(&before).map(|(a, b)| a - b).collect();
+        // Eight points over four idle slots: four to each worker, in one request each.
+        assert_eq!(sent, vec![1, 1], "requests per worker for batch {k}");
+    }
+    let most: Vec<u64> = nappers.simulators.iter().map(|n| n.most_points()).collect();
+    assert_eq!(most, vec![4, 4], "largest request per worker");
+}
+
+#[test]
 fn the_measurement_travels_to_each_worker_once() {
     use calib_coordinator::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();

@@ -295,22 +295,34 @@ impl WorkerPool {
         if total_slots == 0 {
             return Vec::new();
         }
-        let per_slot = |remaining: usize, w: &Worker| {
+        // A chunk's points per slot: an even share of what is pending over the slots the
+        // pass fills, within what the worker's speed allows.
+        let per_slot = |share: usize, w: &Worker| {
             let most = match w.point_seconds {
                 Some(t) if t > 0.0 => {
                     ((CHUNK_SECONDS / t) as usize).clamp(1, MAX_POINTS_PER_SLOT_FAST)
                 }
                 _ => MAX_POINTS_PER_SLOT,
             };
-            remaining
-                .div_ceil(total_slots)
-                .clamp(1, most.min(most_per_slot.max(1)))
+            share.clamp(1, most.min(most_per_slot.max(1)))
         };
         let mut remaining = wanted;
         let mut leases = Vec::new();
         // First one chunk to each worker with an idle slot, then chunks queued behind.
         for queued in [false, true] {
             loop {
+                // Shared by the idle slots in the first pass, by every slot behind.
+                let slots = if queued {
+                    total_slots
+                } else {
+                    state
+                        .workers
+                        .iter()
+                        .filter(|w| w.health == Health::Up)
+                        .map(|w| w.slots.saturating_sub(w.busy))
+                        .sum()
+                };
+                let share = remaining.div_ceil(slots.max(1));
                 let mut gave = false;
                 for k in 0..n {
                     if remaining == 0 {
@@ -330,12 +342,12 @@ impl WorkerPool {
                         if w.busy >= capacity {
                             continue;
                         }
-                        (w.slots * per_slot(remaining, w)).min(capacity - w.busy)
+                        (w.slots * per_slot(share, w)).min(capacity - w.busy)
                     } else {
                         if w.busy >= w.slots {
                             continue;
                         }
-                        (w.slots - w.busy) * per_slot(remaining, w)
+                        (w.slots - w.busy) * per_slot(share, w)
                     };
                     let points = room.min(remaining);
                     remaining -= points;

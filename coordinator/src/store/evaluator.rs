@@ -212,7 +212,9 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                     armed: true,
                 };
                 // Another round may have stored some between their callers' lookups and
-                // this claim: only then are they looked up again.
+                // this claim: only then are they looked up again. (Writes of other
+                // evaluators on the same store are not seen here; at worst such a point is
+                // simulated again, with the same answer.)
                 let stale: Vec<usize> = (0..mine.len())
                     .filter(|&j| {
                         let (g, k) = mine[j];
@@ -248,6 +250,17 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                 let fresh = self.simulate_side_by_side(&groups, &batches);
                 let mut entries: Vec<(EvaluationKey, Evaluation)> = Vec::new();
                 for ((g, _), result) in batches.iter().zip(fresh) {
+                    let wanted = to_simulate[*g].len();
+                    let result = result.and_then(|evaluations| {
+                        if evaluations.len() == wanted {
+                            Ok(evaluations)
+                        } else {
+                            Err(Fault::unavailable(format!(
+                                "{} answers for {wanted} points",
+                                evaluations.len()
+                            )))
+                        }
+                    });
                     match result {
                         Ok(evaluations) => {
                             let failed = evaluations.iter().filter(|e| e.failure.is_some());
@@ -439,9 +452,6 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
         let missing: Vec<usize> = (0..points.len())
             .filter(|&i| answers[i].is_none())
             .collect();
-        // Hits of the first look; the round counts its own.
-        self.store
-            .count_lookups((points.len() - missing.len()) as u64, 0);
         if !missing.is_empty() {
             self.remember(objective);
             let asked: Vec<Missing> = missing
@@ -458,10 +468,13 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
                 self.inner.has_room(),
                 |groups| self.resolve_round(groups),
             )?;
-            for (i, evaluation) in missing.into_iter().zip(resolved) {
-                answers[i] = Some(evaluation);
+            for (i, evaluation) in missing.iter().zip(resolved) {
+                answers[*i] = Some(evaluation);
             }
         }
+        // Hits of the first look, once the batch is answered; the round counted its own.
+        self.store
+            .count_lookups((points.len() - missing.len()) as u64, 0);
         Ok(answers
             .into_iter()
             .map(|a| a.expect("every point answered"))

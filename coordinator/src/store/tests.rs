@@ -544,3 +544,31 @@ fn overlapping_asks_of_many_runs_simulate_each_point_once() {
         (stats.requested - distinct as u64, distinct as u64)
     );
 }
+
+/// Answers one point fewer than it was asked for.
+struct AnswersShort;
+
+impl Evaluator for AnswersShort {
+    fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Result<Vec<Evaluation>, Fault> {
+        Ok(points
+            .iter()
+            .skip(1)
+            .map(|p| Evaluation {
+                objective: p[0],
+                sse: vec![p[0]],
+                failure: None,
+            })
+            .collect())
+    }
+}
+
+#[test]
+fn a_batch_answered_short_is_a_fault_and_stores_nothing() {
+    let store = MemoryStore::new();
+    let evaluator = StoredEvaluator::new(AnswersShort, &store);
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..3).map(|i| vec![f64::from(i)]).collect();
+    let fault = evaluator.evaluate(&objective, &points).unwrap_err();
+    assert!(fault.message.contains("2 answers for 3 points"), "{fault}");
+    assert_eq!(store.stats().unwrap().evaluations, 0);
+}
