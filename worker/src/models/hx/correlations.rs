@@ -154,20 +154,22 @@ pub struct ChenCoefficient {
 /// The property groups come precomputed with the saturation state
 /// ([`Saturation::groups`](super::refrigerant::Groups)).
 pub fn chen(s: &Saturation, x: f64, g: f64, d: f64, dt_sat: f64) -> ChenCoefficient {
-    // Powers are taken as exponentials of logarithms: each `powf` costs about as much as
-    // a logarithm and an exponential together, and the logarithms are shared.
+    // Powers are taken as exponentials of logarithms (each `powf` costs about as much as a
+    // logarithm and an exponential together, and the logarithms are shared), or as a
+    // product where the exponent allows: `Nu_t^10 = (0.023 Pr_l^0.4)^10 Re_l^8`.
     let x = x.clamp(1e-4, 0.9999);
-    let re_l = g * (1.0 - x) * d / s.mu_l;
-    let ln_re = re_l.ln();
-    let ln_nu_l = ln_dittus_boelter_with(ln_re, s.groups.pr_l_04);
+    // Re_l = (G D/μ_l)(1 − x): the factor independent of x first, off the path from x.
+    let re_l = g * d / s.mu_l * (1.0 - x);
+    let nu_t10 = (0.023 * s.groups.pr_l_04).powi(10) * re_l.powi(8);
+    let ln_nu_l = 0.1 * (NU_LAMINAR.powi(10) + nu_t10).ln();
     let inv_xtt = (0.9 * (x / (1.0 - x)).ln()).exp() * s.groups.martinelli;
     // F = max(1, 2.35 (1/X_tt + 0.213)^0.736), through its logarithm.
     let ln_f = (2.35f64.ln() + 0.736 * (inv_xtt + 0.213).ln()).max(0.0);
     // F h_l, h_l = Nu_l k_l / D.
-    let convective = (ln_f + ln_nu_l).exp() * s.k_l / d;
+    let convective = (ln_f + ln_nu_l).exp() * (s.k_l / d);
     let nucleate = if dt_sat > 0.0 {
         // (Re_l F^1.25)^1.17.
-        let re_tp_117 = (1.17 * (ln_re + 1.25 * ln_f)).exp();
+        let re_tp_117 = (1.17 * (re_l.ln() + 1.25 * ln_f)).exp();
         let supp = 1.0 / (1.0 + 2.53e-6 * re_tp_117);
         // ΔT_sat^0.24 Δp_sat^0.75 with Δp_sat = ΔT_sat / (dT_sat/dp).
         let driving = (0.99 * dt_sat.ln() - 0.75 * s.dt_dp.ln()).exp();

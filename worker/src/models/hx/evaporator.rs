@@ -18,7 +18,7 @@ use super::correlations::{
     chen, colburn_j, fin_efficiency, louver_group, nusselt_gnielinski, nusselt_gnielinski_with, Air,
 };
 use super::geometry::Geometry;
-use super::pressure_drop;
+use super::pressure_drop::{self, Flow};
 use super::refrigerant::{self, saturation, Saturation};
 use super::NOMINAL;
 
@@ -336,18 +336,25 @@ impl Evaporator {
         }
     }
 
-    /// Refrigerant side of one segment at inlet pressure `p`, enthalpy `h`, wall `tw`.
-    fn segment(&self, p: f64, h: f64, tw: f64, mdot: f64) -> Segment {
+    /// Refrigerant side of one segment at inlet pressure `p`, enthalpy `h`, wall `tw`, for
+    /// the flow `flow` (mass flux `mdot / flow_area`, see [`Evaporator::flow`]).
+    fn segment(&self, p: f64, h: f64, tw: f64, mdot: f64, flow: &Flow) -> Segment {
         let st = &self.settings;
         let high = st.fidelity == Fidelity::High;
         let s = saturation(p);
-        let g = mdot / self.flow_area;
+        let g = flow.g;
         let d = self.d;
         let a = self.seg_area_ref;
         let len = self.seg_len;
         let (q_ref, h_out, dp) = if h < s.h_v {
             let x_in = s.quality(h);
             let dt = tw - s.t;
+            // Homogeneous specific volume at quality `x`, clamped to [0, 1] (high fidelity).
+            let inv_rho = (1.0 / s.rho_l, 1.0 / s.rho_v);
+            let volume = |x: f64| {
+                let x = x.clamp(0.0, 1.0);
+                x * inv_rho.1 + (1.0 - x) * inv_rho.0
+            };
             let c = chen(&s, x_in, g, d, dt);
             // Saturated-vapour coefficient, needed in the dry-out region only.
             let alpha_v = || {
@@ -364,14 +371,16 @@ impl Evaporator {
             let q_full = alpha * a * dt;
             let to_dew = mdot * (s.h_v - h);
             if q_full <= to_dew {
-                let h_out = h + q_full / mdot;
+                // The reciprocals do not depend on the heat flow, so the divisions stay off
+                // the path from the wall balance to the pressure drop.
+                let inv_mdot = 1.0 / mdot;
+                let h_out = h + q_full * inv_mdot;
                 let dp = if high {
-                    let x_out = s.quality(h_out);
+                    // The quality of `h_out`, as `x_in + Q/(ṁ h_lv)`.
+                    let x_out = x_in + q_full * (inv_mdot / s.h_lv());
                     let x_m = 0.5 * (x_in + x_out).max(0.0);
-                    let v_in = 1.0 / s.homogeneous_density(x_in);
-                    let v_out = 1.0 / s.homogeneous_density(x_out);
-                    st.cf_ref_dp * pressure_drop::friedel(&s, x_m, g, d, len)
-                        + pressure_drop::acceleration(g, v_in, v_out)
+                    st.cf_ref_dp * pressure_drop::friedel_at(&s, inv_rho, x_m, flow, len)
+                        + pressure_drop::acceleration(g, volume(x_in), volume(x_out))
                 } else {
                     0.0
                 };
@@ -384,11 +393,16 @@ impl Evaporator {
                 let q_v = c_ref * (tw - s.t) * (1.0 - (-alpha_v() * a * (1.0 - f) / c_ref).exp());
                 let h_out = s.h_v + q_v / mdot;
                 let dp = if high {
-                    let v_in = 1.0 / s.homogeneous_density(x_in);
+                    let v_in = volume(x_in);
                     let v_out = 1.0 / s.vapour(h_out).rho;
                     st.cf_ref_dp
-                        * (pressure_drop::friedel(&s, 0.5 * (x_in.max(0.0) + 1.0), g, d, f * len)
-                            + pressure_drop::single_phase(s.rho_v, s.mu_v, g, d, (1.0 - f) * len))
+                        * (pressure_drop::friedel_at(
+                            &s,
+                            inv_rho,
+                            0.5 * (x_in.max(0.0) + 1.0),
+                            flow,
+                            f * len,
+                        ) + pressure_drop::single_phase(s.rho_v, s.mu_v, g, d, (1.0 - f) * len))
                         + pressure_drop::acceleration(g, v_in, v_out)
                 } else {
                     0.0
@@ -424,6 +438,11 @@ impl Evaporator {
         }
     }
 
+    /// The flow-only quantities of the friction correlations at refrigerant flow `mdot`.
+    fn flow(&self, mdot: f64) -> Flow {
+        Flow::new(mdot / self.flow_area, self.d)
+    }
+
     /// Heat flows into the wall of a segment from air, and out of it to ambient.
     #[inline]
     fn air_and_ambient(&self, air: &AirSide, tw: f64) -> (f64, f64) {
@@ -446,11 +465,12 @@ impl Evaporator {
         let s = saturation(p);
         let t_ref = if h < s.h_v { s.t } else { s.vapour(h).t };
         let t_amb = self.settings.t_ambient;
+        let flow = self.flow(mdot);
         let lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
         let hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
         let balance = |tw: f64| {
             let (q_air, q_amb) = self.air_and_ambient(air, tw);
-            q_air - self.segment(p, h, tw, mdot).q_ref - q_amb
+            q_air - self.segment(p, h, tw, mdot, &flow).q_ref - q_amb
         };
         let tw = falsi(balance, lo, hi, WALL_TOL, WALL_ITER).map_err(|e| {
             format!(
@@ -459,7 +479,7 @@ impl Evaporator {
                 h / 1e3
             )
         })?;
-        Ok((tw, self.segment(p, h, tw, mdot)))
+        Ok((tw, self.segment(p, h, tw, mdot, &flow)))
     }
 
     /// March from the inlet at pressure `p_in`, writing the net heat flow into each wall
@@ -486,13 +506,14 @@ impl Evaporator {
         };
         let mut v_sum = 0.0;
         let (p_min, p_max) = refrigerant::pressure_range();
+        let flow = self.flow(inp.mdot_ref);
         for i in 0..n {
             // Outside the tables the march goes on at the nearest tabulated pressure, so
             // that trial states stay finite; the margin reports it.
             let p_margin = pressure_margin(p);
             let p_seg = p.clamp(p_min, p_max);
             let (tw, seg) = match &mut walls {
-                Walls::Given(tw) => (tw[i], self.segment(p_seg, h, tw[i], inp.mdot_ref)),
+                Walls::Given(tw) => (tw[i], self.segment(p_seg, h, tw[i], inp.mdot_ref, &flow)),
                 Walls::Steady(tw) => {
                     let (t, seg) = self.steady_wall(air, p_seg, h, inp.mdot_ref)?;
                     tw[i] = t;

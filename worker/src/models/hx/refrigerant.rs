@@ -141,19 +141,19 @@ impl Vapour {
 }
 
 struct Tables {
-    /// ln p of the first node and node spacing, saturation grid.
+    /// ln p of the first node and the reciprocal of the node spacing, saturation grid.
     s0: f64,
-    ds: f64,
+    inv_ds: f64,
     /// Saturation rows (quantities, then their groups) with one ghost row at each end
     /// (linear extrapolation).
     sat: Vec<[f64; ROW_COLS]>,
     /// Pressure range of the saturation table.
     sat_p_min: f64,
     sat_p_max: f64,
-    /// ln p grid of the vapour table.
+    /// ln p grid of the vapour table and reciprocal spacings of its two grids.
     vs0: f64,
-    vds: f64,
-    du: f64,
+    inv_vds: f64,
+    inv_du: f64,
     np: usize,
     nu: usize,
     /// Vapour rows, p-major, with ghost rows/columns: (np + 2) × (nu + 2).
@@ -238,13 +238,13 @@ fn tables() -> &'static Tables {
         let vs0 = vp_min.ln();
         Tables {
             s0,
-            ds,
+            inv_ds: 1.0 / ds,
             sat,
             sat_p_min: p[0],
             sat_p_max: p[n - 1],
             vs0,
-            vds: (vp_max.ln() - vs0) / (np - 1) as f64,
-            du: u_max / (nu - 1) as f64,
+            inv_vds: (np - 1) as f64 / (vp_max.ln() - vs0),
+            inv_du: (nu - 1) as f64 / u_max,
             np,
             nu,
             vap,
@@ -276,10 +276,12 @@ fn weights(t: f64) -> ([f64; 4], [f64; 4]) {
     )
 }
 
-/// Cell index (into rows with one leading ghost row) and local coordinate.
+/// Cell index (into rows with one leading ghost row) and local coordinate, on a grid of
+/// `nodes` nodes from `x0` with spacing `1/inv_dx` (the reciprocal spares a division on
+/// every lookup).
 #[inline]
-fn locate(x: f64, x0: f64, dx: f64, nodes: usize) -> (usize, f64) {
-    let f = ((x - x0) / dx).clamp(0.0, (nodes - 1) as f64);
+fn locate(x: f64, x0: f64, inv_dx: f64, nodes: usize) -> (usize, f64) {
+    let f = ((x - x0) * inv_dx).clamp(0.0, (nodes - 1) as f64);
     // `f ≥ 0`, so truncation is the floor.
     let i = (f as usize).min(nodes - 2);
     (i, f - i as f64)
@@ -307,7 +309,7 @@ pub fn saturation(p: f64) -> Saturation {
     let tb = tables();
     let n = tb.sat.len() - 2;
     let s = p.max(1.0).ln();
-    let (i, t) = locate(s, tb.s0, tb.ds, n);
+    let (i, t) = locate(s, tb.s0, tb.inv_ds, n);
     let (w, dw) = weights(t);
     let mut v = [0.0; ROW_COLS];
     let mut dt = 0.0;
@@ -324,7 +326,7 @@ pub fn saturation(p: f64) -> Saturation {
         ln_p: s,
         t: v[0],
         // dT/dp = dT/ds · ds/dp, ds = ln p.
-        dt_dp: dt / tb.ds / p_eff,
+        dt_dp: dt * tb.inv_ds / p_eff,
         rho_l: v[1],
         rho_v: v[2],
         h_l: v[3],
@@ -352,9 +354,9 @@ pub fn saturation(p: f64) -> Saturation {
 /// dew-point enthalpy `h_v` at `p`; see [`Saturation::vapour`].
 fn vapour(ln_p: f64, h: f64, h_v: f64) -> Vapour {
     let tb = tables();
-    let (i, tp) = locate(ln_p, tb.vs0, tb.vds, tb.np);
+    let (i, tp) = locate(ln_p, tb.vs0, tb.inv_vds, tb.np);
     let u = (h - h_v).max(0.0);
-    let (j, tu) = locate(u, 0.0, tb.du, tb.nu);
+    let (j, tu) = locate(u, 0.0, tb.inv_du, tb.nu);
     let (wp, _) = weights(tp);
     let (wu, _) = weights(tu);
     let w = tb.nu + 2;
