@@ -228,11 +228,7 @@ where
 
     let mut t = 0.0;
     let mut y = y0.to_vec();
-    let mut next_out = 0;
-    while next_out < grid.len() && grid[next_out] <= t {
-        out(next_out, &y);
-        next_out += 1;
-    }
+    let mut next_out = outputs_at_start(grid, &y, &mut out);
     if next_out == grid.len() {
         return Ok(stats);
     }
@@ -364,16 +360,11 @@ where
             system, &dense, t, t_new, &ynew, &g_old, &mut g_new, &mut ytmp, &mut g_tmp,
         );
 
-        let t_stop = event.map_or(t_new, |(_, te)| te);
-        while next_out < grid.len() && grid[next_out] <= t_stop {
-            if grid[next_out] == t_new && event.is_none() {
-                out(next_out, &ynew);
-            } else {
-                dense.eval(grid[next_out], &mut ytmp);
-                out(next_out, &ytmp);
-            }
-            next_out += 1;
-        }
+        let end = match event {
+            None => StepEnd::Reached(t_new, &ynew),
+            Some((_, te)) => StepEnd::Event(te),
+        };
+        outputs_of_step(grid, &mut next_out, end, &dense, &mut ytmp, &mut out);
 
         match event {
             None => {
@@ -412,6 +403,51 @@ where
                 last_rejected = false;
             }
         }
+    }
+}
+
+/// Record the outputs at the grid times up to the start (`t = 0`, state `y0`); the index of
+/// the first grid time after it.
+fn outputs_at_start<F: FnMut(usize, &[f64])>(grid: &[f64], y0: &[f64], out: &mut F) -> usize {
+    let mut next_out = 0;
+    while next_out < grid.len() && grid[next_out] <= 0.0 {
+        out(next_out, y0);
+        next_out += 1;
+    }
+    next_out
+}
+
+/// Where an accepted step's outputs stop.
+enum StepEnd<'a> {
+    /// At the step's end `t_new`, whose state is known exactly.
+    Reached(f64, &'a [f64]),
+    /// At an event inside the step.
+    Event(f64),
+}
+
+/// Record the outputs at the grid times of an accepted step from `grid[*next_out]` up to
+/// its end: read off the continuous extension, except a grid time at the step's very end,
+/// which takes the step's state.
+fn outputs_of_step<D: Interpolant, F: FnMut(usize, &[f64])>(
+    grid: &[f64],
+    next_out: &mut usize,
+    end: StepEnd,
+    dense: &D,
+    ytmp: &mut [f64],
+    out: &mut F,
+) {
+    let t_stop = match end {
+        StepEnd::Reached(t_new, _) | StepEnd::Event(t_new) => t_new,
+    };
+    while *next_out < grid.len() && grid[*next_out] <= t_stop {
+        match end {
+            StepEnd::Reached(t_new, y_new) if grid[*next_out] == t_new => out(*next_out, y_new),
+            _ => {
+                dense.eval(grid[*next_out], ytmp);
+                out(*next_out, ytmp);
+            }
+        }
+        *next_out += 1;
     }
 }
 

@@ -45,7 +45,10 @@
 //! - E. Hairer, G. Wanner, *Solving Ordinary Differential Equations II*, 2nd ed., Springer
 //!   1996, §IV.2 (stabilised explicit methods).
 
-use super::{first_event, switch_mode, HybridSystem, Interpolant, ZenoGuard};
+use super::{
+    first_event, outputs_at_start, outputs_of_step, switch_mode, HybridSystem, Interpolant,
+    StepEnd, ZenoGuard,
+};
 use crate::model::{SimulationError, SolverOptions, SolverStats};
 
 /// Accepted steps between two estimates of the spectral radius.
@@ -175,11 +178,7 @@ where
     };
 
     let mut t = 0.0;
-    let mut next_out = 0;
-    while next_out < grid.len() && grid[next_out] <= t {
-        out(next_out, y0);
-        next_out += 1;
-    }
+    let mut next_out = outputs_at_start(grid, y0, &mut out);
     if next_out == grid.len() {
         return Ok(stats);
     }
@@ -325,16 +324,11 @@ where
         let event = first_event(
             &*system, &step, t, t_new, &step.y1, &g_old, &mut g_new, &mut ytmp, &mut g_tmp,
         );
-        let t_stop = event.map_or(t_new, |(_, te)| te);
-        while next_out < grid.len() && grid[next_out] <= t_stop {
-            if grid[next_out] == t_new && event.is_none() {
-                out(next_out, &step.y1);
-            } else {
-                step.eval(grid[next_out], &mut ytmp);
-                out(next_out, &ytmp);
-            }
-            next_out += 1;
-        }
+        let end = match event {
+            None => StepEnd::Reached(t_new, &step.y1),
+            Some((_, te)) => StepEnd::Event(te),
+        };
+        outputs_of_step(grid, &mut next_out, end, &step, &mut ytmp, &mut out);
 
         match event {
             None => {
