@@ -317,16 +317,11 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
         // the store or from another thread's simulation.
         let hits: u64 = groups
             .iter()
+            .zip(&simulated)
             .zip(&faults)
             .filter(|(_, fault)| fault.is_none())
-            .map(|(group, _)| group.distinct.len() as u64)
-            .sum::<u64>()
-            - simulated
-                .iter()
-                .zip(&faults)
-                .filter(|(_, fault)| fault.is_none())
-                .map(|(n, _)| n)
-                .sum::<u64>();
+            .map(|((group, n), _)| group.distinct.len() as u64 - n)
+            .sum();
         self.store.count_lookups(hits, simulated.iter().sum());
         groups
             .iter()
