@@ -101,6 +101,21 @@ struct Worker {
 }
 
 impl Worker {
+    /// Points this worker can take in a chunk now: into its idle slots, or (`queued`) into
+    /// its queue behind what runs, up to `depth` chunks and what it queues before it
+    /// refuses. 0 when it is not up.
+    fn free(&self, queued: bool, depth: usize) -> usize {
+        if self.health != Health::Up {
+            0
+        } else if !queued {
+            self.slots.saturating_sub(self.busy)
+        } else if self.chunks >= depth {
+            0
+        } else {
+            (self.slots + self.queue_bound).saturating_sub(self.busy)
+        }
+    }
+
     fn failed(&mut self, reason: String, probe_interval: std::time::Duration) {
         self.failures = self.failures.saturating_add(1);
         let backoff = probe_interval
@@ -315,12 +330,7 @@ impl WorkerPool {
                 let slots = if queued {
                     total_slots
                 } else {
-                    state
-                        .workers
-                        .iter()
-                        .filter(|w| w.health == Health::Up)
-                        .map(|w| w.slots.saturating_sub(w.busy))
-                        .sum()
+                    state.workers.iter().map(|w| w.free(false, depth)).sum()
                 };
                 let share = remaining.div_ceil(slots.max(1));
                 let mut gave = false;
@@ -329,25 +339,16 @@ impl WorkerPool {
                         break;
                     }
                     let w = &mut state.workers[(start + k) % n];
-                    if w.health != Health::Up {
+                    let free = w.free(queued, depth);
+                    if free == 0 {
                         continue;
                     }
                     let room = if queued {
                         // Queued behind what runs: as large as what is pending allows, within
                         // what the worker queues before it refuses.
-                        if w.chunks >= depth {
-                            continue;
-                        }
-                        let capacity = w.slots + w.queue_bound;
-                        if w.busy >= capacity {
-                            continue;
-                        }
-                        (w.slots * per_slot(share, w)).min(capacity - w.busy)
+                        (w.slots * per_slot(share, w)).min(free)
                     } else {
-                        if w.busy >= w.slots {
-                            continue;
-                        }
-                        (w.slots - w.busy) * per_slot(share, w)
+                        free * per_slot(share, w)
                     };
                     let points = room.min(remaining);
                     remaining -= points;
@@ -434,10 +435,10 @@ impl WorkerPool {
     pub fn has_room(&self) -> bool {
         let state = self.state.lock().expect("pool lock");
         let depth = self.config.depth.max(1);
-        state.workers.iter().any(|w| {
-            w.health == Health::Up
-                && (w.busy < w.slots || (w.chunks < depth && w.busy < w.slots + w.queue_bound))
-        })
+        state
+            .workers
+            .iter()
+            .any(|w| w.free(false, depth) > 0 || w.free(true, depth) > 0)
     }
 
     /// False when every known worker is set aside for good (another protocol, a refused
