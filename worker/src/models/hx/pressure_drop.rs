@@ -18,66 +18,6 @@ use super::refrigerant::Saturation;
 
 const G_ACC: f64 = 9.81;
 
-/// Fanning friction factor used inside Friedel's correlation:
-/// `16/Re` below Re = 1055, `0.079 Re^−0.25` above (Friedel's own choice).
-#[cfg(test)]
-fn fanning_friedel(re: f64) -> f64 {
-    if re < 1055.0 {
-        16.0 / re.max(1e-9)
-    } else {
-        0.079 * re.powf(-0.25)
-    }
-}
-
-/// [`fanning_friedel`] at `Re = gd/μ`, given `(gd)^0.25` and `μ^0.25`.
-fn fanning_friedel_with(gd: f64, gd_025: f64, mu: f64, mu_025: f64) -> f64 {
-    let re = gd / mu;
-    if re < 1055.0 {
-        16.0 / re.max(1e-9)
-    } else {
-        0.079 * mu_025 / gd_025
-    }
-}
-
-/// Friedel's two-phase multiplier `Φ_lo²` at quality `x`, mass flux `g`, diameter `d`.
-///
-/// `Φ_lo² = E + 3.24 F H / (Fr^0.045 We^0.035)` with
-/// `E = (1−x)² + x² ρ_l f_vo / (ρ_v f_lo)`, `F = x^0.78 (1−x)^0.224`,
-/// `H = (ρ_l/ρ_v)^0.91 (μ_v/μ_l)^0.19 (1 − μ_v/μ_l)^0.7`,
-/// `Fr = G²/(g D ρ_h²)`, `We = G² D/(σ ρ_h)`, `ρ_h` the homogeneous density.
-/// `H` and the viscosity powers come precomputed with the saturation state.
-pub fn friedel_multiplier(s: &Saturation, x: f64, g: f64, d: f64) -> f64 {
-    let gd = g * d;
-    let gd_025 = gd.sqrt().sqrt();
-    let f_lo = fanning_friedel_with(gd, gd_025, s.mu_l, s.groups.mu_l_025);
-    multiplier(s, x, g, d, f_lo, gd_025)
-}
-
-fn multiplier(s: &Saturation, x: f64, g: f64, d: f64, f_lo: f64, gd_025: f64) -> f64 {
-    let x = x.clamp(0.0, 1.0);
-    let f_vo = fanning_friedel_with(g * d, gd_025, s.mu_v, s.groups.mu_v_025);
-    let e = (1.0 - x).powi(2) + x * x * s.rho_l * f_vo / (s.rho_v * f_lo);
-    if x <= 0.0 || x >= 1.0 {
-        // F = x^0.78 (1−x)^0.224 vanishes.
-        return e;
-    }
-    let rho_h = s.homogeneous_density(x);
-    let fr = g * g / (G_ACC * d * rho_h * rho_h);
-    let we = g * g * d / (s.sigma * rho_h);
-    // F / (Fr^0.045 We^0.035), as one exponential of logarithms.
-    let ratio = (0.78 * x.ln() + 0.224 * (1.0 - x).ln() - 0.045 * fr.ln() - 0.035 * we.ln()).exp();
-    e + 3.24 * s.groups.friedel_h * ratio
-}
-
-/// Two-phase frictional pressure drop (Pa) over length `len` at mean quality `x`:
-/// `Δp = Φ_lo² · 2 f_lo G² L / (D ρ_l)`.
-pub fn friedel(s: &Saturation, x: f64, g: f64, d: f64, len: f64) -> f64 {
-    let gd = g * d;
-    let gd_025 = gd.sqrt().sqrt();
-    let f_lo = fanning_friedel_with(gd, gd_025, s.mu_l, s.groups.mu_l_025);
-    multiplier(s, x, g, d, f_lo, gd_025) * 2.0 * f_lo * g * g * len / (d * s.rho_l)
-}
-
 /// Quantities of the friction correlations that depend on the mass flux `g` and the
 /// diameter `d` alone, computed once per march.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -121,10 +61,18 @@ impl Flow {
     }
 }
 
-/// [`friedel`] for the flow `flow`, given `1/ρ_l` and `1/ρ_v` of the saturation state.
+/// Friedel's two-phase frictional pressure drop (Pa) over length `len` at mean quality `x`,
+/// for the flow `flow`, given `1/ρ_l` and `1/ρ_v` of the saturation state:
+/// `Δp = Φ_lo² · 2 f_lo G² L / (D ρ_l)`, with the multiplier
+/// `Φ_lo² = E + 3.24 F H / (Fr^0.045 We^0.035)`,
+/// `E = (1−x)² + x² ρ_l f_vo / (ρ_v f_lo)`, `F = x^0.78 (1−x)^0.224`,
+/// `H = (ρ_l/ρ_v)^0.91 (μ_v/μ_l)^0.19 (1 − μ_v/μ_l)^0.7`,
+/// `Fr = G²/(g D ρ_h²)`, `We = G² D/(σ ρ_h)`, `ρ_h` the homogeneous density, and Friedel's
+/// own Fanning factors (`16/Re` below Re = 1055, `0.079 Re^−0.25` above). `H` and the
+/// viscosity powers come precomputed with the saturation state.
 ///
-/// The same equations with the factors that depend on the flow alone taken out of the
-/// segment: with `v_h = 1/ρ_h`,
+/// The factors that depend on the flow alone are taken out of the segment: with
+/// `v_h = 1/ρ_h`,
 /// `Fr^0.045 We^0.035 = (G²/(g D))^0.045 (G² D)^0.035 v_h^0.125 σ^−0.035`, whose first
 /// two factors come with `flow`; the Fanning factors and `2 G²/D` likewise, so that the
 /// only divisions left are by `f_lo` and in the caller's `1/ρ_l`, `1/ρ_v`.
@@ -190,6 +138,58 @@ mod tests {
         assert!((fanning_churchill(500.0) / (16.0 / 500.0) - 1.0).abs() < 0.01);
         let bl = 0.079 * 2e4f64.powf(-0.25);
         assert!((fanning_churchill(2e4) / bl - 1.0).abs() < 0.05);
+    }
+
+    /// Friedel's Fanning factor, as the paper writes it.
+    fn fanning_friedel(re: f64) -> f64 {
+        if re < 1055.0 {
+            16.0 / re.max(1e-9)
+        } else {
+            0.079 * re.powf(-0.25)
+        }
+    }
+
+    /// Friedel's multiplier `Φ_lo²`, term by term as the paper writes it (see
+    /// [`friedel_at`]): the reference the model's form is held to, to rounding and the
+    /// tabulated viscosity powers (10⁻¹⁰).
+    fn friedel_multiplier(s: &Saturation, x: f64, g: f64, d: f64) -> f64 {
+        let x = x.clamp(0.0, 1.0);
+        let f_lo = fanning_friedel(g * d / s.mu_l);
+        let f_vo = fanning_friedel(g * d / s.mu_v);
+        let e = (1.0 - x).powi(2) + x * x * s.rho_l * f_vo / (s.rho_v * f_lo);
+        if x <= 0.0 || x >= 1.0 {
+            return e;
+        }
+        let rho_h = s.homogeneous_density(x);
+        let fr = g * g / (G_ACC * d * rho_h * rho_h);
+        let we = g * g * d / (s.sigma * rho_h);
+        let f = x.powf(0.78) * (1.0 - x).powf(0.224);
+        e + 3.24 * f * s.groups.friedel_h / (fr.powf(0.045) * we.powf(0.035))
+    }
+
+    /// `Δp = Φ_lo² · 2 f_lo G² L / (D ρ_l)`, as the paper writes it.
+    fn friedel(s: &Saturation, x: f64, g: f64, d: f64, len: f64) -> f64 {
+        let f_lo = fanning_friedel(g * d / s.mu_l);
+        friedel_multiplier(s, x, g, d) * 2.0 * f_lo * g * g * len / (d * s.rho_l)
+    }
+
+    #[test]
+    fn the_models_form_of_friedel_equals_the_papers() {
+        for p in [1.5e5, 3e5, 6e5] {
+            let s = saturation(p);
+            let inv_rho = (1.0 / s.rho_l, 1.0 / s.rho_v);
+            for (g, d) in [(20.0, 1e-3), (170.0, 1e-3), (600.0, 1.1e-3)] {
+                let flow = Flow::new(g, d);
+                for x in [0.0, 0.05, 0.3, 0.6, 0.95, 1.0] {
+                    let paper = friedel(&s, x, g, d, 0.2);
+                    let model = friedel_at(&s, inv_rho, x, &flow, 0.2);
+                    assert!(
+                        (model / paper - 1.0).abs() < 1e-10,
+                        "p {p}, G {g}, x {x}: {model} vs {paper}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]
