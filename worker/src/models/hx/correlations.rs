@@ -94,7 +94,12 @@ pub fn fin_efficiency(h: f64, conductivity: f64, thickness: f64, half_height: f6
 
 /// Churchill–Usagi blend of the laminar floor and a turbulent Nusselt number.
 fn blend(nu_turbulent: f64) -> f64 {
-    (0.1 * (NU_LAMINAR.powi(10) + nu_turbulent.max(0.0).powi(10)).ln()).exp()
+    ln_blend(nu_turbulent.max(0.0).powi(10)).exp()
+}
+
+/// The logarithm of [`blend`], given the turbulent Nusselt number to the tenth power.
+fn ln_blend(nu_turbulent_10: f64) -> f64 {
+    0.1 * (NU_LAMINAR.powi(10) + nu_turbulent_10).ln()
 }
 
 /// Dittus–Boelter (heating) with the laminar floor.
@@ -113,7 +118,7 @@ fn dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
 /// The logarithm of [`dittus_boelter_with`].
 fn ln_dittus_boelter_with(ln_re: f64, pr_04: f64) -> f64 {
     let nu_turbulent = 0.023 * (0.8 * ln_re).exp() * pr_04;
-    0.1 * (NU_LAMINAR.powi(10) + nu_turbulent.powi(10)).ln()
+    ln_blend(nu_turbulent.powi(10))
 }
 
 /// Gnielinski with the Filonenko friction factor, blended with the laminar floor; the
@@ -161,7 +166,7 @@ pub fn chen(s: &Saturation, x: f64, g: f64, d: f64, dt_sat: f64) -> ChenCoeffici
     // Re_l = (G D/μ_l)(1 − x): the factor independent of x first, off the path from x.
     let re_l = g * d / s.mu_l * (1.0 - x);
     let nu_t10 = (0.023 * s.groups.pr_l_04).powi(10) * re_l.powi(8);
-    let ln_nu_l = 0.1 * (NU_LAMINAR.powi(10) + nu_t10).ln();
+    let ln_nu_l = ln_blend(nu_t10);
     let inv_xtt = (0.9 * (x / (1.0 - x)).ln()).exp() * s.groups.martinelli;
     // F = max(1, 2.35 (1/X_tt + 0.213)^0.736), through its logarithm.
     let ln_f = (2.35f64.ln() + 0.736 * (inv_xtt + 0.213).ln()).max(0.0);
