@@ -454,23 +454,24 @@ impl Evaporator {
 
     /// Steady wall temperature of one segment: `q_air(T_w) = q_ref(T_w) + q_amb(T_w)`, the
     /// balance being strictly decreasing in `T_w`, solved by [`falsi`] on a bracket between
-    /// the coldest and the warmest temperature around.
+    /// the coldest and the warmest temperature around. `flow` is [`Evaporator::flow`] of
+    /// `mdot`.
     fn steady_wall(
         &self,
         air: &AirSide,
         p: f64,
         h: f64,
         mdot: f64,
+        flow: &Flow,
     ) -> Result<(f64, Segment), String> {
         let s = saturation(p);
         let t_ref = if h < s.h_v { s.t } else { s.vapour(h).t };
         let t_amb = self.settings.t_ambient;
-        let flow = self.flow(mdot);
         let lo = t_ref.min(air.t_in).min(t_amb) - 0.01;
         let hi = t_ref.max(air.t_in).max(t_amb) + 0.01;
         let balance = |tw: f64| {
             let (q_air, q_amb) = self.air_and_ambient(air, tw);
-            q_air - self.segment(p, h, tw, mdot, &flow).q_ref - q_amb
+            q_air - self.segment(p, h, tw, mdot, flow).q_ref - q_amb
         };
         let tw = falsi(balance, lo, hi, WALL_TOL, WALL_ITER).map_err(|e| {
             format!(
@@ -479,7 +480,7 @@ impl Evaporator {
                 h / 1e3
             )
         })?;
-        Ok((tw, self.segment(p, h, tw, mdot, &flow)))
+        Ok((tw, self.segment(p, h, tw, mdot, flow)))
     }
 
     /// March from the inlet at pressure `p_in`, writing the net heat flow into each wall
@@ -515,7 +516,7 @@ impl Evaporator {
             let (tw, seg) = match &mut walls {
                 Walls::Given(tw) => (tw[i], self.segment(p_seg, h, tw[i], inp.mdot_ref, &flow)),
                 Walls::Steady(tw) => {
-                    let (t, seg) = self.steady_wall(air, p_seg, h, inp.mdot_ref)?;
+                    let (t, seg) = self.steady_wall(air, p_seg, h, inp.mdot_ref, &flow)?;
                     tw[i] = t;
                     (t, seg)
                 }
