@@ -10,15 +10,18 @@
 //! No timer: a caller that finds no round under way sends one at once (its own points and
 //! whatever else waits); a caller that finds one under way sends a second only when the
 //! workers have room for it ([`crate::evaluator::Evaluator::has_room`]) and fewer than
-//! [`LEADERS`] travel, else it leaves its points in the queue. When a round is answered its
-//! leader returns to its own work and hands the baton to the first caller still waiting,
-//! which sends everything then waiting. A lone caller therefore waits for nothing, many
-//! callers share rounds, a second round fills idle workers while the first travels, and no
-//! caller's own work waits while it serves others'. Each point's answer is the answer for
-//! that point alone, so how points are grouped changes no number.
+//! [`LEADERS`] travel, else it leaves its points in the queue. When a round's answers are in
+//! (before the store has made them durable: [`Arrival`]) its leader hands the baton to the
+//! first caller still waiting, which sends everything then waiting, and then settles its
+//! round and returns to its own work. A lone caller therefore waits for nothing, many
+//! callers share rounds, a second round fills idle workers while the first travels, the
+//! workers get the next round while the last one is written, and no caller's own work waits
+//! while it serves others'. Each point's answer is the answer for that point alone, so how
+//! points are grouped changes no number.
 
 use crate::evaluator::Fault;
 use crate::objective::Evaluation;
+use std::cell::Cell;
 use std::sync::{Arc, Condvar, Mutex};
 
 /// Points to send, grouped by key: each group one batch. A point is the values of the free
@@ -126,13 +129,31 @@ impl Drop for Unanswered {
     }
 }
 
-/// Ends a leader's round, also when it panics: the baton goes to a caller still waiting, or
-/// the leader's place is given up.
-struct EndOfRound<'a, K, P>(&'a Coalescer<K, P>);
+/// Handed to a round's `send`: [`Arrival::arrived`] says that the round's answers are in
+/// and only their bookkeeping is left (the store writes them durably before they are
+/// published), so that the next round may set out while this one settles. A round that
+/// never says so has arrived when `send` returns.
+pub struct Arrival<'a>(&'a dyn Fn());
 
-impl<K, P> Drop for EndOfRound<'_, K, P> {
-    fn drop(&mut self) {
-        let mut queue = match self.0.queue.lock() {
+impl Arrival<'_> {
+    pub fn arrived(&self) {
+        (self.0)()
+    }
+}
+
+/// Ends a leader's round once (on arrival, at the latest when the round is over, also when
+/// it panics): the baton goes to a caller still waiting, or the leader's place is given up.
+struct EndOfRound<'a, K, P> {
+    coalescer: &'a Coalescer<K, P>,
+    ended: Cell<bool>,
+}
+
+impl<K, P> EndOfRound<'_, K, P> {
+    fn end(&self) {
+        if self.ended.replace(true) {
+            return;
+        }
+        let mut queue = match self.coalescer.queue.lock() {
             Ok(queue) => queue,
             Err(poisoned) => poisoned.into_inner(),
         };
@@ -146,6 +167,12 @@ impl<K, P> Drop for EndOfRound<'_, K, P> {
     }
 }
 
+impl<K, P> Drop for EndOfRound<'_, K, P> {
+    fn drop(&mut self) {
+        self.end();
+    }
+}
+
 impl<K: Clone + PartialEq, P> Coalescer<K, P> {
     /// Evaluate `points` of `key`: `send` dispatches groups of points (each of one key) and
     /// answers each point in order; it is called on this thread with this caller's points
@@ -154,7 +181,8 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
     /// `room`: whether a round sent now would find capacity idle (see
     /// [`crate::evaluator::Evaluator::has_room`]). A round starts at once when none travels;
     /// a second one only when there is room for it, else this caller's points wait for the
-    /// next round, which then takes more points in one dispatch.
+    /// next round, which then takes more points in one dispatch. A round travels until
+    /// `send` says it has arrived ([`Arrival`]) or returns.
     pub fn evaluate<S>(
         &self,
         key: K,
@@ -163,7 +191,7 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
         send: S,
     ) -> Result<Vec<Evaluation>, Fault>
     where
-        S: Fn(Groups<K, P>) -> Answers,
+        S: Fn(Groups<K, P>, &Arrival) -> Answers,
     {
         let reply = Arc::new(Reply::new());
         let mut queue = self.queue.lock().expect("coalescer lock");
@@ -187,8 +215,11 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
         // a round begun since took them along).
         let round = std::mem::take(&mut self.queue.lock().expect("coalescer lock").waiting);
         {
-            let _end = EndOfRound(self);
-            self.send_round(round, &send);
+            let end = EndOfRound {
+                coalescer: self,
+                ended: Cell::new(false),
+            };
+            self.send_round(round, &send, &Arrival(&|| end.end()));
         }
         loop {
             if let Some(answer) = reply.wait() {
@@ -199,9 +230,9 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
 
     /// Dispatch one round: its asks grouped by key, each group as one batch; then every
     /// ask's share of its group's answers.
-    fn send_round<S>(&self, round: Vec<Ask<K, P>>, send: &S)
+    fn send_round<S>(&self, round: Vec<Ask<K, P>>, send: &S, arrival: &Arrival)
     where
-        S: Fn(Groups<K, P>) -> Answers,
+        S: Fn(Groups<K, P>, &Arrival) -> Answers,
     {
         if round.is_empty() {
             return;
@@ -236,7 +267,7 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
             points = batches.iter().map(|(_, p)| p.len()).sum::<usize>(),
             "round"
         );
-        let answers = send(batches);
+        let answers = send(batches, arrival);
         for (((_, members), counts), answer) in groups.iter().zip(&sizes).zip(answers) {
             match answer {
                 Ok(evaluations) => {
@@ -276,8 +307,8 @@ mod tests {
     fn slow_send<'a>(
         calls: &'a AtomicUsize,
         largest: &'a AtomicUsize,
-    ) -> impl Fn(Groups<u8>) -> Answers + 'a {
-        move |groups| {
+    ) -> impl Fn(Groups<u8>, &Arrival) -> Answers + 'a {
+        move |groups, _| {
             calls.fetch_add(1, Ordering::SeqCst);
             std::thread::sleep(Duration::from_millis(20));
             groups
@@ -346,10 +377,10 @@ mod tests {
             let coalescer = Coalescer::<u8>::default();
             let (travelling, most) = (AtomicUsize::new(0), AtomicUsize::new(0));
             let (calls, largest) = (AtomicUsize::new(0), AtomicUsize::new(0));
-            let send = |groups: Groups<u8>| {
+            let send = |groups: Groups<u8>, arrival: &Arrival| {
                 let now = travelling.fetch_add(1, Ordering::SeqCst) + 1;
                 most.fetch_max(now, Ordering::SeqCst);
-                let answers = slow_send(&calls, &largest)(groups);
+                let answers = slow_send(&calls, &largest)(groups, arrival);
                 travelling.fetch_sub(1, Ordering::SeqCst);
                 answers
             };
@@ -375,10 +406,60 @@ mod tests {
     }
 
     #[test]
+    fn an_arrived_round_lets_the_next_set_out_while_it_settles() {
+        // Without room a second round waits for the first; the first says it has arrived
+        // and then settles until the second has been sent (or 10 s have passed).
+        let coalescer = Coalescer::<u8>::default();
+        let second_sent = (Mutex::new(false), Condvar::new());
+        let first_travels = (Mutex::new(false), Condvar::new());
+        let set_out_while_settling = AtomicUsize::new(0);
+        let answer = |groups: Groups<u8>| -> Answers {
+            groups
+                .into_iter()
+                .map(|(_, p)| Ok(p.iter().map(|p| evaluation(p[0])).collect()))
+                .collect()
+        };
+        std::thread::scope(|scope| {
+            scope.spawn(|| {
+                let send = |groups: Groups<u8>, arrival: &Arrival| {
+                    *first_travels.0.lock().unwrap() = true;
+                    first_travels.1.notify_all();
+                    // Let the second caller queue behind this round.
+                    std::thread::sleep(Duration::from_millis(50));
+                    arrival.arrived();
+                    let sent = second_sent.0.lock().unwrap();
+                    let (sent, _) = second_sent
+                        .1
+                        .wait_timeout_while(sent, Duration::from_secs(10), |sent| !*sent)
+                        .unwrap();
+                    if *sent {
+                        set_out_while_settling.fetch_add(1, Ordering::SeqCst);
+                    }
+                    answer(groups)
+                };
+                let got = coalescer.evaluate(0, vec![vec![1.0]], false, send).unwrap();
+                assert_eq!(got, vec![evaluation(1.0)]);
+            });
+            scope.spawn(|| {
+                let travels = first_travels.0.lock().unwrap();
+                drop(first_travels.1.wait_while(travels, |t| !*t).unwrap());
+                let send = |groups: Groups<u8>, _: &Arrival| {
+                    *second_sent.0.lock().unwrap() = true;
+                    second_sent.1.notify_all();
+                    answer(groups)
+                };
+                let got = coalescer.evaluate(0, vec![vec![2.0]], false, send).unwrap();
+                assert_eq!(got, vec![evaluation(2.0)]);
+            });
+        });
+        assert_eq!(set_out_while_settling.load(Ordering::SeqCst), 1);
+    }
+
+    #[test]
     fn points_of_different_keys_go_in_separate_groups() {
         let coalescer = Coalescer::<u8>::default();
         let mixed = AtomicUsize::new(0);
-        let send = |groups: Vec<(u8, Vec<Vec<f64>>)>| {
+        let send = |groups: Vec<(u8, Vec<Vec<f64>>)>, _: &Arrival| {
             std::thread::sleep(Duration::from_millis(10));
             groups
                 .into_iter()
@@ -411,7 +492,7 @@ mod tests {
     #[test]
     fn a_fault_reaches_every_caller_of_its_group_and_a_panic_answers_the_waiting() {
         let coalescer = Coalescer::<u8>::default();
-        let fault = coalescer.evaluate(0, vec![vec![1.0]], true, |groups| {
+        let fault = coalescer.evaluate(0, vec![vec![1.0]], true, |groups, _| {
             groups
                 .into_iter()
                 .map(|_| Err(Fault::unavailable("no worker")))
@@ -419,12 +500,12 @@ mod tests {
         });
         assert_eq!(fault.unwrap_err().message, "no worker");
         let panicked = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-            coalescer.evaluate(0, vec![vec![1.0]], true, |_| panic!("dispatch broke"))
+            coalescer.evaluate(0, vec![vec![1.0]], true, |_, _| panic!("dispatch broke"))
         }));
         assert!(panicked.is_err());
         // The leader's place was given back: the next caller dispatches.
         let answer = coalescer
-            .evaluate(0, vec![vec![3.0]], true, |groups| {
+            .evaluate(0, vec![vec![3.0]], true, |groups, _| {
                 groups
                     .into_iter()
                     .map(|(_, p)| Ok(p.iter().map(|p| evaluation(p[0])).collect()))

@@ -88,7 +88,7 @@ impl Evaluator for GrpcEvaluator {
             objective.fingerprint(),
             points.to_vec(),
             self.has_room(),
-            |groups| {
+            |groups, _| {
                 let mut batches = groups.into_iter().map(|(fingerprint, points)| {
                     let wire = self
                         .wire_of(&fingerprint)

@@ -1,7 +1,7 @@
 //! The evaluator the optimisers talk to: the store first, the simulator for the misses.
 
 use super::{evaluation_key, EvaluationKey, Store, StoreError};
-use crate::coalesce::{Answers, Coalescer, Groups};
+use crate::coalesce::{Answers, Arrival, Coalescer, Groups};
 use crate::evaluator::{CacheStats, Evaluator, Fault};
 use crate::objective::{Evaluation, Objective};
 use std::collections::HashMap;
@@ -176,9 +176,11 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
 
     /// One round of many callers' missing points (one group per objective): claimed
     /// together, looked up again, simulated group by group side by side, written in one
-    /// batch made durable by one flush, then published. Keys another thread is simulating
-    /// are waited for; keys it abandons are tried again.
-    fn resolve_round(&self, groups: Groups<[u8; 32], Missing>) -> Answers {
+    /// batch made durable by one flush, then published. The round has arrived once its
+    /// simulations are answered: the next one sets out while this one's write is made
+    /// durable. Keys another thread is simulating are waited for; keys it abandons are
+    /// tried again.
+    fn resolve_round(&self, groups: Groups<[u8; 32], Missing>, arrival: &Arrival) -> Answers {
         let groups: Vec<RoundGroup> = groups
             .into_iter()
             .map(|(fingerprint, points)| RoundGroup::new(self.objective_of(&fingerprint), points))
@@ -248,6 +250,7 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
                     })
                     .collect();
                 let fresh = self.simulate_side_by_side(&groups, &batches);
+                arrival.arrived();
                 let mut entries: Vec<(EvaluationKey, Evaluation)> = Vec::new();
                 for ((g, _), result) in batches.iter().zip(fresh) {
                     let wanted = to_simulate[*g].len();
@@ -461,7 +464,7 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
                 objective.fingerprint(),
                 asked,
                 self.inner.has_room(),
-                |groups| self.resolve_round(groups),
+                |groups, arrival| self.resolve_round(groups, arrival),
             )?;
             for (i, evaluation) in missing.iter().zip(resolved) {
                 answers[*i] = Some(evaluation);

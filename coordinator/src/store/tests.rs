@@ -435,6 +435,120 @@ fn concurrent_runs_share_one_durable_write_per_round() {
     assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
 }
 
+/// Scores as [`Counting`], never has room for a second round, and tells when batches start.
+#[derive(Default)]
+struct NoRoom {
+    counting: Counting,
+    started: (std::sync::Mutex<usize>, std::sync::Condvar),
+}
+
+impl NoRoom {
+    /// Whether `n` batches have started within `timeout`.
+    fn started(&self, n: usize, timeout: Duration) -> bool {
+        let started = self.started.0.lock().unwrap();
+        let (started, _) = self
+            .started
+            .1
+            .wait_timeout_while(started, timeout, |s| *s < n)
+            .unwrap();
+        *started >= n
+    }
+}
+
+impl Evaluator for NoRoom {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        *self.started.0.lock().unwrap() += 1;
+        self.started.1.notify_all();
+        self.counting.evaluate(objective, points)
+    }
+
+    fn has_room(&self) -> bool {
+        false
+    }
+}
+
+/// A memory store whose first evaluation write lasts until a second batch has started (at
+/// most 10 s), noting whether one did.
+struct FirstWriteWaits<'a> {
+    inner: MemoryStore,
+    simulator: &'a NoRoom,
+    first: std::sync::atomic::AtomicBool,
+    saw_second: std::sync::atomic::AtomicBool,
+}
+
+impl Store for FirstWriteWaits<'_> {
+    fn get_evaluations(
+        &self,
+        keys: &[EvaluationKey],
+    ) -> Result<Vec<Option<Evaluation>>, StoreError> {
+        self.inner.get_evaluations(keys)
+    }
+    fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
+        if self.first.swap(false, Ordering::SeqCst) {
+            let second = self.simulator.started(2, Duration::from_secs(10));
+            self.saw_second.store(second, Ordering::SeqCst);
+        }
+        self.inner.put_evaluations(entries)
+    }
+    fn count_lookups(&self, hits: u64, misses: u64) {
+        self.inner.count_lookups(hits, misses)
+    }
+    fn put_campaign(&self, id: &CampaignId, record: &CampaignRecord) -> Result<(), StoreError> {
+        self.inner.put_campaign(id, record)
+    }
+    fn campaign(&self, id: &CampaignId) -> Result<Option<CampaignRecord>, StoreError> {
+        self.inner.campaign(id)
+    }
+    fn campaigns(&self) -> Result<Vec<(CampaignId, CampaignRecord)>, StoreError> {
+        self.inner.campaigns()
+    }
+    fn put_dataset(&self, hash: &DatasetHash, bytes: &[u8]) -> Result<(), StoreError> {
+        self.inner.put_dataset(hash, bytes)
+    }
+    fn dataset(&self, hash: &DatasetHash) -> Result<Option<Vec<u8>>, StoreError> {
+        self.inner.dataset(hash)
+    }
+    fn raw_entries(&self, collection: Collection) -> Result<Vec<RawEntry>, StoreError> {
+        self.inner.raw_entries(collection)
+    }
+    fn put_raw(&self, collection: Collection, entries: &[RawEntry]) -> Result<(), StoreError> {
+        self.inner.put_raw(collection, entries)
+    }
+    fn stats(&self) -> Result<StoreStats, StoreError> {
+        self.inner.stats()
+    }
+}
+
+#[test]
+fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
+    // No room for a second round: the next one sets out when the first's simulations are
+    // answered, not once its write is durable.
+    let simulator = NoRoom::default();
+    let store = FirstWriteWaits {
+        inner: MemoryStore::new(),
+        simulator: &simulator,
+        first: true.into(),
+        saw_second: false.into(),
+    };
+    let evaluator = StoredEvaluator::new(&simulator, &store);
+    let objective = objective(false);
+    std::thread::scope(|scope| {
+        let (evaluator, objective, simulator) = (&evaluator, &objective, &simulator);
+        scope.spawn(move || evaluator.evaluate(objective, &[vec![0.1]]).unwrap());
+        scope.spawn(move || {
+            assert!(simulator.started(1, Duration::from_secs(10)));
+            evaluator.evaluate(objective, &[vec![0.2]]).unwrap()
+        });
+    });
+    assert!(store.saw_second.load(Ordering::SeqCst));
+    assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 2);
+    assert_eq!(store.stats().unwrap().evaluations, 2);
+}
+
 /// Has no worker for one objective (by fingerprint); scores the others as [`Counting`].
 struct UnavailableFor {
     fingerprint: [u8; 32],
