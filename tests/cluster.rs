@@ -642,6 +642,37 @@ fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
 }
 
 #[test]
+fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
+    use calib_coordinator::evaluator::Evaluator;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = campaign(dir.path(), 10);
+    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let nappers = calib_sandbox::NappingCluster::start(1, Duration::from_millis(300), 2).unwrap();
+    let remote = nappers.try_connect().unwrap();
+    assert!(remote.wait_until_up(1, Duration::from_secs(10)));
+    let evaluator = remote.evaluator();
+    assert!(evaluator.has_room(), "an idle worker is room");
+    let batch: Vec<Vec<f64>> = (0..4)
+        .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
+        .collect();
+    std::thread::scope(|scope| {
+        let running = scope.spawn(|| evaluator.evaluate(&objective, &batch).unwrap());
+        let busy = || remote.pool().workers()[0].busy;
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while busy() < 2 && std::time::Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(busy() >= 2, "the batch occupies both slots");
+        // The worker's queue could take more, but a queue is not an idle slot: a second
+        // round would only wait there, and it grows larger by waiting here instead.
+        assert!(!evaluator.has_room());
+        assert_eq!(running.join().unwrap().len(), 4);
+    });
+    assert!(evaluator.has_room(), "answered, the slots are idle again");
+}
+
+#[test]
 fn the_measurement_travels_to_each_worker_once() {
     use calib_coordinator::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();

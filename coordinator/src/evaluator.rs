@@ -74,10 +74,10 @@ pub trait Evaluator: Send + Sync {
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault>;
 
-    /// Whether a batch sent now would find capacity idle (a free worker slot, room in a
-    /// worker's queue). Callers that gather many runs' points into shared batches send a
-    /// second batch while one travels only when it has somewhere to go; otherwise its points
-    /// wait to join the next, larger batch. A hint: it never changes an answer.
+    /// Whether a batch sent now would find capacity idle (a free worker slot). Callers that
+    /// gather many runs' points into shared batches send a second batch while one travels
+    /// only when it has somewhere to go; otherwise its points wait to join the next, larger
+    /// batch. A hint: it never changes an answer.
     fn has_room(&self) -> bool {
         true
     }

@@ -430,15 +430,13 @@ impl WorkerPool {
         self.changed.notified()
     }
 
-    /// Whether a chunk acquired now would find room: a worker up with an idle slot, or one
-    /// that may take another chunk into its queue (see [`WorkerPool::acquire`]).
+    /// Whether a chunk acquired now would find an idle slot on a worker that is up. Room in
+    /// a worker's queue does not count: a batch sent there would only wait for the slots,
+    /// while a batch held back meanwhile takes more points in one request.
     pub fn has_room(&self) -> bool {
         let state = self.state.lock().expect("pool lock");
         let depth = self.config.depth.max(1);
-        state
-            .workers
-            .iter()
-            .any(|w| w.free(false, depth) > 0 || w.free(true, depth) > 0)
+        state.workers.iter().any(|w| w.free(false, depth) > 0)
     }
 
     /// False when every known worker is set aside for good (another protocol, a refused
