@@ -177,6 +177,28 @@
 //! `(ΔT^33 (dT/dp)^−25)^0.03` or `(x^195 (1−x)^56)^0.004` (the multiplication chains cost
 //! what the saved logarithm did); `ln x − ln(1−x)` in place of `ln(x/(1−x))` (no change).
 //!
+//! Also measured and not kept (`examples/hx_timing.rs`, 1 s grid, medians of six runs,
+//! old and new binaries in turn, on a machine shared with other builds):
+//! - `exp` and `ln` inlined, table-driven as glibc's (64-entry `2^(j/64)`, 129-entry
+//!   `ln c`, Taylor polynomials; within 2 ulp of glibc, 1 ulp almost everywhere):
+//!   `hx_highfi` 22.9 → 24.4 ms, `hx_lowfi` 1.62 → 1.75 ms. Compiled for the baseline
+//!   x86-64 target they have no fused multiply-add, so their reductions and polynomials
+//!   are longer chains than those of glibc's FMA variants, which it picks at run time.
+//! - `0.035 ln σ` and `−0.75 ln(dT_sat/dp)` interpolated with the saturation state instead
+//!   of two logarithms per two-phase segment: 22.4 → 22.6 ms, the right-hand sides
+//!   2 864 → 2 906 as the numbers moved (about 2 % less per right-hand side). Those
+//!   logarithms lie off the chain from one segment's pressure to the next, and the
+//!   march costs that chain's latency (about seven dependent logarithms and exponentials
+//!   per two-phase segment, after the saturation lookup), not the number of calls.
+//!
+//! Of the solver's share: a trace of the steps shows the error of the accuracy-limited
+//! two-stage steps coming from a single state, the wall of the segment where the dry-out
+//! front sits (segments 36–39 at the defaults, 95–99 % of the error norm); each crossing
+//! of a segment boundary costs one or two rejected steps and a step cut to about 0.02 s
+//! by the predictive controller. The power iteration takes 229 of the 2 864 right-hand
+//! sides (50 estimates, 11 of them after two rejections in a row, about 40 right-hand
+//! sides).
+//!
 //! # Boundary conditions
 //!
 //! Ramps of refrigerant mass flow, inlet enthalpy, outlet pressure, air inlet temperature
