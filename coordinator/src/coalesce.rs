@@ -32,7 +32,7 @@ pub type Groups<K, P = Vec<f64>> = Vec<(K, Vec<P>)>;
 pub type Answers = Vec<Result<Vec<Evaluation>, Fault>>;
 
 /// Rounds under way at once at most: a second fills idle workers while the first's answers
-/// travel back.
+/// travel back. A round that has arrived and handed on the baton settles beside them.
 pub const LEADERS: usize = 2;
 
 /// What one caller waits on: its answer, and perhaps first the baton (it leads a round).
@@ -92,7 +92,7 @@ struct Ask<K, P> {
 
 struct Queue<K, P> {
     waiting: Vec<Ask<K, P>>,
-    /// Rounds under way or handed to a waiting caller.
+    /// Rounds travelling (their leaders' places) or handed to a waiting caller.
     leaders: usize,
 }
 
@@ -131,8 +131,8 @@ impl Drop for Unanswered {
 
 /// Handed to a round's `send`: [`Arrival::arrived`] says that the round's answers are in
 /// and only their bookkeeping is left (the store writes them durably before they are
-/// published), so that the next round may set out while this one settles. A round that
-/// never says so has arrived when `send` returns.
+/// published), so that a caller waiting for the next round may set out with it while this
+/// one settles. A round that never says so has arrived when `send` returns.
 pub struct Arrival<'a>(&'a dyn Fn());
 
 impl Arrival<'_> {
@@ -141,14 +141,30 @@ impl Arrival<'_> {
     }
 }
 
-/// Ends a leader's round once (on arrival, at the latest when the round is over, also when
-/// it panics): the baton goes to a caller still waiting, or the leader's place is given up.
+/// Ends a leader's round once (on arrival if a caller waits, else when the round is over,
+/// also when it panics): the baton goes to a caller still waiting, or the leader's place is
+/// given up.
 struct EndOfRound<'a, K, P> {
     coalescer: &'a Coalescer<K, P>,
     ended: Cell<bool>,
 }
 
 impl<K, P> EndOfRound<'_, K, P> {
+    /// On arrival: the baton goes to a caller waiting now. With none waiting the leader
+    /// keeps its place while it settles, so that the callers it answers, asking again one
+    /// by one, gather into the next round instead of each leading a small one.
+    fn arrive(&self) {
+        if self.ended.get() {
+            return;
+        }
+        let mut queue = self.coalescer.queue.lock().expect("coalescer lock");
+        if let Some(next) = queue.waiting.iter_mut().find(|ask| !ask.leads) {
+            next.leads = true;
+            next.reply.hand_baton();
+            self.ended.set(true);
+        }
+    }
+
     fn end(&self) {
         if self.ended.replace(true) {
             return;
@@ -219,13 +235,20 @@ impl<K: Clone + PartialEq, P> Coalescer<K, P> {
                 coalescer: self,
                 ended: Cell::new(false),
             };
-            self.send_round(round, &send, &Arrival(&|| end.end()));
+            self.send_round(round, &send, &Arrival(&|| end.arrive()));
         }
         loop {
             if let Some(answer) = reply.wait() {
                 return answer;
             }
         }
+    }
+
+    /// Callers waiting for a round (not yet handed the baton).
+    #[cfg(test)]
+    pub(crate) fn waiting(&self) -> usize {
+        let queue = self.queue.lock().expect("coalescer lock");
+        queue.waiting.iter().filter(|ask| !ask.leads).count()
     }
 
     /// Dispatch one round: its asks grouped by key, each group as one batch; then every
@@ -425,7 +448,10 @@ mod tests {
                     *first_travels.0.lock().unwrap() = true;
                     first_travels.1.notify_all();
                     // Let the second caller queue behind this round.
-                    std::thread::sleep(Duration::from_millis(50));
+                    let queued = std::time::Instant::now() + Duration::from_secs(10);
+                    while coalescer.waiting() == 0 && std::time::Instant::now() < queued {
+                        std::thread::sleep(Duration::from_millis(1));
+                    }
                     arrival.arrived();
                     let sent = second_sent.0.lock().unwrap();
                     let (sent, _) = second_sent

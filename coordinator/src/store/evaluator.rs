@@ -104,6 +104,12 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
         self.error.lock().expect("error lock").take()
     }
 
+    /// Callers waiting for a round.
+    #[cfg(test)]
+    pub(crate) fn rounds_waiting(&self) -> usize {
+        self.rounds.waiting()
+    }
+
     fn note(&self, error: StoreError) {
         tracing::error!(error = %error, "evaluation store failed");
         self.error.lock().expect("error lock").get_or_insert(error);
@@ -175,11 +181,11 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
     }
 
     /// One round of many callers' missing points (one group per objective): claimed
-    /// together, looked up again, simulated group by group side by side, written in one
-    /// batch made durable by one flush, then published. The round has arrived once its
-    /// simulations are answered: the next one sets out while this one's write is made
-    /// durable. Keys another thread is simulating are waited for; keys it abandons are
-    /// tried again.
+    /// together, looked up again, simulated group by group side by side, written together
+    /// and made durable by one flush, then published. The round has arrived once its
+    /// simulations are answered: a round waiting for it sets out while this one's write is
+    /// made durable. Keys another thread is simulating are waited for; keys it abandons are
+    /// tried again (then beside the rounds under way: only after a simulation panicked).
     fn resolve_round(&self, groups: Groups<[u8; 32], Missing>, arrival: &Arrival) -> Answers {
         let groups: Vec<RoundGroup> = groups
             .into_iter()

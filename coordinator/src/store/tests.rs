@@ -5,7 +5,7 @@ use crate::campaign::Campaign;
 use crate::evaluator::{Evaluator, Fault};
 use crate::measurement::Measurement;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
 
 fn key(i: u64) -> EvaluationKey {
@@ -435,11 +435,13 @@ fn concurrent_runs_share_one_durable_write_per_round() {
     assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
 }
 
-/// Scores as [`Counting`], never has room for a second round, and tells when batches start.
+/// Scores as [`Counting`], never has room for a second round, tells when batches start,
+/// and holds its first batch until let go (at most 10 s).
 #[derive(Default)]
 struct NoRoom {
     counting: Counting,
     started: (std::sync::Mutex<usize>, std::sync::Condvar),
+    let_go: (std::sync::Mutex<bool>, std::sync::Condvar),
 }
 
 impl NoRoom {
@@ -461,8 +463,22 @@ impl Evaluator for NoRoom {
         objective: &Objective,
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
-        *self.started.0.lock().unwrap() += 1;
+        let first = {
+            let mut started = self.started.0.lock().unwrap();
+            *started += 1;
+            *started == 1
+        };
         self.started.1.notify_all();
+        if first {
+            let held = self.let_go.0.lock().unwrap();
+            let timeout = Duration::from_secs(10);
+            drop(
+                self.let_go
+                    .1
+                    .wait_timeout_while(held, timeout, |go| !*go)
+                    .unwrap(),
+            );
+        }
         self.counting.evaluate(objective, points)
     }
 
@@ -471,16 +487,13 @@ impl Evaluator for NoRoom {
     }
 }
 
-/// A memory store whose first evaluation write lasts until a second batch has started (at
-/// most 10 s), noting whether one did.
-struct FirstWriteWaits<'a> {
+/// A memory store that runs `before_write` ahead of each evaluation write.
+struct HookedStore<F> {
     inner: MemoryStore,
-    simulator: &'a NoRoom,
-    first: std::sync::atomic::AtomicBool,
-    saw_second: std::sync::atomic::AtomicBool,
+    before_write: F,
 }
 
-impl Store for FirstWriteWaits<'_> {
+impl<F: Fn() + Send + Sync> Store for HookedStore<F> {
     fn get_evaluations(
         &self,
         keys: &[EvaluationKey],
@@ -488,10 +501,7 @@ impl Store for FirstWriteWaits<'_> {
         self.inner.get_evaluations(keys)
     }
     fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
-        if self.first.swap(false, Ordering::SeqCst) {
-            let second = self.simulator.started(2, Duration::from_secs(10));
-            self.saw_second.store(second, Ordering::SeqCst);
-        }
+        (self.before_write)();
         self.inner.put_evaluations(entries)
     }
     fn count_lookups(&self, hits: u64, misses: u64) {
@@ -528,11 +538,16 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
     // No room for a second round: the next one sets out when the first's simulations are
     // answered, not once its write is durable.
     let simulator = NoRoom::default();
-    let store = FirstWriteWaits {
+    let (first, saw_second) = (AtomicBool::new(true), AtomicBool::new(false));
+    // The first write lasts until a second batch has started (at most 10 s).
+    let store = HookedStore {
         inner: MemoryStore::new(),
-        simulator: &simulator,
-        first: true.into(),
-        saw_second: false.into(),
+        before_write: || {
+            if first.swap(false, Ordering::SeqCst) {
+                let second = simulator.started(2, Duration::from_secs(10));
+                saw_second.store(second, Ordering::SeqCst);
+            }
+        },
     };
     let evaluator = StoredEvaluator::new(&simulator, &store);
     let objective = objective(false);
@@ -543,10 +558,50 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
             assert!(simulator.started(1, Duration::from_secs(10)));
             evaluator.evaluate(objective, &[vec![0.2]]).unwrap()
         });
+        // The first batch answers once the second caller waits for the next round.
+        scope.spawn(move || {
+            let queued = std::time::Instant::now() + Duration::from_secs(10);
+            while evaluator.rounds_waiting() == 0 && std::time::Instant::now() < queued {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            *simulator.let_go.0.lock().unwrap() = true;
+            simulator.let_go.1.notify_all();
+        });
     });
-    assert!(store.saw_second.load(Ordering::SeqCst));
+    assert!(saw_second.load(Ordering::SeqCst));
     assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 2);
     assert_eq!(store.stats().unwrap().evaluations, 2);
+}
+
+#[test]
+fn rounds_still_gather_when_durable_writes_are_slow() {
+    // A slow disk: each write takes longer than a batch's simulations. The callers a
+    // round answers ask again one by one; they must gather into the next round, not each
+    // lead one of their own while the rounds before settle.
+    let store = HookedStore {
+        inner: MemoryStore::new(),
+        before_write: || std::thread::sleep(Duration::from_millis(30)),
+    };
+    let inner = Counting::default();
+    let evaluator = StoredEvaluator::new(&inner, &store);
+    let objective = objective(false);
+    let (runs, calls) = (8, 5);
+    std::thread::scope(|scope| {
+        for r in 0..runs {
+            let (evaluator, objective) = (&evaluator, &objective);
+            scope.spawn(move || {
+                for c in 0..calls {
+                    let x = (r * 100 + c) as f64;
+                    let answers = evaluator.evaluate(objective, &[vec![x]]).unwrap();
+                    assert_eq!(answers[0].objective, x);
+                }
+            });
+        }
+    });
+    let asks = runs * calls;
+    assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
+    let batches = inner.batches.load(Ordering::SeqCst);
+    assert!(batches < asks / 2, "{batches} batches for {asks} asks");
 }
 
 /// Has no worker for one objective (by fingerprint); scores the others as [`Counting`].
