@@ -96,6 +96,21 @@ struct Queue<K, P> {
     leaders: usize,
 }
 
+impl<K, P> Queue<K, P> {
+    /// Hand the baton to the first caller waiting that has not been handed it; false when
+    /// there is none.
+    fn pass_baton(&mut self) -> bool {
+        match self.waiting.iter_mut().find(|ask| !ask.leads) {
+            Some(next) => {
+                next.leads = true;
+                next.reply.hand_baton();
+                true
+            }
+            None => false,
+        }
+    }
+}
+
 /// Gathers the points of concurrent callers into shared dispatches. `K` names what points
 /// may share a request (the objective); points of different keys go in batches of their
 /// own, sent side by side.
@@ -158,9 +173,7 @@ impl<K, P> EndOfRound<'_, K, P> {
             return;
         }
         let mut queue = self.coalescer.queue.lock().expect("coalescer lock");
-        if let Some(next) = queue.waiting.iter_mut().find(|ask| !ask.leads) {
-            next.leads = true;
-            next.reply.hand_baton();
+        if queue.pass_baton() {
             self.ended.set(true);
         }
     }
@@ -173,12 +186,8 @@ impl<K, P> EndOfRound<'_, K, P> {
             Ok(queue) => queue,
             Err(poisoned) => poisoned.into_inner(),
         };
-        match queue.waiting.iter_mut().find(|ask| !ask.leads) {
-            Some(next) => {
-                next.leads = true;
-                next.reply.hand_baton();
-            }
-            None => queue.leaders -= 1,
+        if !queue.pass_baton() {
+            queue.leaders -= 1;
         }
     }
 }
