@@ -399,6 +399,30 @@ fn a_fault_stores_nothing_and_the_points_are_simulated_once_workers_are_back() {
     assert_eq!(store.stats().unwrap().evaluations, 3);
 }
 
+/// Eight runs on threads of their own, each asking five times for `per_ask` new points
+/// (`x`, `x + 0.5`, …) and checking the answers ([`Counting`] scores a point by its sum);
+/// returns the number of asks.
+fn ask_from_runs(evaluator: &impl Evaluator, objective: &Objective, per_ask: usize) -> usize {
+    let (runs, calls) = (8, 5);
+    std::thread::scope(|scope| {
+        for r in 0..runs {
+            scope.spawn(move || {
+                for c in 0..calls {
+                    let x = (r * 100 + c) as f64;
+                    let points: Vec<Vec<f64>> =
+                        (0..per_ask).map(|k| vec![x + 0.5 * k as f64]).collect();
+                    let answers = evaluator.evaluate(objective, &points).unwrap();
+                    assert_eq!(answers.len(), per_ask);
+                    for (point, answer) in points.iter().zip(&answers) {
+                        assert_eq!(answer.objective, point[0]);
+                    }
+                }
+            });
+        }
+    });
+    runs * calls
+}
+
 #[test]
 fn concurrent_runs_share_one_durable_write_per_round() {
     let dir = tempfile::tempdir().unwrap();
@@ -406,24 +430,8 @@ fn concurrent_runs_share_one_durable_write_per_round() {
     let inner = Counting::default();
     let evaluator = StoredEvaluator::new(&inner, &store);
     let objective = objective(false);
-    let (runs, calls) = (8, 5);
     let flushes_before = store.flushes();
-    std::thread::scope(|scope| {
-        for r in 0..runs {
-            let (evaluator, objective) = (&evaluator, &objective);
-            scope.spawn(move || {
-                for c in 0..calls {
-                    let x = (r * 100 + c) as f64;
-                    let answers = evaluator
-                        .evaluate(objective, &[vec![x], vec![x + 0.5]])
-                        .unwrap();
-                    assert_eq!(answers[0].objective, x);
-                    assert_eq!(answers[1].objective, x + 0.5);
-                }
-            });
-        }
-    });
-    let asks = runs * calls;
+    let asks = ask_from_runs(&evaluator, &objective, 2);
     assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
     let batches = inner.batches.load(Ordering::SeqCst);
     let flushes = store.flushes() - flushes_before;
@@ -585,20 +593,7 @@ fn rounds_still_gather_when_durable_writes_are_slow() {
     let inner = Counting::default();
     let evaluator = StoredEvaluator::new(&inner, &store);
     let objective = objective(false);
-    let (runs, calls) = (8, 5);
-    std::thread::scope(|scope| {
-        for r in 0..runs {
-            let (evaluator, objective) = (&evaluator, &objective);
-            scope.spawn(move || {
-                for c in 0..calls {
-                    let x = (r * 100 + c) as f64;
-                    let answers = evaluator.evaluate(objective, &[vec![x]]).unwrap();
-                    assert_eq!(answers[0].objective, x);
-                }
-            });
-        }
-    });
-    let asks = runs * calls;
+    let asks = ask_from_runs(&evaluator, &objective, 1);
     assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
     let batches = inner.batches.load(Ordering::SeqCst);
     assert!(batches < asks / 2, "{batches} batches for {asks} asks");
