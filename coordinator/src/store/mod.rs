@@ -21,6 +21,7 @@
 pub mod encoding;
 pub mod evaluator;
 pub mod export;
+mod key_filter;
 mod memory;
 mod sled;
 

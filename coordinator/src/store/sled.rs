@@ -12,6 +12,7 @@
 //! `flush_async` is not used (it can deadlock in 0.34).
 
 use super::encoding::{self, LAYOUT_VERSION};
+use super::key_filter::KeyFilter;
 use super::{
     CampaignId, CampaignRecord, Collection, DatasetHash, EvaluationKey, RawEntry, Store,
     StoreError, StoreStats,
@@ -33,11 +34,15 @@ pub struct SledStore {
     campaigns: sled::Tree,
     datasets: sled::Tree,
     meta: sled::Tree,
+    /// Which keys `evaluations` may hold: new points skip the lookup in sled.
+    evaluation_keys: KeyFilter,
     commits: GroupCommit,
     /// Lookup counts not yet added to `meta`.
     pending_hits: AtomicU64,
     pending_misses: AtomicU64,
     flushes: AtomicU64,
+    /// Evaluation lookups that reached sled.
+    sled_lookups: AtomicU64,
 }
 
 #[derive(Default)]
@@ -75,8 +80,11 @@ impl SledStore {
             e => open_error(e.to_string()),
         })?;
         let tree = |name: &str| db.open_tree(name).map_err(|e| open_error(e.to_string()));
+        let evaluations = tree(Collection::Evaluations.name())?;
+        let evaluation_keys = KeyFilter::build(evaluations.clone());
         let store = Self {
-            evaluations: tree(Collection::Evaluations.name())?,
+            evaluations,
+            evaluation_keys,
             campaigns: tree(Collection::Campaigns.name())?,
             datasets: tree(Collection::Datasets.name())?,
             meta: tree("meta")?,
@@ -86,6 +94,7 @@ impl SledStore {
             pending_hits: AtomicU64::new(0),
             pending_misses: AtomicU64::new(0),
             flushes: AtomicU64::new(0),
+            sled_lookups: AtomicU64::new(0),
         };
         match store.meta.get(LAYOUT_KEY)? {
             None => {
@@ -113,6 +122,18 @@ impl SledStore {
     /// Flushes (fsyncs) made so far by this process.
     pub fn flushes(&self) -> u64 {
         self.flushes.load(Ordering::Relaxed)
+    }
+
+    /// Wait until the filter of evaluation keys has read the keys on disk.
+    #[cfg(test)]
+    pub(crate) fn wait_for_key_filter(&self) {
+        self.evaluation_keys.wait();
+        assert!(self.evaluation_keys.is_ready(), "the key filter was built");
+    }
+
+    /// Evaluation lookups made in sled so far (the others were known misses).
+    pub fn sled_lookups(&self) -> u64 {
+        self.sled_lookups.load(Ordering::Relaxed)
     }
 
     fn tree(&self, collection: Collection) -> &sled::Tree {
@@ -192,8 +213,14 @@ impl Store for SledStore {
         &self,
         keys: &[EvaluationKey],
     ) -> Result<Vec<Option<Evaluation>>, StoreError> {
+        let maybe = self.evaluation_keys.may_hold(keys.iter().map(|k| &k[..]));
         keys.iter()
-            .map(|k| {
+            .zip(maybe)
+            .map(|(k, maybe)| {
+                if !maybe {
+                    return Ok(None);
+                }
+                self.sled_lookups.fetch_add(1, Ordering::Relaxed);
                 self.evaluations
                     .get(k)?
                     .map(|v| encoding::decode_evaluation(&v))
@@ -208,6 +235,8 @@ impl Store for SledStore {
     /// before its manifest and seals the manifest's buffer after), tripling the syncs of a
     /// round.
     fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
+        self.evaluation_keys
+            .note(entries.iter().map(|(k, _)| &k[..]));
         for (k, e) in entries {
             self.evaluations
                 .insert(&k[..], encoding::encode_evaluation(e))?;
@@ -267,6 +296,10 @@ impl Store for SledStore {
     }
 
     fn put_raw(&self, collection: Collection, entries: &[RawEntry]) -> Result<(), StoreError> {
+        if collection == Collection::Evaluations {
+            self.evaluation_keys
+                .note(entries.iter().map(|(k, _)| &k[..]));
+        }
         let mut batch = sled::Batch::default();
         for (k, v) in entries {
             batch.insert(&k[..], &v[..]);

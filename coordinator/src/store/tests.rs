@@ -161,6 +161,56 @@ fn sled_store_survives_reopening() {
     assert_eq!((stats.hits, stats.misses), (5, 1));
 }
 
+/// Once its filter of keys has read the store, a key the store never held is answered
+/// without a lookup in sled, while every key written (before the filter was ready and
+/// after), imported or found on reopening is still found.
+#[test]
+fn lookups_of_new_points_skip_sled_and_stored_ones_are_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let written: Vec<(EvaluationKey, Evaluation)> =
+        (0..2000).map(|i| (key(i), evaluation(i))).collect();
+    let fresh: Vec<EvaluationKey> = (10_000..12_000).map(key).collect();
+    let check = |store: &SledStore, keys: &[EvaluationKey]| {
+        store.wait_for_key_filter();
+        let before = store.sled_lookups();
+        let got = store.get_evaluations(&fresh).unwrap();
+        assert!(got.iter().all(Option::is_none));
+        // The filter is sized for a false positive in a hundred.
+        let reached = store.sled_lookups() - before;
+        assert!(
+            reached < 100,
+            "{reached} of 2000 new keys looked up in sled"
+        );
+        let got = store.get_evaluations(keys).unwrap();
+        for ((k, e), g) in written.iter().zip(&got) {
+            assert!(keys.contains(k));
+            assert!(same(g.as_ref().expect("a stored key is found"), e));
+        }
+    };
+    let keys: Vec<EvaluationKey> = written.iter().map(|(k, _)| *k).collect();
+    {
+        let store = SledStore::open(dir.path()).unwrap();
+        assert!(store
+            .get_evaluations(&keys)
+            .unwrap()
+            .iter()
+            .all(Option::is_none));
+        // Written while the filter may still be reading the (empty) store, and after.
+        store.put_evaluations(&written[..500]).unwrap();
+        store.wait_for_key_filter();
+        store.put_evaluations(&written[500..1000]).unwrap();
+        let raw: Vec<RawEntry> = written[1000..]
+            .iter()
+            .map(|(k, e)| (k.to_vec(), encoding::encode_evaluation(e)))
+            .collect();
+        store.put_raw(Collection::Evaluations, &raw).unwrap();
+        check(&store, &keys);
+    }
+    // Reopened, the filter is rebuilt from what is on disk.
+    let store = SledStore::open(dir.path()).unwrap();
+    check(&store, &keys);
+}
+
 #[test]
 fn a_sled_store_opens_once_at_a_time() {
     let dir = tempfile::tempdir().unwrap();
