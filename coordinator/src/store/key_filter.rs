@@ -17,23 +17,23 @@ const ERROR_RATE: f64 = 0.01;
 const INITIAL_CAPACITY: usize = 1 << 16;
 
 pub struct KeyFilter {
-    keys: Arc<RwLock<Keys>>,
+    keys: Arc<RwLock<State>>,
     cancel: Arc<AtomicBool>,
     builder: Mutex<Option<JoinHandle<()>>>,
 }
 
-#[derive(Default)]
-struct Keys {
-    /// `None` while the keys on disk are being read.
-    filter: Option<GrowableBloom>,
-    /// Keys written meanwhile.
-    pending: Vec<Vec<u8>>,
+enum State {
+    /// The keys on disk are being read; the keys written meanwhile.
+    Reading(Vec<Vec<u8>>),
+    Ready(GrowableBloom),
+    /// Reading them failed: every lookup goes to sled.
+    Unavailable,
 }
 
 impl KeyFilter {
     /// Start reading the keys of `tree`.
     pub fn build(tree: sled::Tree) -> Self {
-        let keys = Arc::new(RwLock::new(Keys::default()));
+        let keys = Arc::new(RwLock::new(State::Reading(Vec::new())));
         let cancel = Arc::new(AtomicBool::new(false));
         let builder = {
             let (keys, cancel) = (keys.clone(), cancel.clone());
@@ -41,9 +41,12 @@ impl KeyFilter {
                 .name("calib-store-keys".into())
                 .spawn(move || {
                     let mut filter = GrowableBloom::new(ERROR_RATE, INITIAL_CAPACITY);
+                    let unavailable = || {
+                        *keys.write().expect("key filter lock") = State::Unavailable;
+                    };
                     for key in tree.iter().keys() {
                         if cancel.load(Ordering::Relaxed) {
-                            return;
+                            return unavailable();
                         }
                         match key {
                             Ok(key) => {
@@ -52,21 +55,24 @@ impl KeyFilter {
                             Err(e) => {
                                 // Lookups keep going to sled: slower, never wrong.
                                 tracing::warn!(error = %e, "cannot read the store's keys");
-                                return;
+                                return unavailable();
                             }
                         }
                     }
-                    let mut keys = keys.write().expect("key filter lock");
-                    for key in std::mem::take(&mut keys.pending) {
-                        filter.insert(&key[..]);
+                    let mut state = keys.write().expect("key filter lock");
+                    if let State::Reading(pending) = &*state {
+                        for key in pending {
+                            filter.insert(&key[..]);
+                        }
                     }
-                    keys.filter = Some(filter);
+                    *state = State::Ready(filter);
                 })
         };
         let builder = match builder {
             Ok(handle) => Some(handle),
             Err(e) => {
                 tracing::warn!(error = %e, "cannot start the thread reading the store's keys");
+                *keys.write().expect("key filter lock") = State::Unavailable;
                 None
             }
         };
@@ -79,29 +85,27 @@ impl KeyFilter {
 
     /// For each key, whether the store may hold it (always, until the filter is ready).
     pub fn may_hold<'k>(&self, keys: impl Iterator<Item = &'k [u8]>) -> Vec<bool> {
-        let state = self.keys.read().expect("key filter lock");
-        match &state.filter {
-            Some(filter) => keys.map(|k| filter.contains(k)).collect(),
-            None => keys.map(|_| true).collect(),
+        match &*self.keys.read().expect("key filter lock") {
+            State::Ready(filter) => keys.map(|k| filter.contains(k)).collect(),
+            State::Reading(_) | State::Unavailable => keys.map(|_| true).collect(),
         }
     }
 
     /// Note keys about to be written.
     pub fn note<'k>(&self, keys: impl Iterator<Item = &'k [u8]>) {
-        let mut state = self.keys.write().expect("key filter lock");
-        let Keys { filter, pending } = &mut *state;
-        match filter {
-            Some(filter) => keys.for_each(|k| {
+        match &mut *self.keys.write().expect("key filter lock") {
+            State::Ready(filter) => keys.for_each(|k| {
                 filter.insert(k);
             }),
-            None => pending.extend(keys.map(<[u8]>::to_vec)),
+            State::Reading(pending) => pending.extend(keys.map(<[u8]>::to_vec)),
+            State::Unavailable => {}
         }
     }
 
     /// Whether the keys on disk have all been read.
     #[cfg(test)]
     pub fn is_ready(&self) -> bool {
-        self.keys.read().expect("key filter lock").filter.is_some()
+        matches!(*self.keys.read().expect("key filter lock"), State::Ready(_))
     }
 
     /// Wait until the keys on disk have been read (or reading them stopped).
