@@ -182,8 +182,8 @@ fn lookups_of_new_points_skip_sled_and_stored_ones_are_found() {
             "{reached} of 2000 new keys looked up in sled"
         );
         let got = store.get_evaluations(keys).unwrap();
-        for ((k, e), g) in written.iter().zip(&got) {
-            assert!(keys.contains(k));
+        assert_eq!(got.len(), written.len());
+        for ((_, e), g) in written.iter().zip(&got) {
             assert!(same(g.as_ref().expect("a stored key is found"), e));
         }
     };
@@ -195,7 +195,8 @@ fn lookups_of_new_points_skip_sled_and_stored_ones_are_found() {
             .unwrap()
             .iter()
             .all(Option::is_none));
-        // Written while the filter may still be reading the (empty) store, and after.
+        // Written right after opening and once the filter is ready (written while it reads
+        // a large store: `key_filter.rs`'s own test).
         store.put_evaluations(&written[..500]).unwrap();
         store.wait_for_key_filter();
         store.put_evaluations(&written[500..1000]).unwrap();
