@@ -34,6 +34,11 @@ enum State {
 impl KeyFilter {
     /// Start reading the keys of `tree`.
     pub fn build(tree: sled::Tree) -> Self {
+        Self::build_after(tree, None)
+    }
+
+    /// [`KeyFilter::build`], the reading held back until `gate` receives (or closes).
+    fn build_after(tree: sled::Tree, gate: Option<std::sync::mpsc::Receiver<()>>) -> Self {
         let keys = Arc::new(RwLock::new(State::Reading(Vec::new())));
         let cancel = Arc::new(AtomicBool::new(false));
         let builder = {
@@ -45,6 +50,9 @@ impl KeyFilter {
                     // when this thread unwinds: lookups keep going to sled, slower, never
                     // wrong.
                     let mut guard = Unavailable(Some(&keys));
+                    if let Some(gate) = gate {
+                        let _ = gate.recv();
+                    }
                     let mut filter = GrowableBloom::new(ERROR_RATE, INITIAL_CAPACITY);
                     for key in tree.iter().keys() {
                         if cancel.load(Ordering::Relaxed) {
@@ -161,19 +169,20 @@ mod tests {
             k[4] = 0xa5;
             k
         };
-        for i in 0..50_000 {
+        for i in 0..5_000 {
             tree.insert(key(i), &[1u8][..]).unwrap();
         }
-        let filter = KeyFilter::build(tree.clone());
-        // Still reading 50,000 keys (≈ 0.2 s in a test build): the keys noted now go to
-        // the pending list.
+        let (start, gate) = std::sync::mpsc::channel();
+        let filter = KeyFilter::build_after(tree.clone(), Some(gate));
+        // Not yet reading: the keys noted now go to the pending list.
         assert!(!filter.is_ready());
         assert_eq!(filter.may_hold(std::iter::once(&key(60_000)[..])), [true]);
         let late: Vec<[u8; 32]> = (60_000..60_100).map(key).collect();
         filter.note(late.iter().map(|k| &k[..]));
+        start.send(()).unwrap();
         filter.wait();
         assert!(filter.is_ready());
-        let on_disk: Vec<[u8; 32]> = (0..50_000).map(key).collect();
+        let on_disk: Vec<[u8; 32]> = (0..5_000).map(key).collect();
         assert!(filter
             .may_hold(on_disk.iter().map(|k| &k[..]))
             .iter()
