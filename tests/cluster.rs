@@ -611,15 +611,32 @@ fn a_fast_workers_chunks_grow_past_eight_points_per_slot() {
     );
 }
 
-#[test]
-fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
-    use calib_coordinator::evaluator::Evaluator;
+/// `workers` napping workers of `slots` slots each, sleeping `nap` per point, a coordinator's
+/// pool connected to them (not yet waited for), and the objective of a small campaign (its
+/// files live in the returned folder).
+fn napping_cluster(
+    workers: usize,
+    nap: Duration,
+    slots: u32,
+) -> (
+    tempfile::TempDir,
+    calib_coordinator::objective::Objective,
+    calib_sandbox::NappingCluster,
+    RemoteWorkers,
+) {
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
     let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
     let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
-    let nappers = calib_sandbox::NappingCluster::start(2, Duration::from_millis(20), 2).unwrap();
+    let nappers = calib_sandbox::NappingCluster::start(workers, nap, slots).unwrap();
     let remote = nappers.try_connect().unwrap();
+    (dir, objective, nappers, remote)
+}
+
+#[test]
+fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
+    use calib_coordinator::evaluator::Evaluator;
+    let (_dir, objective, nappers, remote) = napping_cluster(2, Duration::from_millis(20), 2);
     assert!(remote.wait_until_up(2, Duration::from_secs(10)));
     let batch = |k: u32| -> Vec<Vec<f64>> {
         (0..8)
@@ -644,12 +661,7 @@ fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
 #[test]
 fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
     use calib_coordinator::evaluator::Evaluator;
-    let dir = tempfile::tempdir().unwrap();
-    let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
-    let nappers = calib_sandbox::NappingCluster::start(1, Duration::from_millis(300), 2).unwrap();
-    let remote = nappers.try_connect().unwrap();
+    let (_dir, objective, _nappers, remote) = napping_cluster(1, Duration::from_millis(300), 2);
     assert!(remote.wait_until_up(1, Duration::from_secs(10)));
     let evaluator = remote.evaluator();
     assert!(evaluator.has_room(), "an idle worker is room");
@@ -675,12 +687,7 @@ fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
 #[test]
 fn the_measurement_travels_to_each_worker_once() {
     use calib_coordinator::evaluator::Evaluator;
-    let dir = tempfile::tempdir().unwrap();
-    let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
-    let nappers = calib_sandbox::NappingCluster::start(2, Duration::from_millis(20), 1).unwrap();
-    let remote = nappers.try_connect().unwrap();
+    let (_dir, objective, nappers, remote) = napping_cluster(2, Duration::from_millis(20), 1);
     let batch = |k: u32| -> Vec<Vec<f64>> {
         (0..8)
             .map(|i| vec![0.01 + 1e-4 * f64::from(8 * k + i), 0.002])
