@@ -190,6 +190,29 @@
 //!   logarithms lie off the chain from one segment's pressure to the next, and the
 //!   march costs that chain's latency (about seven dependent logarithms and exponentials
 //!   per two-phase segment, after the saturation lookup), not the number of calls.
+//! - `exp` and `ln` inlined with fused multiply-adds (a build for the host's CPU, where
+//!   `f64::mul_add` is one instruction; `exp` by a degree-12 polynomial after reduction by
+//!   `ln 2`, `ln` by the `atanh` series of `(m − 1)/(m + 1)`, both evaluated by Estrin's
+//!   scheme): `hx_highfi` 21.1 → 24.6–25.9 ms against glibc's calls in the same build
+//!   (7.4 → 8.4 µs per right-hand side). glibc already runs its own FMA variants on such a
+//!   CPU, and its table-driven reductions are shorter than any table-free polynomial. The
+//!   host-CPU build alone (glibc's calls kept, no contraction, the same step sequence)
+//!   gave 21.7 → 21.1 ms, too little to give up one binary for every x86-64 host.
+//! - A dry-out blend without the kink, `w = ξ³(10 − 15ξ + 6ξ²)` with
+//!   `ξ = (1 − x)/(1 − X_DRYOUT)` (C² at both ends, so `w α` vanishes like `(1 − x)^2.3` at
+//!   the dew point instead of the linear blend's unbounded slope; a change of the model's
+//!   equations): 1,039 → 918 steps and 76 → 29 rejected, but 2,864 → 2,914 right-hand sides
+//!   and no faster, as the longer steps need more stages; `w = ξ³` alone: 3,175. So the
+//!   kink is not what holds the step count: between the crossings the steps of a
+//!   second-order method are held by accuracy on the wall of the dry-out segment, and
+//!   explicit methods of higher order by stability on the same mode (about twelve
+//!   right-hand sides per second of the cycle either way, see the README's performance
+//!   section).
+//! - What a multirate integration (small steps only on the walls around the front) could
+//!   gain, bounded by leaving states out of RKC's error norm: without the walls of
+//!   segments 36–39 2,425 right-hand sides, 28–39 1,924, all 40 walls 1,853, the inlet
+//!   pressure alone 2,886. The inlet pressure, which integrates the outlet residual, holds
+//!   the large steps to about 1,850 full marches, so such a scheme stays near 16 ms.
 //!
 //! Of the solver's share: a trace of the steps shows the error of the accuracy-limited
 //! two-stage steps coming from a single state, the wall of the segment where the dry-out
