@@ -199,9 +199,9 @@
 //!   host-CPU build alone (glibc's calls kept, no contraction, the same step sequence)
 //!   gave 21.7 → 21.1 ms, too little to give up one binary for every x86-64 host.
 //! - A dry-out blend without the kink, `w = ξ³(10 − 15ξ + 6ξ²)` with
-//!   `ξ = (1 − x)/(1 − X_DRYOUT)` (C² at both ends, so `w α` vanishes like `(1 − x)^2.3` at
-//!   the dew point instead of the linear blend's unbounded slope; a change of the model's
-//!   equations): 1,039 → 918 steps and 76 → 29 rejected, but 2,864 → 2,914 right-hand sides
+//!   `ξ = (1 − x)/(1 − X_DRYOUT)` (C² at both ends, so `w α` vanishes at the dew point with
+//!   its first two derivatives, where the linear blend's second derivative is unbounded; a
+//!   change of the model's equations): 1,039 → 918 steps and 76 → 29 rejected, but 2,864 → 2,914 right-hand sides
 //!   and no faster, as the longer steps need more stages; `w = ξ³` alone: 3,175. So the
 //!   kink is not what holds the step count: between the crossings the steps of a
 //!   second-order method are held by accuracy on the wall of the dry-out segment, and
