@@ -68,44 +68,29 @@
 //!
 //! States: `N` wall temperatures and the inlet pressure. The fastest wall mode (wall to
 //! boiling refrigerant, whose heat flux grows like the square of the wall superheat in
-//! Chen's nucleate term, over the wall capacity) has a time constant of about 0.1–0.3 s:
-//! the spectral radius of the Jacobian is 8–10 s⁻¹ over the bench cycle at the defaults.
-//! That holds the crate's Dormand–Prince 5(4) ([`crate::ode`]) to its stability bound of
-//! about 3.3/ρ, steps of about 0.4 s, wherever the solution is smooth, almost whatever
-//! the tolerance (549, 599 and 734 steps for the 300 s cycle at rtol 10⁻⁵, 10⁻⁶, 10⁻⁷).
-//! So the integrator depends on the tolerance:
+//! Chen's nucleate term, over the wall capacity) has a time constant of about 0.1–0.3 s
+//! (spectral radius 8–10 s⁻¹ at the defaults). It holds the crate's Dormand–Prince 5(4)
+//! ([`crate::ode`]) to its stability bound, steps of about 0.4 s, almost whatever the
+//! tolerance, so the integrator depends on the tolerance:
 //! - at rtol ≥ 10⁻⁶ ([`RKC_MAX_ACCURACY`], the models' own tolerance and looser): the
 //!   Runge–Kutta–Chebyshev method of [`crate::ode::rkc`] (Sommeijer, Shampine & Verwer
 //!   1998), explicit and of second order, whose stability interval grows with the square
 //!   of its stage count, with the spectral radius from a power iteration on the
-//!   right-hand side. Where the solution is smooth it takes steps of 1–10 s at a few
-//!   right-hand sides each; where the dry-out front crosses a segment boundary (the
-//!   right-hand side bends within a few millikelvin of wall temperature) its steps shrink
-//!   to about 0.02 s at two right-hand sides each, which over such a stretch costs about
-//!   what Dormand–Prince's stability-limited steps do. Being explicit, the bend costs it
-//!   accuracy-controlled small steps and nothing more. It runs at 0.3 times the requested
-//!   tolerances ([`RKC_TOLERANCE_SCALE`]): a second-order method uses up its tolerance
-//!   where Dormand–Prince, held back by stability, stays well inside it, and at the full
-//!   tolerance its wall temperatures ended up three times further from a reference at
-//!   rtol 10⁻⁹ (the air-side heat flow 0.072 W off in the heavy case of
-//!   `outputs_at_the_model_tolerance_stay_near_the_reference`, over that test's 0.06 W);
-//!   at 0.3 every output of that test stays within its bound, the refrigerant heat flow
-//!   closer to the reference than with Dormand–Prince at the same requested tolerance in
-//!   every case and the pressure drop in all but one (`hx_lowfi`, diagnosis truth: 0.58
-//!   against 0.52 Pa);
+//!   right-hand side. Where the solution is smooth it takes steps of seconds; where the
+//!   dry-out front crosses a segment boundary (the right-hand side bends within a few
+//!   millikelvin of wall temperature) it shortens its steps and nothing more. It runs at
+//!   [`RKC_TOLERANCE_SCALE`] times the requested tolerances: a second-order method uses up
+//!   its tolerance where Dormand–Prince, held back by stability, stays well inside it, and
+//!   at the full tolerance the outputs left the bounds of
+//!   `outputs_at_the_model_tolerance_stay_near_the_reference`;
 //! - at tighter tolerances: Dormand–Prince, as its fifth order gains on the second order
-//!   of RKC, whose steps grow like `rtol^(−1/3)`. Measured on `hx_highfi` (`hx_lowfi`),
-//!   right-hand sides of RKC against Dormand–Prince at a requested rtol of 10⁻⁷: 5 004
-//!   against 4 604 (2 774 against 3 236); at 10⁻⁸: 9 590 against 6 332 (5 510 against
-//!   4 244).
+//!   of RKC, whose steps grow like `rtol^(−1/3)`.
 //!
 //! Both locate the event of a state leaving the property tables (below) on their
 //! continuous extension, and a simulation that leaves them fails the same way with either.
-//! A fixed-step Rosenbrock–W method (ROS2, Verwer et al. 1999, Jacobian by finite
-//! differences) was tried and measured against DoPri5 at rtol 10⁻⁸: the dry-out front
-//! crossing segment boundaries makes the right-hand side only piecewise smooth, and at
-//! steps of 0.25–1 s ROS2 was off by up to 5 % in heat flow and diverged at 0.5 s in the
-//! 40-segment model.
+//! Rosenbrock methods (linearly implicit) were measured and fail across that bend: the
+//! dry-out front makes the right-hand side only piecewise smooth, and their stages are
+//! wrong at any useful step, where an explicit method only sees a kink in time.
 //!
 //! The initial state is the steady state at the inputs of t = 0, solved directly: for a
 //! given inlet pressure, each segment's wall balance is a scalar equation in `T_w,i`
@@ -122,105 +107,15 @@
 //! state of the march leaves them, located by the solver's event search; trial stages of
 //! the solver are not counted.
 //!
-//! **Cost** (300 s, release build, `examples/hx_timing.rs`): measured at first 150 ms for
-//! `hx_highfi` and 16 ms for `hx_lowfi` at rtol 10⁻⁸, two thirds of it in `powf` inside
-//! the correlations. The pressure-only property groups now come interpolated from the
-//! saturation table ([`refrigerant::Groups`]), the remaining powers are exponentials of
-//! shared logarithms, the air side is recomputed only when the air inputs move, and the
-//! flat first minute is not integrated: 141 → 66 ms and 15 → 4.8 ms at rtol 10⁻⁸ (best
-//! medians, old and new binaries run in turn on the same machine), with 6 374 and 4 898
-//! evaluations of the right-hand side (1 001 and 802 steps). A Rosenbrock method with
-//! error control (RODAS4, Hairer & Wanner 1996) was measured: on `hx_lowfi` it needs 445
-//! steps instead of 802 but 14 evaluations per step (the Jacobian by differences), so it
-//! is no faster at equal tolerance, and on `hx_highfi` it fails (tens of thousands of
-//! rejected steps): around the dry-out segment the right-hand side bends within a few
-//! millikelvin of wall temperature (a 1 mK step changes its slope by 14 %), so the
-//! linearly implicit stages are wrong at any useful step, where an explicit method only
-//! sees a kink in time.
-//!
-//! At the models' own tolerance (rtol 10⁻⁶, 1 s output grid, all outputs) RKC replaced
-//! Dormand–Prince: `hx_highfi` 599 steps (24 rejected, 3 740 right-hand sides) → 1 034
-//! steps (72 rejected, 2 840 right-hand sides, 8 % of them in the power iteration),
-//! 32.1 → 24.3 ms; `hx_lowfi` 451 steps (13 rejected, 2 786) → 498 (9 rejected, 1 543),
-//! 2.64 → 1.57 ms (medians over five runs of 21, old and new binaries in turn, on a
-//! machine shared with other builds). About half of RKC's right-hand sides go to the
-//! 70 s (of 240 s integrated) where the dry-out front crosses segment boundaries. The
-//! outputs of the flat first minute come from one evaluation, and a vapour lookup shares
-//! the saturation lookup's `ln p`. Measured and not kept: re-estimating the spectral
-//! radius every 50 steps instead of 25 (more rejections, no fewer right-hand sides), and
-//! putting a due estimate off while the steps keep two stages (more rejections, 2 866
-//! right-hand sides). Of an `hx_highfi` right-hand side,
-//! `Evaporator::segment` with the correlations inlined takes 23 %, `log` 23 %, `exp` 19 %,
-//! the saturation-table interpolation 15 %, Friedel 6 %, the vapour table 4 %, `pow` 4 %;
-//! the solver 1 %.
-//!
-//! The march is one chain of dependent operations (each segment's saturation lookup waits
-//! for the previous segment's pressure drop), so a right-hand side costs mostly latency,
-//! and divisions on that chain weigh about as much as the transcendental calls. Same
-//! equations, fewer and shorter operations per segment: the quantities of Friedel's
-//! correlation that depend on the mass flux alone (`G D`, `(G D)^−0.25`, `2 G²/D` and the
-//! flow part of `ln(Fr^0.045 We^0.035)`) are computed once per march
-//! ([`pressure_drop::Flow`]); the homogeneous specific volumes come from `1/ρ_l` and
-//! `1/ρ_v` taken once per segment instead of three divisions each; the outlet enthalpy and
-//! quality use `1/ṁ` and `1/(ṁ h_lv)`, computed before the heat flow is known; Chen's
-//! turbulent Nusselt number enters its laminar blend as `(0.023 Pr_l^0.4)^10 Re_l^8`,
-//! one exponential less; the table lookups multiply by the reciprocal grid spacing;
-//! Churchill's `(A + B)^−1.5` is a square root instead of a `powf`. Results change at
-//! rounding level: over five perturbed states of each model the right-hand side moved by
-//! at most 3·10⁻¹³ relative in the refrigerant heat flow and 6·10⁻¹⁰ W in a wall's net
-//! heat flow. At the models' tolerance (1 s grid) `hx_highfi` went from 22.7 to 19.1 ms
-//! (2 840 → 2 864 right-hand sides, the step sequence moving with the rounding; 8.0 →
-//! 6.7 µs per right-hand side, −17 %) and `hx_lowfi` from 1.47 to 1.41 ms (medians over
-//! ten runs of 21, old and new binaries in turn). Measured and not kept: cube roots for
-//! `Pr^(2/3)` and Churchill's `y^(1/12)` (slower: `f64::cbrt` is not glibc's); one
-//! logarithm for a product of powers with integer exponent ratios, such as
-//! `(ΔT^33 (dT/dp)^−25)^0.03` or `(x^195 (1−x)^56)^0.004` (the multiplication chains cost
-//! what the saved logarithm did); `ln x − ln(1−x)` in place of `ln(x/(1−x))` (no change).
-//!
-//! Also measured and not kept (`examples/hx_timing.rs`, 1 s grid, medians of six runs,
-//! old and new binaries in turn, on a machine shared with other builds):
-//! - `exp` and `ln` inlined, table-driven as glibc's (64-entry `2^(j/64)`, 129-entry
-//!   `ln c`, Taylor polynomials; within 2 ulp of glibc, 1 ulp almost everywhere):
-//!   `hx_highfi` 22.9 → 24.4 ms, `hx_lowfi` 1.62 → 1.75 ms. Compiled for the baseline
-//!   x86-64 target they have no fused multiply-add, so their reductions and polynomials
-//!   are longer chains than those of glibc's FMA variants, which it picks at run time.
-//! - `0.035 ln σ` and `−0.75 ln(dT_sat/dp)` interpolated with the saturation state instead
-//!   of two logarithms per two-phase segment: 22.4 → 22.6 ms, the right-hand sides
-//!   2 864 → 2 906 as the numbers moved (about 2 % less per right-hand side). Those
-//!   logarithms lie off the chain from one segment's pressure to the next, and the
-//!   march costs that chain's latency (about seven dependent logarithms and exponentials
-//!   per two-phase segment, after the saturation lookup), not the number of calls.
-//! - `exp` and `ln` inlined with fused multiply-adds (a build for the host's CPU, where
-//!   `f64::mul_add` is one instruction; `exp` by a degree-12 polynomial after reduction by
-//!   `ln 2`, `ln` by the `atanh` series of `(m − 1)/(m + 1)`, both evaluated by Estrin's
-//!   scheme): `hx_highfi` 21.1 → 24.6–25.9 ms against glibc's calls in the same build
-//!   (7.4 → 8.4 µs per right-hand side). glibc already runs its own FMA variants on such a
-//!   CPU, and its table-driven reductions are shorter than any table-free polynomial. The
-//!   host-CPU build alone (glibc's calls kept, no contraction, the same step sequence)
-//!   gave 21.7 → 21.1 ms, too little to give up one binary for every x86-64 host.
-//! - A dry-out blend without the kink, `w = ξ³(10 − 15ξ + 6ξ²)` with
-//!   `ξ = (1 − x)/(1 − X_DRYOUT)` (C² at both ends, so `w α` vanishes at the dew point with
-//!   its first two derivatives, where the linear blend's second derivative is unbounded; a
-//!   change of the model's equations): 1,039 → 918 steps and 76 → 29 rejected, but 2,864 → 2,914 right-hand sides
-//!   and no faster, as the longer steps need more stages; `w = ξ³` alone: 3,175. So the
-//!   kink is not what holds the step count: between the crossings the steps of a
-//!   second-order method are held by accuracy on the wall of the dry-out segment, and
-//!   explicit methods of higher order by stability on the same mode (about twelve
-//!   right-hand sides per second of the cycle either way, see the README's performance
-//!   section).
-//! - What a multirate integration (small steps only on the walls around the front) could
-//!   gain, bounded by leaving states out of RKC's error norm: without the walls of
-//!   segments 36–39 2,425 right-hand sides, 28–39 1,924, all 40 walls 1,853, the inlet
-//!   pressure alone 2,886. The inlet pressure, which integrates the outlet residual, holds
-//!   the large steps to about 1,850 full marches, so such a scheme stays near 16 ms.
-//!
-//! Of the solver's share: a trace of the steps shows the error of the accuracy-limited
-//! two-stage steps coming from a single state, the wall of the segment where the dry-out
-//! front sits (segments 36–39 at the defaults, 95–99 % of the error norm); each crossing
-//! of a segment boundary costs one or two rejected steps and a step cut to about 0.02 s
-//! by the predictive controller. The power iteration takes 229 of the 2 864 right-hand
-//! sides (50 estimates, 11 of them after two rejections in a row, about 40 right-hand
-//! sides).
+//! **Cost**: the march is one chain of dependent operations (each segment's saturation
+//! lookup waits for the previous segment's pressure drop), so a right-hand side costs
+//! mostly the latency of its logarithms, exponentials and divisions. Hence the property
+//! groups that depend on pressure alone come interpolated from the saturation table
+//! ([`refrigerant::Groups`]), powers are exponentials of shared logarithms, the quantities
+//! that depend on the mass flux alone are computed once per march ([`pressure_drop::Flow`]),
+//! the air side is recomputed only when the air inputs move, and the flat first minute is
+//! not integrated. The measurements behind these choices, the integrator's, and the ways to
+//! a faster `hx_highfi` that were measured and not kept are in `docs/hx.md`.
 //!
 //! # Boundary conditions
 //!
@@ -232,7 +127,8 @@
 //!
 //! At the start values ([`NOMINAL`]: 0.021 kg/s of R134a at 250 kJ/kg, quality 0.25 at the
 //! inlet; 2.7 bar at the outlet; 0.15 kg/s of air at 25 °C) `hx_highfi` gives 3.27 kW,
-//! a refrigerant pressure drop of 38.2 kPa (inlet 3.08 bar) and 9.7 K of outlet superheat.
+//! a refrigerant pressure drop of 38.2 kPa (inlet 3.08 bar) and 9.7 K of outlet superheat
+//! (measured; `nominal_point_is_the_documented_one` holds them to ranges).
 //! The refrigerant flow is a little below the 0.025 kg/s of the bench specification: with
 //! dry air (no condensate on the fins), 0.15 kg/s at 25 °C can give at most about
 //! `ṁ_a c_p (25 − T_sat) ≈ 3.9 kW` at infinite NTU, less than the 3.9 kW that 0.025 kg/s
