@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Load on the compose cluster, measured (figures for README; not run by the test suite):
+# Load on the compose cluster, measured (figures for docs/deployment.md; not run by the test suite):
 #   1. throughput and scaling efficiency from 1 to 3 single-slot workers on hx_highfi
 #      (differential evolution: generations of 20 points keep every worker busy);
 #   2. 20 campaigns of 8 starts each submitted at once against 3 workers: every one must

@@ -71,8 +71,9 @@ pub struct Args {
     /// Repetitions of each measurement (the median is reported).
     #[arg(long, default_value_t = 21)]
     repeat: usize,
-    /// Campaign of the calibration benchmarks. The default ships with calib; README's figures
-    /// use `examples/furuta_real.toml`, the real record beside the repository.
+    /// Campaign of the calibration benchmarks. The default ships with calib; the figures of
+    /// docs/performance.md use `examples/furuta_real.toml`, the real record beside the
+    /// repository.
     #[arg(long, default_value = "examples/furuta.toml")]
     campaign: PathBuf,
     /// Measure dispatch over gRPC instead: overhead per evaluation, scaling with workers,

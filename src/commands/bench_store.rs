@@ -18,7 +18,8 @@ pub struct Args {
     evaluations: usize,
     /// Campaign of the resume measurement (run as differential evolution from 5 starts
     /// with a budget of 2,500 each: about 10,000 evaluations). The default ships with calib;
-    /// README's figures use `examples/furuta_real.toml`, the real record beside the repository.
+    /// docs/performance.md's figures use `examples/furuta_real.toml`, the real record beside
+    /// the repository.
     #[arg(long, default_value = "examples/furuta.toml")]
     campaign: PathBuf,
 }

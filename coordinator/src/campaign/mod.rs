@@ -2,7 +2,7 @@
 //!
 //! A campaign is written in TOML (unknown keys are rejected) and resolved against the hosted
 //! models before anything runs, so every mistake is reported up front with the file, the
-//! line and the field. See README.md for the format.
+//! line and the field. See docs/campaigns.md for the format.
 
 mod file;
 mod resolve;
