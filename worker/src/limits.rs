@@ -35,3 +35,12 @@ pub const MAX_FMU_ENTRY_BYTES: u64 = 512 << 20;
 pub const MAX_FMU_INFLATED_BYTES: u64 = 1 << 30;
 /// Largest `modelDescription.xml` parsed [bytes].
 pub const MAX_FMU_DESCRIPTION_BYTES: u64 = 32 << 20;
+
+// The process an FMU's code runs in (`crate::fmu::host`, Linux).
+
+/// Address space of the process running an FMU's code (`RLIMIT_AS`) [bytes]; override
+/// with `CALIB_FMU_MEMORY_MIB`.
+pub const FMU_HOST_MEMORY_BYTES: u64 = 4 << 30;
+/// Default deadline of one simulation in an FMU's process [s] (override with
+/// `CALIB_FMU_DEADLINE`); its CPU time (`RLIMIT_CPU`) is bounded by the same number.
+pub const FMU_DEADLINE_SECONDS: f64 = 60.0;

@@ -26,6 +26,8 @@
 //! simulation with the FMU's messages, and the next simulation starts a fresh child.
 
 pub mod archive;
+#[cfg(target_os = "linux")]
+pub mod contain;
 mod description;
 mod ffi;
 pub mod host;
