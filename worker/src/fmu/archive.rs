@@ -59,7 +59,7 @@ impl Limits {
 
 /// `n` bytes, in MiB when whole.
 fn amount(n: u64) -> String {
-    if n >= 1 << 20 && n % (1 << 20) == 0 {
+    if n >= 1 << 20 && n.is_multiple_of(1 << 20) {
         format!("{} MiB", n >> 20)
     } else {
         format!("{n} bytes")
