@@ -311,3 +311,85 @@ fn calib_models_refuses_an_archive_lying_about_a_size() {
         "{stderr}"
     );
 }
+
+#[test]
+fn a_process_an_fmu_sends_away_ends_with_a_killed_worker() {
+    use calib_proto::v1 as proto;
+    use std::io::BufRead;
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("fmu-cache");
+    let mut worker = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args([
+            "worker",
+            "--listen",
+            "127.0.0.1:0",
+            "--slots",
+            "1",
+            "--allow-fmu",
+        ])
+        .arg("--fmu-cache")
+        .arg(&cache)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(worker.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let address = line
+        .strip_prefix("worker listening on ")
+        .and_then(|rest| rest.split_whitespace().next())
+        .unwrap_or_else(|| panic!("unexpected first line: {line}"))
+        .to_string();
+    let pid = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(async {
+            let mut client =
+                proto::simulator_client::SimulatorClient::connect(format!("http://{address}"))
+                    .await
+                    .unwrap();
+            let uploaded = client
+                .upload_fmu(proto::UploadFmuRequest {
+                    protocol_version: calib_proto::PROTOCOL_VERSION,
+                    fmu: std::fs::read(&escape.path).unwrap(),
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            let simulated = client
+                .simulate(proto::SimulateRequest {
+                    protocol_version: calib_proto::PROTOCOL_VERSION,
+                    model: uploaded.models[0].clone(),
+                    parameters: vec![proto::ParameterValue {
+                        name: "mode".into(),
+                        value: 1.0,
+                    }],
+                    times: vec![0.0, 1.0],
+                    outputs: vec!["y".into()],
+                    solver: None,
+                    fmu_hash: uploaded.fmu_hash,
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(simulated.failure, None);
+            simulated.series[0].values[1] as u32
+        });
+    assert!(
+        eventually(Duration::from_secs(30), || named(&escape.marker) == [pid]),
+        "{:?}",
+        named(&escape.marker)
+    );
+    // The worker is killed outright: it has no chance to stop its FMU hosts itself.
+    worker.kill().unwrap();
+    worker.wait().unwrap();
+    assert!(
+        eventually(Duration::from_secs(20), || named(&escape.marker).is_empty()),
+        "process {pid} outlived the worker"
+    );
+}

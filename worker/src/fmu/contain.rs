@@ -11,7 +11,8 @@
 //! descendant, and an orphan comes back to it), removes the working folder and exits as
 //! the inner process did.
 //!
-//! The inner process, before it loads the FMU's library, bounds its address space and CPU
+//! The inner process (its `TMPDIR` the working folder too), before it loads the FMU's
+//! library, bounds its address space and CPU
 //! time (`setrlimit`) and, where the kernel has Landlock, confines its files: it may
 //! write in its working folder alone, and read the unpacked FMU and the system's folders
 //! (`/usr`, `/lib*`, `/etc`, `/opt`, `/proc`, `/sys`, `/dev`), nothing else. Landlock (ABI
