@@ -93,7 +93,7 @@ fn rpc(status: tonic::Status) -> Failure {
 
 pub fn submit(args: SubmitArgs) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
-    if calib_worker::fmu::archive_of(&campaign.model.info().name).is_some() {
+    if calib_worker::fmu::hash_of(&campaign.model.info().name).is_some() {
         return Err(Failure::input(format!(
             "{}: `model.fmu`: the Calibration API does not take FMUs yet; run the campaign \
              with `calib calibrate` (here, or on workers with --workers)",

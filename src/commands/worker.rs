@@ -66,6 +66,13 @@ pub fn run(args: Args) -> Outcome {
     config.advertise = args.advertise;
     config.security = args.serve.server(&args.dial)?;
     config.register_security = args.dial.client()?;
+    if let Some(warning) = fmu_warning(
+        args.allow_fmu,
+        config.security.token.is_some(),
+        &args.listen,
+    ) {
+        eprintln!("{warning}");
+    }
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let worker = service::start_worker(config.clone())
@@ -82,4 +89,56 @@ pub fn run(args: Args) -> Outcome {
             .await
             .map_err(|e| Failure::internal(format!("worker server failed: {e}")))
     })
+}
+
+/// What to say about accepting FMUs (native code) on `listen`, with or without a token.
+fn fmu_warning(allow_fmu: bool, token: bool, listen: &SocketAddr) -> Option<String> {
+    if !allow_fmu {
+        return None;
+    }
+    #[cfg(target_os = "linux")]
+    let contained = calib_worker::fmu::contain::containment().to_string();
+    #[cfg(not(target_os = "linux"))]
+    let contained = "each FMU runs in a child process with a deadline".to_string();
+    if token {
+        return Some(format!("calib worker: --allow-fmu: {contained}"));
+    }
+    if listen.ip().is_loopback() {
+        return Some(format!(
+            "calib worker: WARNING: --allow-fmu without --token-file: any program on this \
+             machine may upload an FMU and run its native code as this user; {contained}"
+        ));
+    }
+    let rule = "!".repeat(78);
+    Some(format!(
+        "{rule}\ncalib worker: WARNING: --allow-fmu WITHOUT A TOKEN ON {listen}, NOT LOOPBACK:\n\
+         ANYONE WHO CAN REACH THIS ADDRESS MAY RUN NATIVE CODE HERE AS THIS USER.\n\
+         Give a --token-file (and --tls-cert/--tls-key), or --listen 127.0.0.1:PORT.\n\
+         {contained}\n{rule}"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fmu_warning;
+
+    #[test]
+    fn accepting_fmus_without_a_token_is_warned_of_loudly_off_loopback() {
+        let any = "0.0.0.0:50051".parse().unwrap();
+        let local = "127.0.0.1:50051".parse().unwrap();
+        assert_eq!(fmu_warning(false, false, &any), None);
+        let loud = fmu_warning(true, false, &any).unwrap();
+        assert!(
+            loud.contains("WITHOUT A TOKEN ON 0.0.0.0:50051, NOT LOOPBACK"),
+            "{loud}"
+        );
+        let quiet = fmu_warning(true, false, &local).unwrap();
+        assert!(
+            quiet.contains("WARNING: --allow-fmu without --token-file"),
+            "{quiet}"
+        );
+        assert!(!quiet.contains("NOT LOOPBACK"), "{quiet}");
+        let tokened = fmu_warning(true, true, &any).unwrap();
+        assert!(!tokened.contains("WARNING"), "{tokened}");
+    }
 }

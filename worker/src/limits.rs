@@ -19,3 +19,28 @@ pub const MAX_STEPS: RangeInclusive<u64> = 1..=10_000_000;
 pub const RTOL: RangeInclusive<f64> = 1e-14..=0.1;
 /// Absolute tolerances of the ODE solver, in the unit of each state.
 pub const ATOL: RangeInclusive<f64> = 1e-300..=1e300;
+
+// FMU archives (`.fmu` zip files), checked while they are read and inflated: a header's
+// sizes and counts are never trusted (see `crate::fmu`). An upload is also bounded by
+// `MAX_MESSAGE_BYTES`.
+
+/// Largest FMU archive read [bytes, compressed].
+pub const MAX_FMU_ARCHIVE_BYTES: u64 = 256 << 20;
+/// Most entries (files and folders) in one FMU archive.
+pub const MAX_FMU_ENTRIES: u64 = 10_000;
+/// Largest file an FMU archive may inflate to [bytes].
+pub const MAX_FMU_ENTRY_BYTES: u64 = 512 << 20;
+/// Largest total an FMU archive may inflate to [bytes]; on a worker also at most the bound
+/// of its FMU cache (`--fmu-cache-mib`).
+pub const MAX_FMU_INFLATED_BYTES: u64 = 1 << 30;
+/// Largest `modelDescription.xml` parsed [bytes].
+pub const MAX_FMU_DESCRIPTION_BYTES: u64 = 32 << 20;
+
+// The process an FMU's code runs in (`crate::fmu::host`, Linux).
+
+/// Address space of the process running an FMU's code (`RLIMIT_AS`) [bytes]; override
+/// with `CALIB_FMU_MEMORY_MIB`.
+pub const FMU_HOST_MEMORY_BYTES: u64 = 4 << 30;
+/// Default deadline of one simulation in an FMU's process [s] (override with
+/// `CALIB_FMU_DEADLINE`); its CPU time (`RLIMIT_CPU`) is bounded by the same number.
+pub const FMU_DEADLINE_SECONDS: f64 = 60.0;

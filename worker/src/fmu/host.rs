@@ -14,6 +14,11 @@
 //! ([`deadline`]: `CALIB_FMU_DEADLINE` seconds, default 60) is killed and forgotten; the
 //! simulation is [`SimulationError::Failed`] with what happened and the FMU's last
 //! messages, and the next simulation starts a fresh child.
+//!
+//! On Linux each child is a supervisor in a session and process group of its own, and the
+//! FMU's code runs one process below it, in a private working folder, with its memory, CPU
+//! time and (with Landlock) files bounded; killing a child kills every process the FMU
+//! started, whatever it did to get away ([`super::contain`]).
 
 use super::{FmuError, Interface};
 use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
@@ -36,7 +41,10 @@ pub fn deadline() -> Duration {
         .ok()
         .and_then(|s| s.trim().parse::<f64>().ok())
         .filter(|s| s.is_finite() && *s > 0.0)
-        .map_or(Duration::from_secs(60), Duration::from_secs_f64)
+        .map_or(
+            Duration::from_secs_f64(crate::limits::FMU_DEADLINE_SECONDS),
+            Duration::from_secs_f64,
+        )
 }
 
 fn interface_arg(interface: Interface) -> &'static str {
@@ -69,6 +77,29 @@ struct Child {
     stdin: ChildStdin,
     replies: mpsc::Receiver<std::io::Result<Vec<u8>>>,
     stderr: Arc<Mutex<VecDeque<String>>>,
+    /// How it ended, once stopped.
+    ended: Option<std::io::Result<std::process::ExitStatus>>,
+}
+
+impl Child {
+    /// Stop it and every process its FMU started, and reap it (once).
+    fn stop(&mut self) -> &std::io::Result<std::process::ExitStatus> {
+        self.ended.get_or_insert_with(|| {
+            #[cfg(target_os = "linux")]
+            return super::contain::stop_supervisor(&mut self.process);
+            #[cfg(not(target_os = "linux"))]
+            {
+                let _ = self.process.kill();
+                self.process.wait()
+            }
+        })
+    }
+}
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        self.stop();
+    }
 }
 
 impl Hosts {
@@ -84,17 +115,34 @@ impl Hosts {
     fn spawn(&self) -> Result<Child, FmuError> {
         let command = super::host_command()
             .ok_or_else(|| FmuError::Host("no host program to run FMU instances in".into()))?;
-        let mut process = Command::new(&command.program)
+        // The FMU's process works in a folder of its own: the FMU's by its full path.
+        let dir = std::fs::canonicalize(&self.dir).unwrap_or_else(|_| self.dir.clone());
+        let mut process = Command::new(&command.program);
+        process
             .args(&command.args)
-            .arg(&self.dir)
+            .arg(&dir)
             .arg(interface_arg(self.interface))
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .map_err(|e| {
-                FmuError::Host(format!("cannot start {}: {e}", command.program.display()))
-            })?;
+            .stderr(Stdio::piped());
+        #[cfg(target_os = "linux")]
+        let started = {
+            static SAID: std::sync::Once = std::sync::Once::new();
+            SAID.call_once(|| {
+                let containment = super::contain::containment();
+                if containment.landlock_abi.is_some() {
+                    tracing::info!("FMUs: {containment}");
+                } else {
+                    tracing::warn!("FMUs: {containment}");
+                }
+            });
+            super::contain::spawn_supervisor(process)
+        };
+        #[cfg(not(target_os = "linux"))]
+        let started = process.spawn();
+        let mut process = started.map_err(|e| {
+            FmuError::Host(format!("cannot start {}: {e}", command.program.display()))
+        })?;
         let stdin = process.stdin.take().expect("piped");
         let mut stdout = process.stdout.take().expect("piped");
         let stderr_pipe = process.stderr.take().expect("piped");
@@ -123,6 +171,7 @@ impl Hosts {
             stdin,
             replies,
             stderr,
+            ended: None,
         })
     }
 
@@ -169,8 +218,7 @@ impl Hosts {
     /// Kill and reap a child; what happened to it, with its last messages.
     fn lose(&self, mut child: Child, timed_out: Option<Duration>) -> String {
         self.lost.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let _ = child.process.kill();
-        let status = child.process.wait();
+        let status = child.stop();
         // Let the stderr reader take the last lines.
         std::thread::sleep(Duration::from_millis(20));
         let what = match (timed_out, status) {
@@ -181,6 +229,7 @@ impl Hosts {
             (None, Ok(status)) => {
                 use std::os::unix::process::ExitStatusExt;
                 match status.signal() {
+                    Some(24) => "the FMU's process used up its CPU time and was stopped".into(),
                     Some(signal) => format!("the FMU's process crashed ({})", signal_name(signal)),
                     None => format!("the FMU's process ended ({status})"),
                 }
@@ -204,15 +253,11 @@ impl Hosts {
 
 impl Drop for Hosts {
     fn drop(&mut self) {
-        for mut child in self
-            .idle
+        // Each child stops as it is dropped, with every process its FMU started.
+        self.idle
             .get_mut()
             .unwrap_or_else(|e| e.into_inner())
-            .drain(..)
-        {
-            let _ = child.process.kill();
-            let _ = child.process.wait();
-        }
+            .clear();
     }
 }
 
@@ -225,14 +270,25 @@ fn signal_name(signal: i32) -> String {
         9 => "SIGKILL",
         11 => "SIGSEGV",
         15 => "SIGTERM",
+        24 => "SIGXCPU",
         _ => return format!("signal {signal}"),
     };
     format!("signal {signal}, {name}")
 }
 
 /// The child's side: open the FMU unpacked at `dir` and answer requests on stdin until it
-/// closes. FMU log messages are written to stderr as they come.
+/// closes. FMU log messages are written to stderr as they come. On Linux the child first
+/// becomes the supervisor of the FMU's own process ([`super::contain`]), which serves.
 pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
+    #[cfg(target_os = "linux")]
+    {
+        if std::env::var_os(super::contain::INNER).is_none() {
+            super::contain::supervise();
+        }
+        let workdir = std::env::current_dir()
+            .map_err(|e| FmuError::Host(format!("no working folder: {e}")))?;
+        super::contain::confine(dir, &workdir);
+    }
     super::ffi::echo_log_to_stderr();
     let model = super::open_unpacked(dir, interface)?;
     let stdin = std::io::stdin();
@@ -246,6 +302,8 @@ pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
         };
         let reply = match decode_request(&frame) {
             Some((params, grid, outputs, options)) => {
+                #[cfg(target_os = "linux")]
+                super::contain::allow_cpu(deadline().as_secs_f64());
                 let result = crate::Model::simulate(&model, &params, &grid, &outputs, &options);
                 encode_reply(&result)
             }

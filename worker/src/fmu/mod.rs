@@ -16,11 +16,18 @@
 //! instance (one per thread that simulates at once), `fmi*Reset`s it and initialises it
 //! again; see [`run`] for the integration.
 //!
+//! Archives are read and unpacked within [`archive::Limits`] (sizes, inflated and not,
+//! and the number of entries; see [`crate::limits`]), counting what is inflated rather
+//! than believing the archive's headers.
+//!
 //! Loading an FMU runs its native code. When [`isolate_with`] names a host program (the
 //! `calib` binary does, with its hidden `fmu-host` subcommand), every instance lives in a
 //! child process instead ([`host`]): a crash, an abort or a hang there is a failed
 //! simulation with the FMU's messages, and the next simulation starts a fresh child.
 
+pub mod archive;
+#[cfg(target_os = "linux")]
+pub mod contain;
 mod description;
 mod ffi;
 pub mod host;
@@ -33,7 +40,6 @@ use crate::model::{
     check_request, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
     Trajectory,
 };
-use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -42,6 +48,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 pub enum FmuError {
     #[error("cannot read the FMU: {0}")]
     Archive(String),
+    /// Past one of the limits of [`archive::Limits`], which the message names.
+    #[error("the FMU is refused: {0}")]
+    Refused(String),
     #[error("modelDescription.xml: {0}")]
     Description(String),
     #[error("{0}")]
@@ -113,8 +122,7 @@ impl FmuModel {
         interface: Option<Interface>,
         isolated: bool,
     ) -> Result<Self, FmuError> {
-        let xml = std::fs::read_to_string(dir.join("modelDescription.xml"))
-            .map_err(|e| FmuError::Archive(format!("modelDescription.xml: {e}")))?;
+        let xml = archive::read_description(&dir)?;
         let description = Description::parse(&xml)?;
         let interface = match interface {
             Some(i) => i,
@@ -354,7 +362,10 @@ struct Registered {
     interface: Interface,
     /// Opened without naming an interface: the FMU's default (Model Exchange when offered).
     default: bool,
-    archive: Arc<Vec<u8>>,
+    /// Where the archive is kept (read again to send it to a worker): the file it was
+    /// opened from, or a worker's FMU cache. Never the bytes themselves, which would stay
+    /// in memory as long as the process.
+    archive: Option<PathBuf>,
     model: &'static dyn Model,
 }
 
@@ -366,15 +377,33 @@ fn registry() -> &'static Mutex<Vec<Registered>> {
 /// The FMU at `path` as a model (with the measurement effects of its outputs). Opening the
 /// same content again returns the same model.
 pub fn open(path: &Path, interface: Option<Interface>) -> Result<&'static dyn Model, FmuError> {
-    let bytes =
-        std::fs::read(path).map_err(|e| FmuError::Archive(format!("{}: {e}", path.display())))?;
-    open_bytes(&bytes, interface)
+    let limits = archive::Limits::default();
+    let bytes = archive::read(path, &limits)?;
+    let opened = open_in(&bytes, interface, &unpack_root(), &limits)?;
+    remember_archive(&content_hash(&bytes), path);
+    Ok(opened)
 }
 
-/// The FMU whose archive is `bytes`, as [`open`].
+/// The FMU whose archive is `bytes`, as [`open`] (within the default limits, unpacked
+/// where `CALIB_FMU_DIR` says).
 pub fn open_bytes(
     bytes: &[u8],
     interface: Option<Interface>,
+) -> Result<&'static dyn Model, FmuError> {
+    open_in(
+        bytes,
+        interface,
+        &unpack_root(),
+        &archive::Limits::default(),
+    )
+}
+
+/// The FMU whose archive is `bytes`, unpacked into `root` within `limits`, as [`open`].
+pub fn open_in(
+    bytes: &[u8],
+    interface: Option<Interface>,
+    root: &Path,
+    limits: &archive::Limits,
 ) -> Result<&'static dyn Model, FmuError> {
     let hash = content_hash(bytes);
     let mut registry = registry().lock().unwrap_or_else(|e| e.into_inner());
@@ -389,14 +418,14 @@ pub fn open_bytes(
     }) {
         return Ok(r.model);
     }
-    let dir = unpack(bytes, &hash, &unpack_root())?;
+    let dir = archive::unpack(bytes, &hex(&hash), root, limits)?;
     let model = FmuModel::new(dir, &hash, interface, host_command().is_some())?;
     let default = interface.is_none();
     let interface = model.interface;
     let archive = registry
         .iter()
         .find(|r| r.hash == hash)
-        .map_or_else(|| Arc::new(bytes.to_vec()), |r| Arc::clone(&r.archive));
+        .and_then(|r| r.archive.clone());
     let model: &'static dyn Model = Box::leak(Box::new(WithOutputEffects::new(model)));
     registry.push(Registered {
         hash,
@@ -408,28 +437,73 @@ pub fn open_bytes(
     Ok(model)
 }
 
-/// Every interface the FMU whose archive is `bytes` offers, opened (see [`open_bytes`]).
-pub fn open_all(bytes: &[u8]) -> Result<Vec<&'static dyn Model>, FmuError> {
-    let first = open_bytes(bytes, None)?;
+/// Every interface the FMU whose archive is `bytes` offers, opened (see [`open_in`]).
+pub fn open_all_in(
+    bytes: &[u8],
+    root: &Path,
+    limits: &archive::Limits,
+) -> Result<Vec<&'static dyn Model>, FmuError> {
+    let first = open_in(bytes, None, root, limits)?;
     let mut models = vec![first];
     if first.info().name.contains(".me@") {
         // Model Exchange is the default; Co-Simulation may be there too.
-        if let Ok(cs) = open_bytes(bytes, Some(Interface::CoSimulation)) {
+        if let Ok(cs) = open_in(bytes, Some(Interface::CoSimulation), root, limits) {
             models.push(cs);
         }
     }
     Ok(models)
 }
 
-/// The archive and content hash of the FMU model registered under `name`, to send it to a
-/// worker.
-pub fn archive_of(name: &str) -> Option<([u8; 32], Arc<Vec<u8>>)> {
+/// Every interface the FMU whose archive is `bytes` offers, as [`open_bytes`].
+pub fn open_all(bytes: &[u8]) -> Result<Vec<&'static dyn Model>, FmuError> {
+    open_all_in(bytes, &unpack_root(), &archive::Limits::default())
+}
+
+/// The archive of the FMU whose content hash is `hash` is kept at `path` (read again by
+/// [`archive_of`]).
+pub fn remember_archive(hash: &[u8; 32], path: &Path) {
+    for r in registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter_mut()
+        .filter(|r| r.hash == *hash)
+    {
+        r.archive = Some(path.to_path_buf());
+    }
+}
+
+/// The content hash of the FMU model registered under `name`.
+pub fn hash_of(name: &str) -> Option<[u8; 32]> {
     registry()
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .iter()
         .find(|r| r.model.info().name == name)
-        .map(|r| (r.hash, Arc::clone(&r.archive)))
+        .map(|r| r.hash)
+}
+
+/// The archive and content hash of the FMU model registered under `name`, to send it to a
+/// worker: read again from where it is kept, and only when its content is still the one
+/// opened.
+pub fn archive_of(name: &str) -> Option<([u8; 32], Arc<Vec<u8>>)> {
+    let (hash, path) = registry()
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|r| r.model.info().name == name)
+        .map(|r| (r.hash, r.archive.clone()))?;
+    let path = path?;
+    match archive::read(&path, &archive::Limits::default()) {
+        Ok(bytes) if content_hash(&bytes) == hash => Some((hash, Arc::new(bytes))),
+        Ok(_) => {
+            tracing::warn!(path = %path.display(), "the FMU's archive changed since it was opened");
+            None
+        }
+        Err(e) => {
+            tracing::warn!(path = %path.display(), "the FMU's archive cannot be read again: {e}");
+            None
+        }
+    }
 }
 
 /// The interface an FMU model's name says it runs through (`….me@…` or `….cs@…`).
@@ -457,11 +531,22 @@ pub fn find(name: &str) -> Option<&'static dyn Model> {
 /// The FMU at `path` with its instances in this process whatever [`isolate_with`] says, and
 /// not registered (for benchmarks).
 pub fn open_local(path: &Path, interface: Option<Interface>) -> Result<FmuModel, FmuError> {
-    let bytes =
-        std::fs::read(path).map_err(|e| FmuError::Archive(format!("{}: {e}", path.display())))?;
+    open_unregistered(path, interface, false)
+}
+
+/// The FMU at `path`, not registered: its instances in child processes when `isolated`
+/// (and [`isolate_with`] named a host program), else in this process. Dropping it stops
+/// its child processes.
+pub fn open_unregistered(
+    path: &Path,
+    interface: Option<Interface>,
+    isolated: bool,
+) -> Result<FmuModel, FmuError> {
+    let limits = archive::Limits::default();
+    let bytes = archive::read(path, &limits)?;
     let hash = content_hash(&bytes);
-    let dir = unpack(&bytes, &hash, &unpack_root())?;
-    FmuModel::new(dir, &hash, interface, false)
+    let dir = archive::unpack(&bytes, &hex(&hash), &unpack_root(), &limits)?;
+    FmuModel::new(dir, &hash, interface, isolated && host_command().is_some())
 }
 
 /// Open an FMU already unpacked at `dir`, in this process (the child process's side).
@@ -473,56 +558,4 @@ fn unpack_root() -> PathBuf {
     std::env::var_os("CALIB_FMU_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|| std::env::temp_dir().join("calib-fmu"))
-}
-
-/// Unpack the archive into `root/<hash>/` once (into a fresh folder renamed into place, so a
-/// half-written folder is never used).
-fn unpack(bytes: &[u8], hash: &[u8; 32], root: &Path) -> Result<PathBuf, FmuError> {
-    let dir = root.join(hex(hash));
-    if dir.join("modelDescription.xml").is_file() {
-        return Ok(dir);
-    }
-    let io = |e: std::io::Error| FmuError::Archive(e.to_string());
-    std::fs::create_dir_all(root).map_err(io)?;
-    let staging = root.join(format!(".{}-{}", hex(hash), std::process::id()));
-    let _ = std::fs::remove_dir_all(&staging);
-    let mut archive = zip::ZipArchive::new(std::io::Cursor::new(bytes))
-        .map_err(|e| FmuError::Archive(format!("not a zip archive: {e}")))?;
-    for i in 0..archive.len() {
-        let mut entry = archive
-            .by_index(i)
-            .map_err(|e| FmuError::Archive(e.to_string()))?;
-        let Some(relative) = entry.enclosed_name() else {
-            return Err(FmuError::Archive(format!(
-                "entry `{}` points outside the archive",
-                entry.name()
-            )));
-        };
-        let target = staging.join(relative);
-        if entry.is_dir() {
-            std::fs::create_dir_all(&target).map_err(io)?;
-            continue;
-        }
-        if let Some(parent) = target.parent() {
-            std::fs::create_dir_all(parent).map_err(io)?;
-        }
-        let mut data = Vec::with_capacity(entry.size() as usize);
-        entry.read_to_end(&mut data).map_err(io)?;
-        std::fs::write(&target, data).map_err(io)?;
-    }
-    if !staging.join("modelDescription.xml").is_file() {
-        let _ = std::fs::remove_dir_all(&staging);
-        return Err(FmuError::Archive(
-            "no modelDescription.xml in the archive".into(),
-        ));
-    }
-    match std::fs::rename(&staging, &dir) {
-        Ok(()) => Ok(dir),
-        // Another process unpacked it first.
-        Err(_) if dir.join("modelDescription.xml").is_file() => {
-            let _ = std::fs::remove_dir_all(&staging);
-            Ok(dir)
-        }
-        Err(e) => Err(io(e)),
-    }
 }

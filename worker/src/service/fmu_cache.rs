@@ -1,6 +1,7 @@
 //! FMUs a worker keeps for later requests: `<hash>.fmu` files in one folder, bounded in
 //! total size; the least recently used go first.
 
+use crate::fmu::archive;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::SystemTime;
@@ -28,8 +29,20 @@ impl FmuCache {
         })
     }
 
-    fn path(&self, hash: &[u8; 32]) -> PathBuf {
+    /// Where the archive named `hash` is kept.
+    pub fn path(&self, hash: &[u8; 32]) -> PathBuf {
         self.dir.join(format!("{}.fmu", hex(hash)))
+    }
+
+    /// The folder FMUs of this cache are unpacked into.
+    pub fn unpacked(&self) -> PathBuf {
+        self.dir.join("unpacked")
+    }
+
+    /// What an archive kept here may be and inflate to: the bound of the cache applies to
+    /// the inflated bytes too.
+    pub fn limits(&self) -> archive::Limits {
+        archive::Limits::default().within_cache(self.bound)
     }
 
     /// The archive named `hash`, if kept (and mark it used).
@@ -56,8 +69,12 @@ impl FmuCache {
             let staging = self
                 .dir
                 .join(format!(".{}.{}", hex(hash), std::process::id()));
-            std::fs::write(&staging, bytes)?;
-            std::fs::rename(&staging, &path)?;
+            let written =
+                std::fs::write(&staging, bytes).and_then(|()| std::fs::rename(&staging, &path));
+            if written.is_err() {
+                let _ = std::fs::remove_file(&staging);
+            }
+            written?;
         }
         self.evict(&path)
     }

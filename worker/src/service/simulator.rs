@@ -6,8 +6,9 @@ use super::error::{Error, Result};
 use super::fmu_cache::FmuCache;
 use super::pool::{PoolLoad, SimulationPool};
 use super::request::{self, Evaluation, Simulation};
+use crate::fmu::{self, archive};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
-use crate::{fmu, models, Model, SimulationError};
+use crate::{models, Model, SimulationError};
 use calib_proto::v1 as proto;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -51,7 +52,7 @@ impl SimulatorService {
         let hash: [u8; 32] = hash
             .try_into()
             .map_err(|_| Error::invalid("fmu_hash", format!("{} bytes, not 32", hash.len())))?;
-        if fmu::archive_of(model).is_some_and(|(known, _)| known == hash) {
+        if fmu::hash_of(model) == Some(hash) {
             return Ok(());
         }
         let interface = fmu::interface_in_name(model).ok_or_else(|| {
@@ -63,8 +64,10 @@ impl SimulatorService {
         let bytes = cache
             .get(&hash)
             .ok_or_else(|| Error::FmuMissing { hash: hex(&hash) })?;
-        let opened = fmu::open_bytes(&bytes, Some(interface))
+        let opened = fmu::open_in(&bytes, Some(interface), &cache.unpacked(), &cache.limits())
             .map_err(|e| Error::invalid("fmu_hash", e.to_string()))?;
+        drop(bytes);
+        fmu::remember_archive(&hash, &cache.path(&hash));
         if opened.info().name != model {
             return Err(Error::invalid(
                 "model",
@@ -85,12 +88,17 @@ impl SimulatorService {
                 field: "fmu".into(),
             });
         };
+        let limits = cache.limits();
+        archive::check_size(request.fmu.len() as u64, &limits)
+            .map_err(|e| Error::invalid("fmu", e.to_string()))?;
         let hash = fmu::content_hash(&request.fmu);
-        let models =
-            fmu::open_all(&request.fmu).map_err(|e| Error::invalid("fmu", e.to_string()))?;
+        let models = fmu::open_all_in(&request.fmu, &cache.unpacked(), &limits)
+            .map_err(|e| Error::invalid("fmu", e.to_string()))?;
         cache
             .put(&hash, &request.fmu)
             .map_err(|e| Error::Internal(format!("cannot keep the FMU: {e}")))?;
+        // Kept on disk from now on: the request's bytes go with the request.
+        fmu::remember_archive(&hash, &cache.path(&hash));
         tracing::info!(fmu = %hex(&hash), bytes = request.fmu.len(), "fmu uploaded");
         Ok(proto::UploadFmuResponse {
             fmu_hash: hash.to_vec(),

@@ -1,0 +1,395 @@
+//! What an FMU's code can and cannot do on a worker: the FMU of `tests/escaping_fmu/`
+//! (built with the C compiler at test time) starts a process that leaves its session, hangs,
+//! writes and reads outside its folders and asks for more memory than it may have. No
+//! process of it outlives its host being dropped, its deadline, or the program that ran it;
+//! its working folder is private and removed afterwards; where the kernel has Landlock its
+//! files are confined. And an archive that lies about a size is refused by `calib models`.
+
+mod common;
+#[path = "../worker/tests/common/zips.rs"]
+mod zips;
+
+use calib_worker::fmu::{self, contain};
+use calib_worker::{Model, SimulationError};
+use common::*;
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// The deadline of a simulation in this test program [s].
+const DEADLINE: &str = "3";
+
+/// The escaping FMU, built once per test program, with the name its runaway process takes,
+/// the file it tries to write and the one it tries to read.
+struct Escape {
+    path: PathBuf,
+    marker: String,
+    outside: PathBuf,
+    secret: PathBuf,
+    _dir: tempfile::TempDir,
+}
+
+fn escape_fmu() -> Option<&'static Escape> {
+    static BUILT: OnceLock<Option<Escape>> = OnceLock::new();
+    BUILT
+        .get_or_init(|| {
+            // Every FMU of this program runs in child processes of the calib binary.
+            std::env::set_var("CALIB_FMU_DEADLINE", DEADLINE);
+            fmu::isolate_with(fmu::HostCommand {
+                program: env!("CARGO_BIN_EXE_calib").into(),
+                args: vec!["fmu-host".into()],
+            });
+            let dir = tempfile::tempdir().unwrap();
+            let marker = format!("calib-esc{}", std::process::id() % 1_000_000);
+            let outside = dir.path().join("outside.txt");
+            let secret = dir.path().join("secret.txt");
+            std::fs::write(&secret, "not for FMUs\n").unwrap();
+            let src = repo().join("tests/escaping_fmu");
+            let root = dir.path().join("escape");
+            std::fs::create_dir_all(root.join("binaries/linux64")).unwrap();
+            std::fs::copy(src.join("escape.xml"), root.join("modelDescription.xml")).unwrap();
+            let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+            let built = std::process::Command::new(&cc)
+                .args(["-shared", "-fPIC", "-O1", "-o"])
+                .arg(root.join("binaries/linux64/Escape.so"))
+                .arg(format!("-DMARKER=\"{marker}\""))
+                .arg(format!("-DOUTSIDE=\"{}\"", outside.display()))
+                .arg(format!("-DSECRET=\"{}\"", secret.display()))
+                .arg(src.join("escape.c"))
+                .status();
+            if !built.is_ok_and(|s| s.success()) {
+                skip(&format!("no C compiler (`{cc}`) to build the escaping FMU"));
+                return None;
+            }
+            let path = dir.path().join("Escape.fmu");
+            let zipped = std::process::Command::new("python3")
+                .args(["-c", "import os,sys,zipfile\nz=zipfile.ZipFile(sys.argv[2],'w')\nfor d,_,fs in os.walk(sys.argv[1]):\n  for f in fs:\n    p=os.path.join(d,f); z.write(p, os.path.relpath(p, sys.argv[1]))\nz.close()"])
+                .arg(&root)
+                .arg(&path)
+                .status();
+            if !zipped.is_ok_and(|s| s.success()) {
+                skip("no python3 to zip the escaping FMU");
+                return None;
+            }
+            Some(Escape {
+                path,
+                marker,
+                outside,
+                secret,
+                _dir: dir,
+            })
+        })
+        .as_ref()
+}
+
+/// The escaping FMU with its instances in child processes of the calib binary, not
+/// registered (dropping it stops them).
+fn open(escape: &Escape) -> fmu::FmuModel {
+    fmu::open_unregistered(&escape.path, None, true).unwrap()
+}
+
+/// Simulate `mode` for a second: the output `y`.
+fn attempt(model: &fmu::FmuModel, mode: f64) -> Result<f64, SimulationError> {
+    let y = model
+        .info()
+        .outputs
+        .iter()
+        .position(|o| o.name == "y")
+        .expect("output y");
+    let trajectory = model.simulate(&[mode], &[0.0, 1.0], &[y], &model.default_options())?;
+    Ok(trajectory.values[0][1])
+}
+
+/// The pids of live processes named `marker`.
+fn named(marker: &str) -> Vec<u32> {
+    std::fs::read_dir("/proc")
+        .unwrap()
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<u32>().ok())
+        .filter(|pid| {
+            let live = std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+                !s.rsplit_once(')')
+                    .is_some_and(|(_, r)| r.trim_start().starts_with('Z'))
+            });
+            live && std::fs::read_to_string(format!("/proc/{pid}/comm"))
+                .is_ok_and(|c| c.trim_end() == marker)
+        })
+        .collect()
+}
+
+/// Wait (at most `within`) until `done` holds; whether it did.
+fn eventually(within: Duration, mut done: impl FnMut() -> bool) -> bool {
+    let until = Instant::now() + within;
+    loop {
+        if done() {
+            return true;
+        }
+        if Instant::now() >= until {
+            return false;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// One test of this program at a time: they count the processes named by one marker.
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    SERIAL.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+#[test]
+fn a_process_an_fmu_sends_away_is_killed_when_its_host_is_dropped() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let model = open(escape);
+    let pid = attempt(&model, 1.0).unwrap() as u32;
+    assert!(pid > 1);
+    // It left (another session, its parent gone), and it lives while the host does (once
+    // it has taken its name).
+    assert!(
+        eventually(Duration::from_secs(30), || named(&escape.marker) == [pid]),
+        "{:?}",
+        named(&escape.marker)
+    );
+    let sid = |pid: u32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat"))
+            .unwrap()
+            .rsplit_once(')')
+            .unwrap()
+            .1
+            .split_whitespace()
+            .nth(3)
+            .unwrap()
+            .parse::<u32>()
+            .unwrap()
+    };
+    assert_eq!(sid(pid), pid, "a session of its own");
+    drop(model);
+    assert_eq!(named(&escape.marker), Vec::<u32>::new(), "nothing left");
+}
+
+#[test]
+fn a_process_an_fmu_sends_away_is_killed_at_the_deadline() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let model = open(escape);
+    let (failed, seen) = std::thread::scope(|scope| {
+        let running = scope.spawn(|| attempt(&model, 2.0));
+        // The runaway process exists while the simulation hangs.
+        let seen = eventually(Duration::from_secs(30), || {
+            !named(&escape.marker).is_empty()
+        });
+        (running.join().unwrap(), seen)
+    });
+    assert!(seen, "the FMU started its process");
+    let message = failed.unwrap_err().to_string();
+    assert!(
+        message.contains(&format!("did not finish within {DEADLINE} s")),
+        "{message}"
+    );
+    // Killed with the host at the deadline, before the model is dropped.
+    assert_eq!(named(&escape.marker), Vec::<u32>::new(), "nothing left");
+    drop(model);
+}
+
+#[test]
+fn a_process_an_fmu_sends_away_ends_with_the_program_that_ran_it() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let out = calib(&[
+        "simulate",
+        escape.path.to_str().unwrap(),
+        "--set",
+        "mode=1",
+        "--stop",
+        "1",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let mut lines = stdout.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let y = header
+        .iter()
+        .position(|h| h.trim_matches('"') == "y")
+        .unwrap();
+    let pid: f64 = lines
+        .last()
+        .unwrap()
+        .split(',')
+        .nth(y)
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!(pid > 1.0);
+    // calib has exited: its FMU hosts are told so by the kernel and clean up.
+    assert!(
+        eventually(Duration::from_secs(20), || named(&escape.marker).is_empty()),
+        "process {pid} outlived calib"
+    );
+}
+
+#[test]
+fn an_fmu_works_in_a_private_folder_removed_afterwards() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let model = open(escape);
+    let supervisor = attempt(&model, 6.0).unwrap() as u32;
+    let folders = || -> Vec<PathBuf> {
+        std::fs::read_dir(std::env::temp_dir())
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .starts_with(&format!("calib-fmu-run-{supervisor}-"))
+            })
+            .map(|e| e.path())
+            .collect()
+    };
+    let live = folders();
+    assert_eq!(live.len(), 1, "{live:?}");
+    use std::os::unix::fs::PermissionsExt;
+    let mode = std::fs::metadata(&live[0]).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o700, "only this user may enter it");
+    // The FMU writes there (and nowhere else, below).
+    assert_eq!(attempt(&model, 3.0).unwrap() as u32 & 2, 2);
+    drop(model);
+    assert_eq!(folders(), Vec::<PathBuf>::new());
+}
+
+#[test]
+fn an_fmu_cannot_write_or_read_outside_its_folders_where_the_kernel_has_landlock() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let model = open(escape);
+    let wrote = attempt(&model, 3.0).unwrap() as u32;
+    let read = attempt(&model, 4.0).unwrap() as u32;
+    assert_eq!(wrote & 2, 2, "it writes in its working folder");
+    match contain::containment().landlock_abi {
+        Some(_) => {
+            assert_eq!(wrote & 1, 0, "it could write {}", escape.outside.display());
+            assert!(!escape.outside.exists());
+            assert_eq!(read, 0, "it could read {}", escape.secret.display());
+        }
+        None => eprintln!(
+            "this kernel has no Landlock: file confinement is not tested (it wrote outside: \
+             {}, read outside: {read})",
+            wrote & 1
+        ),
+    }
+}
+
+#[test]
+fn an_fmu_cannot_take_more_memory_than_its_bound() {
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    const { assert!(calib_worker::limits::FMU_HOST_MEMORY_BYTES < 6 << 30) };
+    let model = open(escape);
+    assert_eq!(attempt(&model, 5.0).unwrap(), 0.0, "6 GiB were allocated");
+}
+
+#[test]
+fn calib_models_refuses_an_archive_lying_about_a_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let lying = zips::stored_zip64(
+        &[("modelDescription.xml", zips::DESCRIPTION.as_bytes())],
+        zips::Lies {
+            first_size: Some(1 << 40),
+            entries: None,
+        },
+    );
+    let path = dir.path().join("Lying.fmu");
+    std::fs::write(&path, lying).unwrap();
+    let out = calib(&["models", path.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("header says 1099511627776 bytes"),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_process_an_fmu_sends_away_ends_with_a_killed_worker() {
+    use calib_proto::v1 as proto;
+    use std::io::BufRead;
+    let _serial = serial();
+    let Some(escape) = escape_fmu() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let cache = dir.path().join("fmu-cache");
+    let mut worker = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args([
+            "worker",
+            "--listen",
+            "127.0.0.1:0",
+            "--slots",
+            "1",
+            "--allow-fmu",
+        ])
+        .arg("--fmu-cache")
+        .arg(&cache)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(worker.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let address = line
+        .strip_prefix("worker listening on ")
+        .and_then(|rest| rest.split_whitespace().next())
+        .unwrap_or_else(|| panic!("unexpected first line: {line}"))
+        .to_string();
+    let pid = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap()
+        .block_on(async {
+            let mut client =
+                proto::simulator_client::SimulatorClient::connect(format!("http://{address}"))
+                    .await
+                    .unwrap();
+            let uploaded = client
+                .upload_fmu(proto::UploadFmuRequest {
+                    protocol_version: calib_proto::PROTOCOL_VERSION,
+                    fmu: std::fs::read(&escape.path).unwrap(),
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            let simulated = client
+                .simulate(proto::SimulateRequest {
+                    protocol_version: calib_proto::PROTOCOL_VERSION,
+                    model: uploaded.models[0].clone(),
+                    parameters: vec![proto::ParameterValue {
+                        name: "mode".into(),
+                        value: 1.0,
+                    }],
+                    times: vec![0.0, 1.0],
+                    outputs: vec!["y".into()],
+                    solver: None,
+                    fmu_hash: uploaded.fmu_hash,
+                })
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!(simulated.failure, None);
+            simulated.series[0].values[1] as u32
+        });
+    assert!(
+        eventually(Duration::from_secs(30), || named(&escape.marker) == [pid]),
+        "{:?}",
+        named(&escape.marker)
+    );
+    // The worker is killed outright: it has no chance to stop its FMU hosts itself.
+    worker.kill().unwrap();
+    worker.wait().unwrap();
+    assert!(
+        eventually(Duration::from_secs(20), || named(&escape.marker).is_empty()),
+        "process {pid} outlived the worker"
+    );
+}

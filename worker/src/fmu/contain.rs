@@ -1,0 +1,434 @@
+//! Keeping an FMU's code to its own processes and folder (Linux).
+//!
+//! The host program the worker starts ([`super::host`]) is a *supervisor* that runs no FMU
+//! code: it starts in a session and process group of its own, dies with the thread that
+//! started it (`PR_SET_PDEATHSIG`), and makes itself the reaper of every orphan below it
+//! (`PR_SET_CHILD_SUBREAPER`). It starts the same program again as the FMU's process
+//! (the *inner* one, [`INNER`]), in a private working folder, and waits. When the inner
+//! process ends, or the supervisor is told to stop (SIGTERM: the deadline passed, the
+//! worker dropped the FMU, the worker exited), it kills the inner process and then every
+//! process left below it (a child that `fork`ed, `setsid`ed or double-forked is still its
+//! descendant, and an orphan comes back to it), removes the working folder and exits as
+//! the inner process did.
+//!
+//! The inner process (its `TMPDIR` the working folder too), before it loads the FMU's
+//! library, bounds its address space and CPU
+//! time (`setrlimit`) and, where the kernel has Landlock, confines its files: it may
+//! write in its working folder alone, and read the unpacked FMU and the system's folders
+//! (`/usr`, `/lib*`, `/etc`, `/opt`, `/proc`, `/sys`, `/dev`), nothing else. Landlock (ABI
+//! 6 and later) also keeps it from signalling processes outside it. Without Landlock the
+//! rest holds and the files are not confined; [`containment`] says which.
+
+use crate::limits;
+use std::io;
+use std::os::unix::process::CommandExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus};
+use std::sync::{mpsc, OnceLock};
+use std::time::{Duration, Instant};
+
+/// Set in the environment of the FMU's own process (the inner one).
+pub const INNER: &str = "CALIB_FMU_HOST_INNER";
+/// How long a supervisor told to stop may take before its whole group is killed.
+const STOP_GRACE: Duration = Duration::from_secs(5);
+/// Rounds of killing what is left below a supervisor (each round kills the processes that
+/// became its children since the last).
+const KILL_ROUNDS: usize = 10_000;
+
+/// What confines an FMU's code on this machine.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Containment {
+    /// The Landlock ABI the kernel offers, if any.
+    pub landlock_abi: Option<i32>,
+}
+
+impl std::fmt::Display for Containment {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "each FMU runs in a process group of its own, killed as a group at its deadline or \
+             when the worker exits, in a private working folder, with its memory and CPU time \
+             bounded; "
+        )?;
+        match self.landlock_abi {
+            Some(abi) => write!(
+                f,
+                "its file access is confined by Landlock (ABI {abi}): writes to its working \
+                 folder, reads to the FMU and the system's folders"
+            ),
+            None => write!(
+                f,
+                "this kernel has no Landlock: the FMU's file access is NOT confined (it may \
+                 read and write whatever this user may)"
+            ),
+        }
+    }
+}
+
+/// What confines an FMU's code on this machine (a probe of the kernel).
+pub fn containment() -> Containment {
+    static PROBED: OnceLock<Containment> = OnceLock::new();
+    *PROBED.get_or_init(|| {
+        // landlock_create_ruleset(NULL, 0, LANDLOCK_CREATE_RULESET_VERSION) answers the ABI.
+        // SAFETY: a query that takes no pointer.
+        let abi = unsafe {
+            libc::syscall(
+                libc::SYS_landlock_create_ruleset,
+                std::ptr::null::<libc::c_void>(),
+                0usize,
+                1u32,
+            )
+        };
+        Containment {
+            landlock_abi: (abi > 0).then_some(abi as i32),
+        }
+    })
+}
+
+/// Start `command` as a supervisor: in a new session and process group, sent SIGTERM when
+/// the thread that started it ends. Every supervisor is started by one thread kept for
+/// that, which lives as long as the process: the death signal follows the thread that
+/// forked, and a worker's simulation threads come and go.
+pub fn spawn_supervisor(mut command: Command) -> io::Result<std::process::Child> {
+    // SAFETY: only async-signal-safe calls between fork and exec.
+    unsafe {
+        let parent = libc::getpid();
+        command.pre_exec(move || {
+            if libc::setsid() < 0 {
+                return Err(io::Error::last_os_error());
+            }
+            if libc::prctl(
+                libc::PR_SET_PDEATHSIG,
+                libc::SIGTERM as libc::c_ulong,
+                0,
+                0,
+                0,
+            ) < 0
+            {
+                return Err(io::Error::last_os_error());
+            }
+            // The parent died before the death signal was asked for.
+            if libc::getppid() != parent {
+                return Err(io::Error::other("the worker ended"));
+            }
+            Ok(())
+        });
+    }
+    type Job = (Command, mpsc::Sender<io::Result<std::process::Child>>);
+    static KEEPER: OnceLock<mpsc::Sender<Job>> = OnceLock::new();
+    let keeper = KEEPER.get_or_init(|| {
+        let (send, jobs) = mpsc::channel::<Job>();
+        std::thread::Builder::new()
+            .name("fmu-host-starter".into())
+            .spawn(move || {
+                for (mut command, reply) in jobs {
+                    let _ = reply.send(command.spawn());
+                }
+            })
+            .expect("a thread to start FMU hosts");
+        send
+    });
+    let (reply, answer) = mpsc::channel();
+    keeper
+        .send((command, reply))
+        .map_err(|_| io::Error::other("the FMU host starter is gone"))?;
+    answer
+        .recv()
+        .map_err(|_| io::Error::other("the FMU host starter is gone"))?
+}
+
+/// Stop a supervisor: ask it (SIGTERM) to kill its FMU's processes and clean up, give it
+/// [`STOP_GRACE`], then kill whatever is left of its process group, and reap it.
+pub fn stop_supervisor(process: &mut std::process::Child) -> io::Result<ExitStatus> {
+    let pid = process.id() as libc::pid_t;
+    // SAFETY: plain system calls on our own child, which is not reaped before the end of
+    // this function (so its pid, the group's id, is not reused meanwhile).
+    unsafe {
+        libc::kill(pid, libc::SIGTERM);
+        let until = Instant::now() + STOP_GRACE;
+        let mut reaped_elsewhere = false;
+        loop {
+            let mut info: libc::siginfo_t = std::mem::zeroed();
+            let r = libc::waitid(
+                libc::P_PID,
+                pid as libc::id_t,
+                &mut info,
+                libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
+            );
+            if r != 0 {
+                reaped_elsewhere = true;
+                break;
+            }
+            if info.si_pid() != 0 || Instant::now() >= until {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        if !reaped_elsewhere {
+            libc::killpg(pid, libc::SIGKILL);
+        }
+    }
+    process.wait()
+}
+
+/// The supervisor's side (see the module documentation): start this program again as the
+/// FMU's process, wait, clean up and exit as it did.
+pub fn supervise() -> ! {
+    // SAFETY: plain system calls; this process runs a single thread.
+    unsafe {
+        libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0);
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for signal in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP, libc::SIGCHLD] {
+            libc::sigaddset(&mut set, signal);
+        }
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+        let workdir = match private_folder() {
+            Ok(dir) => dir,
+            Err(e) => {
+                eprintln!("cannot make the FMU's working folder: {e}");
+                libc::_exit(1);
+            }
+        };
+        let me = libc::getpid();
+        let mut command = Command::new("/proc/self/exe");
+        command
+            .args(std::env::args_os().skip(1))
+            .env(INNER, "1")
+            .env("TMPDIR", &workdir)
+            .current_dir(&workdir);
+        command.pre_exec(move || {
+            let mut none: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut none);
+            libc::pthread_sigmask(libc::SIG_SETMASK, &none, std::ptr::null_mut());
+            if libc::prctl(
+                libc::PR_SET_PDEATHSIG,
+                libc::SIGKILL as libc::c_ulong,
+                0,
+                0,
+                0,
+            ) < 0
+                || libc::getppid() != me
+            {
+                return Err(io::Error::other("the FMU host ended"));
+            }
+            Ok(())
+        });
+        let inner = match command.spawn() {
+            Ok(child) => child.id() as libc::pid_t,
+            Err(e) => {
+                eprintln!("cannot start the FMU's process: {e}");
+                let _ = std::fs::remove_dir_all(&workdir);
+                libc::_exit(1);
+            }
+        };
+        // Only the FMU's process answers on the pipes: let go of them, so that the worker
+        // sees their end when it ends.
+        let null = libc::open(c"/dev/null".as_ptr(), libc::O_RDWR);
+        if null >= 0 {
+            libc::dup2(null, 0);
+            libc::dup2(null, 1);
+            libc::close(null);
+        }
+        let mut ended: Option<libc::c_int> = None;
+        'wait: loop {
+            let signal = libc::sigwaitinfo(&set, std::ptr::null_mut());
+            if signal == libc::SIGCHLD {
+                loop {
+                    let mut status = 0;
+                    let pid = libc::waitpid(-1, &mut status, libc::WNOHANG);
+                    if pid <= 0 {
+                        break;
+                    }
+                    if pid == inner {
+                        ended = Some(status);
+                        break 'wait;
+                    }
+                }
+            } else if signal > 0 {
+                break;
+            }
+        }
+        if ended.is_none() {
+            libc::kill(inner, libc::SIGKILL);
+            let mut status = 0;
+            libc::waitpid(inner, &mut status, 0);
+        }
+        kill_descendants();
+        let _ = std::fs::remove_dir_all(&workdir);
+        match ended {
+            Some(status) if libc::WIFEXITED(status) => libc::_exit(libc::WEXITSTATUS(status)),
+            Some(status) if libc::WIFSIGNALED(status) => {
+                // End as the FMU's process did, for the worker to report (no core dump).
+                let signal = libc::WTERMSIG(status);
+                let none = libc::rlimit {
+                    rlim_cur: 0,
+                    rlim_max: 0,
+                };
+                libc::setrlimit(libc::RLIMIT_CORE, &none);
+                libc::signal(signal, libc::SIG_DFL);
+                let mut only: libc::sigset_t = std::mem::zeroed();
+                libc::sigemptyset(&mut only);
+                libc::sigaddset(&mut only, signal);
+                libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
+                libc::raise(signal);
+                libc::_exit(128 + signal)
+            }
+            _ => libc::_exit(143),
+        }
+    }
+}
+
+/// A new folder only this user may enter, in the temporary folder.
+fn private_folder() -> io::Result<PathBuf> {
+    use std::os::unix::fs::DirBuilderExt;
+    let base = std::env::temp_dir();
+    let pid = std::process::id();
+    for attempt in 0..100u32 {
+        let dir = base.join(format!("calib-fmu-run-{pid}-{attempt}"));
+        match std::fs::DirBuilder::new().mode(0o700).create(&dir) {
+            Ok(()) => return Ok(dir),
+            Err(e) if e.kind() == io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+    Err(io::Error::other(
+        "no free name for the FMU's working folder",
+    ))
+}
+
+/// The processes whose parent is `parent` (from `/proc`).
+fn children_of(parent: libc::pid_t) -> Vec<libc::pid_t> {
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return Vec::new();
+    };
+    entries
+        .filter_map(|e| e.ok()?.file_name().to_str()?.parse::<libc::pid_t>().ok())
+        .filter(|&pid| {
+            std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|stat| {
+                // `pid (comm) state ppid …`, where comm may hold anything.
+                stat.rsplit_once(')')
+                    .and_then(|(_, rest)| rest.split_whitespace().nth(1)?.parse().ok())
+                    == Some(parent)
+            })
+        })
+        .collect()
+}
+
+/// Kill every process below this one, round after round: the orphans of a killed process
+/// come back to this one (a subreaper), to be killed in the next round.
+fn kill_descendants() {
+    // SAFETY: plain system calls on this process's own children.
+    unsafe {
+        let me = libc::getpid();
+        for _ in 0..KILL_ROUNDS {
+            let children = children_of(me);
+            if children.is_empty() {
+                break;
+            }
+            for &pid in &children {
+                libc::kill(pid, libc::SIGKILL);
+            }
+            for &pid in &children {
+                libc::waitpid(pid, std::ptr::null_mut(), 0);
+            }
+        }
+        while libc::waitpid(-1, std::ptr::null_mut(), libc::WNOHANG) > 0 {}
+    }
+}
+
+/// The address space the FMU's process may have [bytes]: `CALIB_FMU_MEMORY_MIB`, or
+/// [`limits::FMU_HOST_MEMORY_BYTES`].
+pub fn memory_limit() -> u64 {
+    std::env::var("CALIB_FMU_MEMORY_MIB")
+        .ok()
+        .and_then(|s| s.trim().parse::<u64>().ok())
+        .filter(|&mib| mib > 0)
+        .map_or(limits::FMU_HOST_MEMORY_BYTES, |mib| {
+            mib.saturating_mul(1 << 20)
+        })
+}
+
+/// The inner process's side, before the FMU's library is loaded: bound its memory, make no
+/// core dumps, and confine its files to `workdir` (writes) and `fmu` and the system's
+/// folders (reads) where the kernel has Landlock.
+pub fn confine(fmu: &Path, workdir: &Path) {
+    set_limit(libc::RLIMIT_AS, memory_limit());
+    set_limit(libc::RLIMIT_CORE, 0);
+    if let Err(e) = confine_files(fmu, workdir) {
+        eprintln!("calib: the FMU's file access is not confined: {e}");
+    }
+}
+
+/// Lower the soft limit of `resource` to `value` (never above the hard limit).
+fn set_limit(resource: libc::__rlimit_resource_t, value: u64) {
+    // SAFETY: plain system calls on this process.
+    unsafe {
+        let mut current: libc::rlimit = std::mem::zeroed();
+        if libc::getrlimit(resource, &mut current) != 0 {
+            return;
+        }
+        let value = value.min(current.rlim_max);
+        let hard = if resource == libc::RLIMIT_CPU {
+            current.rlim_max
+        } else {
+            value
+        };
+        libc::setrlimit(
+            resource,
+            &libc::rlimit {
+                rlim_cur: value,
+                rlim_max: hard,
+            },
+        );
+    }
+}
+
+/// Allow `seconds` more CPU time to the simulation about to run in this process (the soft
+/// `RLIMIT_CPU`: past it the kernel sends SIGXCPU, which ends the process).
+pub fn allow_cpu(seconds: f64) {
+    // SAFETY: plain system calls on this process.
+    let used = unsafe {
+        let mut usage: libc::rusage = std::mem::zeroed();
+        libc::getrusage(libc::RUSAGE_SELF, &mut usage);
+        (usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) as u64
+    };
+    set_limit(libc::RLIMIT_CPU, used + seconds.ceil() as u64 + 1);
+}
+
+fn confine_files(fmu: &Path, workdir: &Path) -> Result<(), landlock::RulesetError> {
+    use landlock::{
+        path_beneath_rules, Access, AccessFs, Ruleset, RulesetAttr, RulesetCreatedAttr, Scope, ABI,
+    };
+    let abi = ABI::V6;
+    let readable: Vec<&Path> = [
+        fmu,
+        Path::new("/usr"),
+        Path::new("/lib"),
+        Path::new("/lib32"),
+        Path::new("/lib64"),
+        Path::new("/bin"),
+        Path::new("/etc"),
+        Path::new("/opt"),
+        Path::new("/proc"),
+        Path::new("/sys"),
+        Path::new("/dev"),
+    ]
+    .into_iter()
+    .filter(|p| p.exists())
+    .collect();
+    // Without Landlock the ruleset is not enforced, silently here: the worker says so
+    // once ([`containment`]), not each FMU process in the FMU's messages.
+    Ruleset::default()
+        .handle_access(AccessFs::from_all(abi))?
+        .scope(Scope::from_all(abi))?
+        .create()?
+        .add_rules(path_beneath_rules(readable, AccessFs::from_read(abi)))?
+        .add_rules(path_beneath_rules([workdir], AccessFs::from_all(abi)))?
+        .add_rules(path_beneath_rules(
+            [Path::new("/dev/null")],
+            AccessFs::from_file(abi),
+        ))?
+        .restrict_self()?;
+    Ok(())
+}
