@@ -109,6 +109,9 @@ fn seconds(step: f64, end: f64) -> Vec<f64> {
         .collect()
 }
 
+/// Parameters set by name.
+type Settings = Vec<(&'static str, f64)>;
+
 /// Full parameter vector of `model` with the named entries set.
 fn with(model: &dyn Model, set: &[(&str, f64)]) -> Vec<f64> {
     let info = model.info();
@@ -149,7 +152,7 @@ fn furuta_results_are_bit_for_bit_the_recorded_ones() {
     let model = Furuta::new();
     let grid = seconds(0.01, 10.0);
     let default = SolverOptions::default();
-    let cases: Vec<(&str, Vec<(&str, f64)>, SolverOptions)> = vec![
+    let cases: Vec<(&str, Settings, SolverOptions)> = vec![
         ("default", vec![], default),
         (
             "frictions",
