@@ -258,14 +258,17 @@ impl<'g, F: FnMut(usize, &[f64])> Run<'g, F> {
             None => StepEnd::Reached(t_new, y_new),
             Some((_, te)) => StepEnd::Event(te),
         };
+        // A local index, which the loop keeps in a register.
+        let mut next_out = self.next_out;
         outputs_of_step(
             self.grid,
-            &mut self.next_out,
+            &mut next_out,
             end,
             stepper,
             &mut self.ytmp,
             &mut self.out,
         );
+        self.next_out = next_out;
         event
     }
 
