@@ -5,19 +5,20 @@
 //! hybrid systems (mode switches such as stick–slip friction) event functions, the mode
 //! switch at an event and the mode that events accumulating at one time approximate.
 //!
-//! Two one-step methods integrate them, each a [`driver::Stepper`] (an attempted step with its
-//! error estimate, a continuous extension of the last step, and its own step-size controller):
-//! - [`integrate`], Dormand–Prince 5(4) ([`dopri`]), for non-stiff systems and tight
+//! Two one-step methods integrate them. Each is a `Stepper` (in `driver.rs`): an attempted
+//! step with its error estimate, a continuous extension of the last step, and its own
+//! step-size controller:
+//! - [`integrate`], Dormand–Prince 5(4) (`dopri.rs`), for non-stiff systems and tight
 //!   tolerances;
 //! - [`rkc::integrate`], the Runge–Kutta–Chebyshev method ([`rkc`]), for mildly stiff systems
 //!   whose step size Dormand–Prince's stability would set.
 //!
-//! Both run in the one loop of [`driver::drive`], which owns what they share: outputs read
-//! off the continuous extension at the requested times (so the step size is set by accuracy
-//! alone, never by the output grid), the step limit, the clamp of the last step, rejected
-//! steps, and the events of [`events`]: located on the continuous extension, the step cut
-//! there, the mode switched and the integration restarted from the event. A new method is a
-//! new `Stepper`, and gets outputs, events and limits as they are.
+//! Both run in the one loop of `drive` (in `driver.rs`), which owns what they share: outputs
+//! read off the continuous extension at the requested times (so the step size is set by
+//! accuracy alone, never by the output grid), the step limit, the clamp of the last step,
+//! rejected steps, and the events (`events.rs`): located on the continuous extension, the
+//! step cut there, the mode switched and the integration restarted from the event. A new
+//! method is a new `Stepper`, and gets outputs, events and limits as they are.
 //!
 //! References: with each method, and
 //! - E. Hairer, S. P. Nørsett, G. Wanner, *Solving Ordinary Differential Equations I*,

@@ -27,7 +27,7 @@ use super::driver::Interpolant;
 use super::HybridSystem;
 use crate::model::SimulationError;
 
-/// Events the [`ZenoGuard`] looks back over.
+/// Events the guard against accumulating events looks back over.
 pub const ZENO_EVENTS: usize = 32;
 /// Span of [`ZENO_EVENTS`] events, relative to the integrated span, below which events are
 /// taken to accumulate: a millionth of a second over a 1000 s simulation.

@@ -34,7 +34,7 @@
 //!   complex dominant pair), the largest ratio it met is taken. The stage count is
 //!   `s = 1 + ⌊√(1 + 1.54 h ρ)⌋`;
 //! - the continuous extension is the cubic Hermite interpolant of `y_n, y_{n+1}, F_n,
-//!   F_{n+1}`, of third order, on which [`super::driver::drive`] reads the outputs and
+//!   F_{n+1}`, of third order, on which the shared driver reads the outputs and
 //!   locates the events exactly as for Dormand–Prince.
 //!
 //! References:
