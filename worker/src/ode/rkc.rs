@@ -34,8 +34,8 @@
 //!   complex dominant pair), the largest ratio it met is taken. The stage count is
 //!   `s = 1 + ⌊√(1 + 1.54 h ρ)⌋`;
 //! - the continuous extension is the cubic Hermite interpolant of `y_n, y_{n+1}, F_n,
-//!   F_{n+1}`, of third order, on which outputs are read and events located exactly as
-//!   in [`super::integrate`].
+//!   F_{n+1}`, of third order, on which the shared driver reads the outputs and
+//!   locates the events exactly as for Dormand–Prince.
 //!
 //! References:
 //! - B. P. Sommeijer, L. F. Shampine, J. G. Verwer, "RKC: an explicit solver for parabolic
@@ -45,10 +45,8 @@
 //! - E. Hairer, G. Wanner, *Solving Ordinary Differential Equations II*, 2nd ed., Springer
 //!   1996, §IV.2 (stabilised explicit methods).
 
-use super::{
-    first_event, outputs_at_start, outputs_of_step, switch_mode, HybridSystem, Interpolant,
-    StepEnd, ZenoGuard,
-};
+use super::driver::{drive, Interpolant, Stepper, Trial};
+use super::HybridSystem;
 use crate::model::{SimulationError, SolverOptions, SolverStats};
 
 /// Accepted steps between two estimates of the spectral radius.
@@ -164,134 +162,193 @@ pub fn integrate<S, F>(
     y0: &[f64],
     grid: &[f64],
     options: &SolverOptions,
-    mut out: F,
+    out: F,
 ) -> Result<SolverStats, SimulationError>
 where
     S: HybridSystem,
     F: FnMut(usize, &[f64]),
 {
-    let n = system.dim();
-    assert_eq!(y0.len(), n, "state dimension");
-    let mut stats = SolverStats::default();
-    let Some(&t_end) = grid.last() else {
-        return Ok(stats);
-    };
+    drive(system, &mut Rkc::new(y0.len()), y0, grid, options, out)
+}
 
-    let mut t = 0.0;
-    let mut next_out = outputs_at_start(grid, y0, &mut out);
-    if next_out == grid.len() {
-        return Ok(stats);
+/// The method's state: the last step's ends (in its interpolant), the stages' scratch, and
+/// what it carries from step to step.
+struct Rkc {
+    /// `y0`/`f0` at the current time, `y1`/`f1` at the end of the last attempt.
+    step: Hermite,
+    yjm1: Vec<f64>,
+    yjm2: Vec<f64>,
+    ytmp: Vec<f64>,
+    work: [Vec<f64>; 2],
+    /// The dominant direction of the last spectral radius estimate.
+    dir: Vec<f64>,
+    /// The spectral radius estimate, NaN when it is to be renewed.
+    rho: f64,
+    /// Accepted steps since `rho` was estimated.
+    since_estimate: usize,
+    /// Stages of the next attempt.
+    stages: usize,
+    /// The last accepted step and its error, for the predictive controller.
+    h_old: f64,
+    err_old: f64,
+}
+
+impl Rkc {
+    fn new(n: usize) -> Self {
+        let vector = || vec![0.0; n];
+        Self {
+            step: Hermite {
+                t0: 0.0,
+                h: 0.0,
+                y0: vector(),
+                y1: vector(),
+                f0: vector(),
+                f1: vector(),
+            },
+            yjm1: vector(),
+            yjm2: vector(),
+            ytmp: vector(),
+            work: std::array::from_fn(|_| vector()),
+            dir: vector(),
+            rho: f64::NAN,
+            since_estimate: 0,
+            stages: 2,
+            h_old: f64::NAN,
+            err_old: f64::NAN,
+        }
+    }
+}
+
+impl Interpolant for Rkc {
+    fn eval(&self, t: f64, out: &mut [f64]) {
+        self.step.eval(t, out);
+    }
+}
+
+impl Stepper for Rkc {
+    fn state(&self) -> &[f64] {
+        &self.step.y0
     }
 
-    let ne = system.event_count();
-    let mut g_old = vec![0.0; ne];
-    let mut g_new = vec![0.0; ne];
-    let mut g_tmp = vec![0.0; ne];
+    fn proposed(&self) -> &[f64] {
+        &self.step.y1
+    }
 
-    // The step's ends live in the interpolant: `y0`/`f0` at `t`, `y1`/`f1` at `t + h`.
-    let mut step = Hermite {
-        t0: 0.0,
-        h: 0.0,
-        y0: y0.to_vec(),
-        y1: vec![0.0; n],
-        f0: vec![0.0; n],
-        f1: vec![0.0; n],
-    };
-    let mut yjm1 = vec![0.0; n];
-    let mut yjm2 = vec![0.0; n];
-    let mut ytmp = vec![0.0; n];
-    let mut work: [Vec<f64>; 2] = std::array::from_fn(|_| vec![0.0; n]);
-    let mut dir = vec![0.0; n];
-
-    let restart = |system: &mut S,
-                   t: f64,
-                   step: &mut Hermite,
-                   g_old: &mut [f64],
-                   stats: &mut SolverStats|
-     -> Result<(), SimulationError> {
+    fn restart<S: HybridSystem>(
+        &mut self,
+        system: &S,
+        t: f64,
+        y: &[f64],
+        stats: &mut SolverStats,
+    ) -> Result<(), SimulationError> {
+        let step = &mut self.step;
+        step.y0.copy_from_slice(y);
         system.rhs(t, &step.y0, &mut step.f0);
         stats.rhs_evaluations += 1;
         if step.f0.iter().any(|v| !v.is_finite()) {
             return Err(SimulationError::Diverged { time: t });
         }
-        system.events(t, &step.y0, g_old);
+        self.h_old = f64::NAN;
+        self.err_old = f64::NAN;
+        self.rho = f64::NAN;
         Ok(())
-    };
-    restart(system, t, &mut step, &mut g_old, &mut stats)?;
+    }
 
-    let mut rho = f64::NAN;
-    let mut since_estimate = 0;
-    let mut h = f64::NAN;
-    let mut h_old = f64::NAN;
-    let mut err_old = f64::NAN;
-    let mut last_rejected = false;
-    let mut zeno = ZenoGuard::new(t_end);
+    /// Chosen in [`Stepper::prepare`], once the spectral radius is known.
+    fn initial_step<S: HybridSystem>(
+        &mut self,
+        _system: &S,
+        _t: f64,
+        _span: f64,
+        _options: &SolverOptions,
+        _stats: &mut SolverStats,
+    ) -> f64 {
+        f64::NAN
+    }
 
-    loop {
-        if stats.accepted_steps + stats.rejected_steps >= options.max_steps {
-            return Err(SimulationError::StepLimit {
-                limit: options.max_steps,
-                time: t,
-            });
-        }
-        if !rho.is_finite() || since_estimate >= SPECTRAL_REFRESH {
-            rho = spectral_radius(
-                &*system, t, &step.y0, &step.f0, &mut dir, options, &mut work, &mut stats,
+    fn prepare<S: HybridSystem>(
+        &mut self,
+        system: &S,
+        t: f64,
+        span: f64,
+        h: &mut f64,
+        options: &SolverOptions,
+        stats: &mut SolverStats,
+    ) -> Result<(), SimulationError> {
+        if !self.rho.is_finite() || self.since_estimate >= SPECTRAL_REFRESH {
+            let step = &self.step;
+            self.rho = spectral_radius(
+                system,
+                t,
+                &step.y0,
+                &step.f0,
+                &mut self.dir,
+                options,
+                &mut self.work,
+                stats,
             )
             .ok_or(SimulationError::Diverged { time: t })?;
-            since_estimate = 0;
+            self.since_estimate = 0;
         }
         if !h.is_finite() {
-            h = initial_step(
-                &*system,
+            *h = initial_step(
+                system,
                 t,
-                &step,
-                rho,
-                t_end - t,
+                &self.step,
+                self.rho,
+                span,
                 options,
-                &mut ytmp,
-                &mut work[0],
+                &mut self.ytmp,
+                &mut self.work[0],
             );
             stats.rhs_evaluations += 1;
         }
-        let remaining = t_end - t;
-        let mut last_step = false;
-        if h >= remaining * (1.0 - 1e-12) {
-            h = remaining;
-            last_step = true;
-        }
-        // Stages for stability, `h` shortened when even the most are not enough.
-        let mut stages = 1 + (1.0 + 1.54 * h * rho).sqrt() as usize;
+        Ok(())
+    }
+
+    /// Stages for stability, `h` shortened when even the most are not enough.
+    fn fit(&mut self, h: &mut f64, last: &mut bool) {
+        let mut stages = 1 + (1.0 + 1.54 * *h * self.rho).sqrt() as usize;
         if stages > MAX_STAGES {
             stages = MAX_STAGES;
-            h = ((stages - 1).pow(2) - 1) as f64 / (1.54 * rho);
-            last_step = false;
+            *h = ((stages - 1).pow(2) - 1) as f64 / (1.54 * self.rho);
+            *last = false;
         }
-        let stages = stages.max(2);
-        if h <= 1e-14 * t.abs().max(1.0) {
-            return Err(SimulationError::StepTooSmall { time: t });
-        }
+        self.stages = stages.max(2);
+    }
 
+    fn attempt<S: HybridSystem>(
+        &mut self,
+        system: &S,
+        t: f64,
+        h: f64,
+        options: &SolverOptions,
+        stats: &mut SolverStats,
+    ) -> Result<Trial, SimulationError> {
+        let step = &mut self.step;
         chebyshev_step(
-            &*system,
+            system,
             t,
             h,
-            stages,
+            self.stages,
             &step.y0,
             &step.f0,
-            &mut yjm1,
-            &mut yjm2,
+            &mut self.yjm1,
+            &mut self.yjm2,
             &mut step.y1,
         );
-        stats.rhs_evaluations += stages - 1;
+        stats.rhs_evaluations += self.stages - 1;
         system.rhs(t + h, &step.y1, &mut step.f1);
         stats.rhs_evaluations += 1;
 
+        let (y0, y1, f0, f1): (&[f64], &[f64], &[f64], &[f64]) =
+            (&step.y0, &step.y1, &step.f0, &step.f1);
+        let n = y0.len();
         let mut err = 0.0;
         for i in 0..n {
-            let e = (12.0 * (step.y0[i] - step.y1[i]) + 6.0 * h * (step.f0[i] + step.f1[i]))
+            let e = (12.0 * (y0[i] - y1[i]) + 6.0 * h * (f0[i] + f1[i]))
                 / 15.0
-                / weight(options, step.y0[i], step.y1[i]);
+                / weight(options, y0[i], y1[i]);
             err += e * e;
         }
         let err = (err / n as f64).sqrt();
@@ -299,79 +356,50 @@ where
             if h < 1e-10 {
                 return Err(SimulationError::Diverged { time: t });
             }
-            stats.rejected_steps += 1;
-            h *= 0.1;
-            last_rejected = true;
-            rho = f64::NAN;
-            continue;
+            return Ok(Trial::NonFinite);
         }
-        if err > 1.0 {
-            stats.rejected_steps += 1;
-            h *= 0.8 / err.cbrt();
-            if last_rejected {
-                // Rejected twice in a row: the state may have turned stiffer.
-                rho = f64::NAN;
-            }
-            last_rejected = true;
-            continue;
-        }
+        Ok(Trial::Error(err))
+    }
 
-        stats.accepted_steps += 1;
-        since_estimate += 1;
-        step.t0 = t;
-        step.h = h;
-        let t_new = if last_step { t_end } else { t + h };
-        let event = first_event(
-            &*system, &step, t, t_new, &step.y1, &g_old, &mut g_new, &mut ytmp, &mut g_tmp,
-        );
-        let end = match event {
-            None => StepEnd::Reached(t_new, &step.y1),
-            Some((_, te)) => StepEnd::Event(te),
-        };
-        outputs_of_step(grid, &mut next_out, end, &step, &mut ytmp, &mut out);
+    fn after_non_finite(&mut self, h: f64) -> f64 {
+        self.rho = f64::NAN;
+        h * 0.1
+    }
 
-        match event {
-            None => {
-                t = t_new;
-                std::mem::swap(&mut step.y0, &mut step.y1);
-                std::mem::swap(&mut step.f0, &mut step.f1);
-                std::mem::swap(&mut g_old, &mut g_new);
-                if next_out == grid.len() {
-                    return Ok(stats);
-                }
-                // 0.8 err^(−1/3), with the predictive correction of the RKC code.
-                let cbrt = err.max(1e-10).cbrt();
-                let mut fac: f64 = 10.0;
-                if err_old.is_finite() {
-                    fac = fac.min(0.8 * (h / h_old) * err_old.cbrt() / (cbrt * cbrt));
-                }
-                fac = fac.min(0.8 / cbrt).max(0.1);
-                if last_rejected {
-                    fac = fac.min(1.0);
-                }
-                h_old = h;
-                err_old = err.max(1e-10);
-                h *= fac;
-                last_rejected = false;
-            }
-            Some((e, te)) => {
-                stats.events += 1;
-                let mut y = vec![0.0; n];
-                step.eval(te, &mut y);
-                t = te;
-                switch_mode(system, &mut zeno, t, &mut y, e)?;
-                if next_out == grid.len() {
-                    return Ok(stats);
-                }
-                step.y0.copy_from_slice(&y);
-                restart(system, t, &mut step, &mut g_old, &mut stats)?;
-                h = (te - step.t0).max(0.1 * h).max(1e-6);
-                h_old = f64::NAN;
-                err_old = f64::NAN;
-                rho = f64::NAN;
-                last_rejected = false;
-            }
+    fn after_rejected(&mut self, h: f64, err: f64, again: bool) -> f64 {
+        if again {
+            // Rejected twice in a row: the state may have turned stiffer.
+            self.rho = f64::NAN;
         }
+        h * (0.8 / err.cbrt())
+    }
+
+    fn accept(&mut self, t: f64, h: f64) {
+        self.since_estimate += 1;
+        self.step.t0 = t;
+        self.step.h = h;
+    }
+
+    fn advance(&mut self) {
+        let step = &mut self.step;
+        std::mem::swap(&mut step.y0, &mut step.y1);
+        std::mem::swap(&mut step.f0, &mut step.f1);
+    }
+
+    /// `0.8 err^(−1/3)`, with the predictive correction of the RKC code.
+    fn next_step(&mut self, h: f64, err: f64, after_rejection: bool) -> f64 {
+        let cbrt = err.max(1e-10).cbrt();
+        let mut fac: f64 = 10.0;
+        if self.err_old.is_finite() {
+            fac = fac.min(0.8 * (h / self.h_old) * self.err_old.cbrt() / (cbrt * cbrt));
+        }
+        fac = fac.min(0.8 / cbrt).max(0.1);
+        if after_rejection {
+            fac = fac.min(1.0);
+        }
+        self.h_old = h;
+        self.err_old = err.max(1e-10);
+        h * fac
     }
 }
 
@@ -479,173 +507,4 @@ fn initial_step<S: HybridSystem>(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use std::cell::Cell;
-
-    /// The heat equation `u_t = u_xx` on `(0, 1)`, `u = 0` at both ends, by central
-    /// differences on `n` interior points: stiff (spectral radius `≈ 4 (n + 1)²`), with the
-    /// exact solution of the semi-discrete system in closed form, since the grid functions
-    /// `sin(kπx)` are its eigenvectors with eigenvalues `−4 (n + 1)² sin²(kπ/(2(n + 1)))`.
-    struct Heat {
-        n: usize,
-        calls: Cell<usize>,
-    }
-
-    /// Initial state: the first and the fifth mode.
-    const MODES: [(usize, f64); 2] = [(1, 1.0), (5, 0.5)];
-
-    impl Heat {
-        fn new(n: usize) -> Self {
-            Self {
-                n,
-                calls: Cell::new(0),
-            }
-        }
-
-        fn exact(&self, t: f64) -> Vec<f64> {
-            let m = (self.n + 1) as f64;
-            (1..=self.n)
-                .map(|j| {
-                    MODES
-                        .iter()
-                        .map(|&(k, a)| {
-                            let k = k as f64;
-                            let lambda =
-                                -4.0 * m * m * (k * std::f64::consts::PI / (2.0 * m)).sin().powi(2);
-                            a * (lambda * t).exp() * (k * std::f64::consts::PI * j as f64 / m).sin()
-                        })
-                        .sum()
-                })
-                .collect()
-        }
-    }
-
-    impl HybridSystem for Heat {
-        fn dim(&self) -> usize {
-            self.n
-        }
-
-        fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
-            self.calls.set(self.calls.get() + 1);
-            let m2 = ((self.n + 1) * (self.n + 1)) as f64;
-            for j in 0..self.n {
-                let left = if j > 0 { y[j - 1] } else { 0.0 };
-                let right = if j + 1 < self.n { y[j + 1] } else { 0.0 };
-                dy[j] = m2 * (left - 2.0 * y[j] + right);
-            }
-        }
-    }
-
-    /// Largest error against the exact solution on a grid, and the right-hand sides used.
-    fn heat_run(rtol: f64, rkc: bool) -> (f64, usize, SolverStats) {
-        let mut heat = Heat::new(40);
-        let grid: Vec<f64> = (0..=20).map(|i| i as f64 * 0.01).collect();
-        let opts = SolverOptions {
-            rtol,
-            atol: rtol,
-            max_steps: 100_000,
-        };
-        let mut states = vec![Vec::new(); grid.len()];
-        let record = |i: usize, y: &[f64]| states[i] = y.to_vec();
-        let y0 = heat.exact(0.0);
-        let stats = if rkc {
-            integrate(&mut heat, &y0, &grid, &opts, record)
-        } else {
-            super::super::integrate(&mut heat, &y0, &grid, &opts, record)
-        }
-        .unwrap();
-        let mut worst: f64 = 0.0;
-        for (t, y) in grid.iter().zip(&states) {
-            for (a, b) in y.iter().zip(heat.exact(*t)) {
-                worst = worst.max((a - b).abs());
-            }
-        }
-        (worst, heat.calls.get(), stats)
-    }
-
-    #[test]
-    fn stiff_heat_equation_matches_the_exact_solution() {
-        let (err, calls, stats) = heat_run(1e-6, true);
-        assert!(err < 1e-4, "max error {err}");
-        assert_eq!(calls, stats.rhs_evaluations, "{stats:?}");
-        // Dormand–Prince is held to steps of about 3.3/ρ by its stability: RKC needs a
-        // fraction of its right-hand sides (measured: 710 against 2426).
-        let (dp_err, dp_calls, _) = heat_run(1e-6, false);
-        assert!(dp_err < 1e-4, "Dormand–Prince: max error {dp_err}");
-        assert!(calls * 3 < dp_calls, "RKC {calls} against {dp_calls}");
-    }
-
-    #[test]
-    fn error_falls_with_tolerance_at_second_order() {
-        let (loose, _, s1) = heat_run(1e-4, true);
-        let (tight, _, s2) = heat_run(1e-7, true);
-        assert!(tight < loose / 100.0, "errors {loose} and {tight}");
-        // Second order: a thousandth of the tolerance takes about ten times the steps.
-        let ratio = s2.accepted_steps as f64 / s1.accepted_steps as f64;
-        assert!((5.0..20.0).contains(&ratio), "{s1:?} {s2:?}");
-    }
-
-    /// `y' = −y` from 1 with an event where `y` falls through 1/2, at `ln 2`.
-    struct Decay {
-        fired: Vec<f64>,
-    }
-
-    impl HybridSystem for Decay {
-        fn dim(&self) -> usize {
-            1
-        }
-        fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
-            dy[0] = -y[0];
-        }
-        fn event_count(&self) -> usize {
-            1
-        }
-        fn events(&self, _t: f64, y: &[f64], g: &mut [f64]) {
-            g[0] = y[0] - 0.5;
-        }
-        fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
-            self.fired.push(t);
-            // Reset, so that the event fires again one ln 2 later.
-            y[0] = 1.0;
-        }
-    }
-
-    #[test]
-    fn events_are_located_on_the_hermite_interpolant() {
-        let mut decay = Decay { fired: Vec::new() };
-        let opts = SolverOptions {
-            rtol: 1e-8,
-            atol: 1e-10,
-            max_steps: 100_000,
-        };
-        let grid = [0.5, 1.0, 2.0];
-        let mut out = [f64::NAN; 3];
-        let stats = integrate(&mut decay, &[1.0], &grid, &opts, |i, y| out[i] = y[0]).unwrap();
-        let ln2 = std::f64::consts::LN_2;
-        assert_eq!(decay.fired.len(), 2, "{:?}", decay.fired);
-        assert_eq!(stats.events, 2);
-        for (k, t) in decay.fired.iter().enumerate() {
-            assert!((t - (k + 1) as f64 * ln2).abs() < 1e-5, "{:?}", decay.fired);
-        }
-        // Outputs after the resets follow the restarted solution.
-        assert!((out[0] - (-0.5f64).exp()).abs() < 1e-5, "{out:?}");
-        assert!((out[1] - (-(1.0 - ln2)).exp()).abs() < 1e-5, "{out:?}");
-        assert!(
-            (out[2] - (-(2.0 - 2.0 * ln2)).exp()).abs() < 1e-5,
-            "{out:?}"
-        );
-    }
-
-    #[test]
-    fn step_limit_is_a_typed_error() {
-        let opts = SolverOptions {
-            max_steps: 3,
-            ..SolverOptions::default()
-        };
-        let mut heat = Heat::new(10);
-        let y0 = heat.exact(0.0);
-        let r = integrate(&mut heat, &y0, &[1.0], &opts, |_, _| {});
-        assert!(matches!(r, Err(SimulationError::StepLimit { .. })), "{r:?}");
-    }
-}
+mod tests;
