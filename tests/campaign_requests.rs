@@ -258,6 +258,21 @@ fn searches_beyond_the_limits_are_refused_naming_the_field_and_the_coordinator_k
     assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
     assert!(status.message().starts_with("max_steps"), "{status:?}");
 
+    // A key the coordinator would keep for as long as it runs.
+    let request = pb::SubmitCampaignRequest {
+        campaign: Some(search("")),
+        idempotency_key: "k".repeat(1 << 20),
+    };
+    let status = c
+        .grpc(async move |mut client| client.submit_campaign(request).await)
+        .expect_err("refused");
+    assert!(
+        status
+            .message()
+            .starts_with("idempotency_key: 1048576 bytes"),
+        "{status:?}"
+    );
+
     // Still serving: the data is there, nothing was started.
     assert!(c.listed().is_empty());
     assert_eq!(c.upload(), dataset);

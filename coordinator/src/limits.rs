@@ -58,6 +58,10 @@ pub const MAX_SENSITIVITY_SAMPLES: usize = 4096;
 /// re-optimisation of the other parameters.
 pub const MAX_PROFILE_STEPS: usize = 1_000;
 
+/// Longest idempotency key of `SubmitCampaign` [bytes]: the coordinator keeps every key it
+/// was given for as long as it runs.
+pub const MAX_IDEMPOTENCY_KEY_BYTES: usize = 256;
+
 /// Largest chunk of an upload [bytes].
 pub const MAX_CHUNK_BYTES: usize = 1 << 20;
 

@@ -8,7 +8,7 @@ use crate::campaigns::datasets::DatasetInfo;
 use crate::campaigns::diagnoses::DiagnosisSnapshot;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
-use crate::limits::MAX_DATASET_BYTES;
+use crate::limits::{MAX_DATASET_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
 use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
@@ -330,6 +330,12 @@ impl Calibration for CalibrationApi {
         let campaign = request
             .campaign
             .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
+        if request.idempotency_key.len() > MAX_IDEMPOTENCY_KEY_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "idempotency_key: {} bytes, more than the {MAX_IDEMPOTENCY_KEY_BYTES} accepted",
+                request.idempotency_key.len()
+            )));
+        }
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
