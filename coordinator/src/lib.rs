@@ -11,6 +11,7 @@ pub mod diagnosis;
 pub mod dispatch;
 pub mod error;
 pub mod evaluator;
+pub mod limits;
 pub mod measurement;
 pub mod objective;
 pub mod optim;

@@ -12,6 +12,7 @@
 use crate::campaign::{Campaign, CampaignError, OutputScale};
 use crate::measurement::Measurement;
 use calib_worker::content_hash::ContentHasher;
+use calib_worker::limits::MAX_TIMES;
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
 
@@ -43,19 +44,29 @@ impl Objective {
     pub fn new(campaign: &Campaign, measurement: &Measurement) -> Result<Self, CampaignError> {
         let (start, stop) = campaign.window;
         let time = &measurement.time;
-        let window_error = |message: String| CampaignError {
+        let field_error = |field: &str, message: String| CampaignError {
             file: campaign.source.clone().unwrap_or_default(),
             line: None,
-            field: "window".into(),
+            field: field.into(),
             message,
         };
+        let window_error = |message: String| field_error("window", message);
         let (first, last) = (time[0], time[time.len() - 1]);
         let slack = 1e-9 * last.abs().max(1.0);
         if start < first - slack || stop > last + slack {
-            return Err(window_error(format!(
-                "[{start}, {stop}] s lies outside the data of {} (time runs from {first} to {last} s)",
-                measurement.source.display()
-            )));
+            let field = if stop > last + slack {
+                "window.stop"
+            } else {
+                "window.start"
+            };
+            return Err(field_error(
+                field,
+                format!(
+                    "[{start}, {stop}] s lies outside the data of {} (time runs from {first} \
+                     to {last} s)",
+                    measurement.source.display()
+                ),
+            ));
         }
         let rows: Vec<usize> = (0..time.len())
             .filter(|&i| time[i] >= start - slack && time[i] <= stop + slack)
@@ -65,6 +76,13 @@ impl Objective {
                 "[{start}, {stop}] s holds {} samples of {}: too few to fit",
                 rows.len(),
                 measurement.source.display()
+            )));
+        }
+        if rows.len() > MAX_TIMES {
+            return Err(window_error(format!(
+                "[{start}, {stop}] s holds {} samples, more than the {MAX_TIMES} one \
+                 simulation may return; narrow the window",
+                rows.len()
             )));
         }
         if time[rows[0]] < 0.0 {

@@ -4,6 +4,10 @@
 //! line of the file when it names one.
 
 use calib_coordinator::campaign::{Campaign, CampaignError};
+use calib_coordinator::limits::{
+    campaign_name, MAX_EVALUATIONS, MAX_FREE_PARAMETERS, MAX_OUTPUTS, MAX_REFIT, MAX_SCREENING,
+    MAX_STARTS,
+};
 use calib_worker::{limits, validate};
 use proptest::prelude::*;
 use proptest::sample::select;
@@ -103,6 +107,17 @@ fn assert_acceptable(c: &Campaign) {
     assert!(limits::RTOL.contains(&c.solver.rtol));
     assert!(limits::ATOL.contains(&c.solver.atol));
     assert!(limits::MAX_STEPS.contains(&(c.solver.max_steps as u64)));
+    // And within the coordinator's own limits: nothing it runs sizes more than they allow.
+    assert!(
+        (1..=MAX_STARTS).contains(&c.search.starts),
+        "{:?}",
+        c.search
+    );
+    assert!(c.search.max_evaluations <= MAX_EVALUATIONS);
+    assert!(c.search.screening.unwrap_or(0) <= MAX_SCREENING);
+    assert!(c.free.len() <= MAX_FREE_PARAMETERS && c.outputs.len() <= MAX_OUTPUTS);
+    assert!(c.diagnosis.refit <= MAX_REFIT);
+    assert_eq!(campaign_name(&c.name), Ok(()), "{:?}", c.name);
 }
 
 fn keys() -> Vec<&'static str> {
@@ -155,6 +170,16 @@ fn values() -> Vec<&'static str> {
         "9223372036854775807",
         "-9223372036854775808",
         "10000001",
+        "1000",
+        "1001",
+        "65535",
+        "65536",
+        "1000000000",
+        "1000000000000",
+        "\"../../x\"",
+        "\"/abs/x\"",
+        "\".calib-db\"",
+        "\"a\\\\b\"",
         "\"furuta\"",
         "\"hx_lowfi\"",
         "\"armFriction\"",

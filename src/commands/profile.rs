@@ -34,18 +34,16 @@ pub struct Args {
 
 pub fn run(args: Args) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
-    if args.max_steps == 0 {
-        return Err(Failure::input("--max-steps must be at least 1"));
-    }
+    let settings = Settings {
+        parameters: args.parameters.clone(),
+        max_steps: args.max_steps,
+    };
+    settings.check().map_err(Failure::from)?;
     let db = args
         .db
         .clone()
         .unwrap_or_else(|| super::calibrate::default_db(&args.campaign));
     let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
-    let settings = Settings {
-        parameters: args.parameters.clone(),
-        max_steps: args.max_steps,
-    };
     let result = match &args.workers.workers {
         None => profile::profile(&campaign, &LocalEvaluator, &store, &settings),
         Some(list) => {

@@ -4,10 +4,11 @@
 pub mod spec;
 
 use crate::campaigns::analyses::AnalysisSnapshot;
-use crate::campaigns::datasets::MAX_DATASET_BYTES;
+use crate::campaigns::datasets::DatasetInfo;
 use crate::campaigns::diagnoses::DiagnosisSnapshot;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
+use crate::limits::{MAX_DATASET_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
 use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
@@ -16,15 +17,7 @@ use std::sync::Arc;
 use tokio_stream::wrappers::ReceiverStream;
 use tonic::{Request, Response, Status, Streaming};
 
-/// Largest chunk of an upload.
-pub const MAX_CHUNK_BYTES: usize = 1 << 20;
-
-/// Most samples a `Sensitivity` request may ask for (Sobol's design takes
-/// `samples · (parameters + 2)` evaluations).
-pub const MAX_SENSITIVITY_SAMPLES: usize = 4096;
-
-/// Largest page of `ListCampaigns`.
-pub const MAX_PAGE: usize = 100;
+pub use crate::limits::{MAX_CHUNK_BYTES, MAX_PAGE, MAX_SENSITIVITY_SAMPLES};
 
 pub struct CalibrationApi {
     campaigns: Arc<Campaigns>,
@@ -55,8 +48,9 @@ impl CalibrationApi {
             time_column = "time".into();
         }
         let campaigns = self.campaigns.clone();
-        let info =
-            blocking(move || campaigns.datasets().put(&file_name, &time_column, &bytes)).await?;
+        let info = self
+            .blocking(move || campaigns.datasets().put(&file_name, &time_column, &bytes))
+            .await?;
         Ok(pb::Dataset {
             id: info.id,
             columns: info.columns,
@@ -77,7 +71,7 @@ impl CalibrationApi {
         let dataset = {
             let campaigns = self.campaigns.clone();
             let id = campaign.dataset_id.clone();
-            blocking(move || campaigns.datasets().get(&id)).await?
+            self.blocking(move || campaigns.datasets().get(&id)).await?
         };
         let Some(dataset) = dataset else {
             return Err(Status::not_found(format!(
@@ -86,21 +80,95 @@ impl CalibrationApi {
                 campaign.dataset_id
             )));
         };
+        check_against_dataset(campaign, &dataset)?;
         let file = self.campaigns.datasets().file(&dataset);
         spec::campaign_file(campaign, &file, &dataset.time_column).map_err(Status::invalid_argument)
     }
+
+    /// [`blocking`], its refusals worded for a client: no path of this server in them.
+    async fn blocking<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Result<T, Error> + Send + 'static,
+    ) -> Result<T, Status> {
+        blocking(work)
+            .await
+            .map_err(|s| Status::new(s.code(), self.campaigns.public(s.message())))
+    }
+}
+
+/// Most column names a refusal lists.
+const LISTED_COLUMNS: usize = 20;
+
+/// The campaign's fields checked against the dataset it names, before anything is parsed
+/// or run: every mapped column is one of the dataset's, the window lies inside its data.
+fn check_against_dataset(campaign: &pb::Campaign, dataset: &DatasetInfo) -> Result<(), Status> {
+    for (i, output) in campaign.outputs.iter().enumerate() {
+        if !dataset.columns.contains(&output.measured) {
+            let mut listed: Vec<String> = dataset
+                .columns
+                .iter()
+                .take(LISTED_COLUMNS)
+                .map(|c| format!("{c:?}"))
+                .collect();
+            if dataset.columns.len() > LISTED_COLUMNS {
+                listed.push(format!("… ({} in all)", dataset.columns.len()));
+            }
+            return Err(Status::invalid_argument(format!(
+                "campaign.outputs[{i}].measured: dataset `{}` has no column {:?}; its columns \
+                 are: {}",
+                dataset.id,
+                output.measured,
+                listed.join(", ")
+            )));
+        }
+    }
+    let (start, stop) = (campaign.window_start, campaign.window_stop);
+    let (first, last) = (dataset.start_time, dataset.stop_time);
+    let slack = 1e-9 * last.abs().max(1.0);
+    let outside = |field: &str, value: f64| {
+        Status::invalid_argument(format!(
+            "campaign.{field}: {value} s lies outside the data of dataset `{}` (time runs \
+             from {first} to {last} s)",
+            dataset.id
+        ))
+    };
+    // A window of 0 to 0 is no window: the campaign's check names it missing.
+    if start != 0.0 || stop != 0.0 {
+        if stop > last + slack {
+            return Err(outside("window_stop", stop));
+        }
+        if start < first - slack {
+            return Err(outside("window_start", start));
+        }
+    }
+    Ok(())
+}
+
+/// The campaign message's name of a campaign file's field (`model.stop_time` is the
+/// message's `stop_time`), for refusals that name what the client sent.
+fn message_field(field: &str) -> String {
+    let renamed = match field {
+        "" => return "campaign".into(),
+        "window" => "window_start, campaign.window_stop",
+        "window.start" => "window_start",
+        "window.stop" => "window_stop",
+        "model.name" | "model" => "model",
+        "model.stop_time" => "stop_time",
+        other => {
+            if let Some(name) = other.strip_prefix("model.parameters.") {
+                return format!("campaign.model_parameters[{name:?}]");
+            }
+            other.strip_prefix("solver.").unwrap_or(other)
+        }
+    };
+    format!("campaign.{renamed}")
 }
 
 /// How an error of the domain reads to a client.
 fn status(e: Error) -> Status {
     match e {
         Error::Campaign(c) => {
-            let field = if c.field.is_empty() {
-                "campaign".to_string()
-            } else {
-                format!("campaign.{}", c.field)
-            };
-            Status::invalid_argument(format!("{field}: {}", c.message))
+            Status::invalid_argument(format!("{}: {}", message_field(&c.field), c.message))
         }
         Error::Measurement(m) => Status::invalid_argument(format!("data: {m}")),
         Error::InvalidRequest(m) => Status::invalid_argument(m),
@@ -262,10 +330,18 @@ impl Calibration for CalibrationApi {
         let campaign = request
             .campaign
             .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
+        if request.idempotency_key.len() > MAX_IDEMPOTENCY_KEY_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "idempotency_key: {} bytes, more than the {MAX_IDEMPOTENCY_KEY_BYTES} accepted",
+                request.idempotency_key.len()
+            )));
+        }
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
-        let (id, started) = blocking(move || campaigns.submit(&text, key.as_deref())).await?;
+        let (id, started) = self
+            .blocking(move || campaigns.submit(&text, key.as_deref()))
+            .await?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
     }
 
@@ -279,7 +355,7 @@ impl Calibration for CalibrationApi {
         let campaigns = self.campaigns.clone();
         let watched = {
             let id = id.clone();
-            blocking(move || campaigns.watch(&id)).await?
+            self.blocking(move || campaigns.watch(&id)).await?
         };
         match watched.ok_or_else(|| not_found(&id))? {
             Watched::Stored(snapshot) => {
@@ -302,7 +378,7 @@ impl Calibration for CalibrationApi {
         let campaigns = self.campaigns.clone();
         let watched = {
             let id = id.clone();
-            blocking(move || campaigns.diagnose(&id)).await?
+            self.blocking(move || campaigns.diagnose(&id)).await?
         };
         let receiver = watched.ok_or_else(|| not_found(&id))?;
         Ok(Response::new(follow(receiver, diagnosis_state, |s| {
@@ -318,7 +394,7 @@ impl Calibration for CalibrationApi {
         let campaigns = self.campaigns.clone();
         let found = {
             let id = id.clone();
-            blocking(move || campaigns.get(&id)).await?
+            self.blocking(move || campaigns.get(&id)).await?
         };
         found
             .map(|s| Response::new(state(&s)))
@@ -345,7 +421,7 @@ impl Calibration for CalibrationApi {
             })?
         };
         let campaigns = self.campaigns.clone();
-        let all = blocking(move || campaigns.list()).await?;
+        let all = self.blocking(move || campaigns.list()).await?;
         let page: Vec<pb::CampaignState> = all.iter().skip(from).take(size).map(state).collect();
         let next = from + page.len();
         Ok(Response::new(pb::ListCampaignsResponse {
@@ -366,7 +442,7 @@ impl Calibration for CalibrationApi {
         let campaigns = self.campaigns.clone();
         let found = {
             let id = id.clone();
-            blocking(move || campaigns.cancel(&id)).await?
+            self.blocking(move || campaigns.cancel(&id)).await?
         };
         found
             .map(|s| Response::new(state(&s)))
@@ -404,15 +480,12 @@ impl Calibration for CalibrationApi {
                 n => n,
             },
         };
-        if settings.samples < 2 || settings.samples > MAX_SENSITIVITY_SAMPLES {
-            return Err(Status::invalid_argument(format!(
-                "samples: {} is not between 2 and {MAX_SENSITIVITY_SAMPLES}",
-                settings.samples
-            )));
-        }
+        settings.check().map_err(status)?;
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
-        let receiver = blocking(move || campaigns.sensitivity(&text, settings)).await?;
+        let receiver = self
+            .blocking(move || campaigns.sensitivity(&text, settings))
+            .await?;
         Ok(Response::new(follow_analysis(receiver)))
     }
 
@@ -434,7 +507,8 @@ impl Calibration for CalibrationApi {
         let campaigns = self.campaigns.clone();
         let watched = {
             let id = id.clone();
-            blocking(move || campaigns.profile(&id, settings)).await?
+            self.blocking(move || campaigns.profile(&id, settings))
+                .await?
         };
         let receiver = watched.ok_or_else(|| not_found(&id))?;
         Ok(Response::new(follow_analysis(receiver)))

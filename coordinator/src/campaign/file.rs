@@ -8,7 +8,7 @@ use toml::Spanned;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct CampaignFile {
-    pub(super) name: Option<String>,
+    pub(super) name: Option<Spanned<String>>,
     pub(super) model: Spanned<ModelSection>,
     pub(super) measurement: MeasurementSection,
     #[serde(default)]

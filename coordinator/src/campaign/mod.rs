@@ -391,6 +391,63 @@ seed = 7
     }
 
     #[test]
+    fn numbers_that_size_memory_are_held_to_the_limits_naming_the_field() {
+        let search_line = GOOD.lines().position(|l| l == "[search]").unwrap() + 1;
+        for (from, to, field, limit) in [
+            ("starts = 3", "starts = 1000000000", "search.starts", "1000"),
+            ("starts = 3", "starts = 1001", "search.starts", "1000"),
+            (
+                "seed = 7",
+                "seed = 7\nscreening = 1000000000000",
+                "search.screening",
+                "65535",
+            ),
+            (
+                "max_evaluations = 300",
+                "max_evaluations = 1000001",
+                "search.max_evaluations",
+                "1000000",
+            ),
+        ] {
+            let e = error_for(from, to);
+            assert_eq!(e.field, field, "{e}");
+            assert!(e.message.contains(limit), "{e}");
+            assert!(e.line.is_some_and(|l| l >= search_line), "{e}");
+        }
+        let c = parse(&GOOD.replacen("starts = 3", "starts = 1000", 1)).unwrap();
+        assert_eq!(c.search.starts, crate::limits::MAX_STARTS);
+
+        let output = "[[outputs]]\nmodel = \"armJoint.phi\"\nmeasured = \"a\"\n";
+        let e = parse(&format!("{GOOD}{}", output.repeat(32))).unwrap_err();
+        assert_eq!(e.field, "outputs", "{e}");
+        assert!(e.message.contains("33 is more than the 32"), "{e}");
+        let parameter = "[[parameters]]\nname = \"armFriction\"\nmin = 0.0\nmax = 0.9\n";
+        let e = parse(&format!("{GOOD}{}", parameter.repeat(64))).unwrap_err();
+        assert_eq!(e.field, "parameters", "{e}");
+        assert!(e.message.contains("65 is more than the 64"), "{e}");
+        let e = parse(&format!("{GOOD}[diagnosis]\nrefit = 11\n")).unwrap_err();
+        assert_eq!(e.field, "diagnosis.refit", "{e}");
+    }
+
+    #[test]
+    fn a_name_that_is_not_one_folder_name_is_refused() {
+        for name in ["../../x", "/abs/x", "a/b", "..", ".calib-db", "a\\b"] {
+            let e = error_for("name = \"clean\"", &format!("name = \"{name}\""));
+            assert_eq!((e.field.as_str(), e.line), ("name", Some(2)), "{name}: {e}");
+        }
+        let long = "n".repeat(1_000_000);
+        let e = error_for("name = \"clean\"", &format!("name = \"{long}\""));
+        assert_eq!(e.field, "name");
+        assert!(e.to_string().len() < 1000, "the name is echoed whole");
+        // A file's stem names a campaign that names none, under the same rule.
+        let unnamed = GOOD.replacen("name = \"clean\"\n", "", 1);
+        let c = Campaign::parse(&unnamed, Path::new("/campaigns/rig 2.toml")).unwrap();
+        assert_eq!(c.name, "rig 2");
+        let e = Campaign::parse(&unnamed, Path::new("/campaigns/.hidden.toml")).unwrap_err();
+        assert_eq!(e.field, "name", "{e}");
+    }
+
+    #[test]
     fn unknown_names_suggest_the_nearest() {
         let e = error_for("name = \"armFriction\"", "name = \"armfriction\"");
         assert!(e.message.ends_with("did you mean `armFriction`?"), "{e}");

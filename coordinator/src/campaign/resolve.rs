@@ -9,6 +9,7 @@ use super::{
     Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, OutputScale, Scale,
     Search,
 };
+use crate::limits;
 use calib_worker::fmu::{self, Interface};
 use calib_worker::validate::{self, SolverOverrides};
 use calib_worker::{Model, ModelInfo, SolverOptions};
@@ -57,6 +58,7 @@ impl Locator<'_> {
 }
 
 pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> {
+    check_counts(&file, at)?;
     let model_span = file.model.span();
     let model_section = file.model.into_inner();
     let model = resolve_model(&model_section, at)?;
@@ -80,12 +82,7 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
             .unwrap_or(Path::new("."))
             .join(measurement_path)
     };
-    let name = file.name.unwrap_or_else(|| {
-        at.path
-            .file_stem()
-            .map(|s| s.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "campaign".into())
-    });
+    let name = resolve_name(file.name, at)?;
 
     Ok(Campaign {
         name,
@@ -103,6 +100,58 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
         solver,
         diagnosis,
     })
+}
+
+/// The campaign's name (the file's stem when it names none), held to
+/// [`limits::campaign_name`]: it becomes the folder of the results.
+fn resolve_name(name: Option<Spanned<String>>, at: &Locator) -> Result<String, CampaignError> {
+    let (name, span) = match name {
+        Some(name) => {
+            let span = name.span();
+            (name.into_inner(), Some(span))
+        }
+        None => (
+            at.path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "campaign".into()),
+            None,
+        ),
+    };
+    match (limits::campaign_name(&name), span) {
+        (Ok(()), _) => Ok(name),
+        (Err(e), Some(span)) => at.error(span, "name", e),
+        (Err(e), None) => at.unlocated(
+            "name",
+            &format!("the file's name {e}; name the campaign with `name = \"...\"`"),
+        ),
+    }
+}
+
+/// The lists of a campaign held to their limits, before any of them is resolved.
+fn check_counts(file: &CampaignFile, at: &Locator) -> Result<(), CampaignError> {
+    let free = file.parameters.len() + file.effects.len();
+    if let Err(e) = limits::at_most(
+        free,
+        limits::MAX_FREE_PARAMETERS,
+        "free parameters and effects",
+    ) {
+        let span = file
+            .parameters
+            .iter()
+            .chain(&file.effects)
+            .nth(limits::MAX_FREE_PARAMETERS)
+            .map(|p| p.span());
+        return match span {
+            Some(span) => at.error(span, "parameters", e),
+            None => at.unlocated("parameters", &e),
+        };
+    }
+    if let Err(e) = limits::at_most(file.outputs.len(), limits::MAX_OUTPUTS, "outputs") {
+        let span = file.outputs[limits::MAX_OUTPUTS].span();
+        return at.error(span, "outputs", e);
+    }
+    Ok(())
 }
 
 fn resolve_model(
@@ -433,6 +482,25 @@ fn resolve_search(
     if s.starts == 0 {
         return at.error(span, "search.starts", "must be at least 1".into());
     }
+    for (field, value, limit, what) in [
+        ("search.starts", s.starts, limits::MAX_STARTS, "starts"),
+        (
+            "search.max_evaluations",
+            s.max_evaluations,
+            limits::MAX_EVALUATIONS,
+            "evaluations per run",
+        ),
+        (
+            "search.screening",
+            s.screening.unwrap_or(0),
+            limits::MAX_SCREENING,
+            "screening points",
+        ),
+    ] {
+        if let Err(e) = limits::at_most(value, limit, what) {
+            return at.error(span, field, e);
+        }
+    }
     if s.max_evaluations < 2 * (free + 1) {
         return at.error(
             span,
@@ -519,9 +587,15 @@ fn resolve_diagnosis(
         if refit == 0 {
             return at.error(span, "diagnosis.refit", "must be at least 1".into());
         }
+        if let Err(e) = limits::at_most(refit, limits::MAX_REFIT, "refitted candidates") {
+            return at.error(span, "diagnosis.refit", e);
+        }
         diagnosis.refit = refit;
     }
     if let Some(candidates) = d.candidates {
+        if let Err(e) = limits::at_most(candidates.len(), limits::MAX_CANDIDATES, "candidates") {
+            return at.error(span, "diagnosis.candidates", e);
+        }
         if let Some(e) = candidates
             .iter()
             .find_map(|c| validate::effect(info, c).err())

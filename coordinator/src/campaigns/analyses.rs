@@ -56,6 +56,7 @@ impl Campaigns {
         spec: &str,
         settings: Settings,
     ) -> Result<watch::Receiver<AnalysisSnapshot>> {
+        settings.check()?;
         let campaign = Campaign::parse(spec, &self.source())?;
         if campaign.free.is_empty() {
             return Err(Error::InvalidRequest(
@@ -63,6 +64,8 @@ impl Campaigns {
             ));
         }
         let measurement = calibration::load_measurement(&campaign)?;
+        // The window and the weights checked against the data now, not once running.
+        crate::objective::Objective::new(&campaign, &measurement)?;
         let identity = campaign.identity(&measurement.content_hash());
         let mut h = ContentHasher::new(b"calib.sensitivity.v1\0");
         h.bytes(&identity)
@@ -103,6 +106,7 @@ impl Campaigns {
         id: &str,
         settings: profile::Settings,
     ) -> Result<Option<watch::Receiver<AnalysisSnapshot>>> {
+        settings.check()?;
         let Some(campaign_key) = unhex32(id) else {
             return Ok(None);
         };

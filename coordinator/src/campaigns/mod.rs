@@ -195,6 +195,19 @@ impl Campaigns {
         self.datasets.folder().join("submitted-campaign.toml")
     }
 
+    /// `message` as a client may read it: the files this coordinator writes for submitted
+    /// campaigns and uploads named as what they are, not by their paths on this machine.
+    pub fn public(&self, message: &str) -> String {
+        let source = self.source().display().to_string();
+        let folder = format!("{}/", self.datasets.folder().display());
+        let results = format!("{}/", self.results.display());
+        message
+            .replace(&format!("{source}: "), "")
+            .replace(&source, "the campaign")
+            .replace(&folder, "dataset ")
+            .replace(&results, "results ")
+    }
+
     /// Start the campaign file `spec` (its measurement a dataset of this coordinator),
     /// unless it is known already; its id, and whether it was started now.
     pub fn submit(
@@ -208,22 +221,44 @@ impl Campaigns {
         }
         let campaign = Campaign::parse(spec, &self.source())?;
         let measurement = calibration::load_measurement(&campaign)?;
+        // The window and the weights checked against the data now, not once running.
+        Objective::new(&campaign, &measurement)?;
         let id = campaign.identity(&measurement.content_hash());
         if let Some(k) = idempotency_key {
             keys.insert(k.to_string(), id);
         }
         drop(keys);
         let mut live = self.live.lock().expect("live lock");
-        if live.contains_key(&id) {
-            return Ok((hex(&id), false));
-        }
-        if self.store.campaign(&id)?.is_some() {
-            // Finished, failed or cancelled before; or left running by an earlier
-            // coordinator, which `resume_submitted` started again when this one started.
-            return Ok((hex(&id), false));
+        if let Some(running) = live.get(&id) {
+            let phase = running.state.borrow().phase;
+            if phase == Phase::Running && running.cancel.load(Ordering::SeqCst) {
+                return Err(Error::InvalidRequest(format!(
+                    "campaign `{}` ({}) is stopping after a cancel; submit it again once it \
+                     has stopped",
+                    campaign.name,
+                    hex(&id)
+                )));
+            }
+            if !Self::runs_again(phase) {
+                return Ok((hex(&id), false));
+            }
+        } else if let Some(record) = self.store.campaign(&id)? {
+            // Finished before, or left running by an earlier coordinator, which
+            // `resume_submitted` started again when this one started.
+            let phase = Snapshot::from_record(&id, &record).phase;
+            if !Self::runs_again(phase) {
+                return Ok((hex(&id), false));
+            }
         }
         self.start(&mut live, id, campaign)?;
         Ok((hex(&id), true))
+    }
+
+    /// Whether a campaign submitted again in `phase` starts again: a cancelled or failed
+    /// campaign does (under its id, replaying from the store what it had evaluated), a
+    /// running or finished one is the answer already.
+    fn runs_again(phase: Phase) -> bool {
+        matches!(phase, Phase::Cancelled | Phase::Failed)
     }
 
     /// Start again every campaign submitted to this API that an earlier coordinator left
@@ -336,10 +371,11 @@ impl Campaigns {
             }
             Err(e) => {
                 tracing::error!(campaign = %campaign.name, error = %e, "campaign failed");
-                let _ = self.mark(&id, CampaignStatus::Failed, Some(e.to_string()));
+                let failure = self.public(&e.to_string());
+                let _ = self.mark(&id, CampaignStatus::Failed, Some(failure.clone()));
                 live.state.send_modify(|s| {
                     s.phase = Phase::Failed;
-                    s.failure = Some(e.to_string());
+                    s.failure = Some(failure);
                 });
             }
         }
@@ -379,6 +415,13 @@ impl Campaigns {
         Ok(())
     }
 
+    /// What the store says of campaign `id`, its failure as a client may read it.
+    fn stored(&self, id: &CampaignId, record: &CampaignRecord) -> Snapshot {
+        let mut snapshot = Snapshot::from_record(id, record);
+        snapshot.failure = snapshot.failure.map(|f| self.public(&f));
+        snapshot
+    }
+
     fn parse_id(id: &str) -> Option<CampaignId> {
         unhex32(id)
     }
@@ -394,7 +437,7 @@ impl Campaigns {
         Ok(self
             .store
             .campaign(&key)?
-            .map(|record| Snapshot::from_record(&key, &record)))
+            .map(|record| self.stored(&key, &record)))
     }
 
     /// The campaign file campaign `id` was run from, if the store holds it.
@@ -417,7 +460,7 @@ impl Campaigns {
         Ok(self
             .store
             .campaign(&key)?
-            .map(|record| Watched::Stored(Snapshot::from_record(&key, &record))))
+            .map(|record| Watched::Stored(self.stored(&key, &record))))
     }
 
     /// Every campaign known, in id order.
@@ -429,7 +472,7 @@ impl Campaigns {
             .into_iter()
             .map(|(id, record)| match live.get(&id) {
                 Some(l) => (id, l.state.borrow().clone()),
-                None => (id, Snapshot::from_record(&id, &record)),
+                None => (id, self.stored(&id, &record)),
             })
             .collect();
         for (id, l) in live.iter() {

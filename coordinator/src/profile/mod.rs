@@ -50,6 +50,7 @@ use crate::diagnosis::stored::{EngineStats, StoredEngine};
 use crate::diagnosis::uncertainty::{self, Interval};
 use crate::error::{Error, Result};
 use crate::evaluator::{CacheStats, Evaluator, Simulator};
+use crate::limits::{MAX_FREE_PARAMETERS, MAX_PROFILE_STEPS};
 use crate::objective::{Objective, FAILURE_PENALTY};
 use crate::optim::problem::Silent;
 use crate::optim::space::UnitBox;
@@ -68,6 +69,28 @@ pub struct Settings {
     pub parameters: Vec<String>,
     /// Most steps on each side of a profile.
     pub max_steps: usize,
+}
+
+impl Settings {
+    /// The settings held to their limits before anything is planned: the number of steps
+    /// ([`MAX_PROFILE_STEPS`]) and of parameters named ([`MAX_FREE_PARAMETERS`], as a
+    /// campaign may have no more free ones).
+    pub fn check(&self) -> Result<()> {
+        if self.max_steps == 0 || self.max_steps > MAX_PROFILE_STEPS {
+            return Err(Error::InvalidRequest(format!(
+                "max_steps: {} is not between 1 and {MAX_PROFILE_STEPS}",
+                self.max_steps
+            )));
+        }
+        if self.parameters.len() > MAX_FREE_PARAMETERS {
+            return Err(Error::InvalidRequest(format!(
+                "parameters: {} names, more than the {MAX_FREE_PARAMETERS} free parameters \
+                 a campaign may have",
+                self.parameters.len()
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl Default for Settings {
@@ -488,6 +511,7 @@ pub fn profile<E: Evaluator + Simulator>(
     settings: &Settings,
 ) -> Result<Profiles> {
     let started = Instant::now();
+    settings.check()?;
     if campaign.free.is_empty() {
         return Err(Error::InvalidRequest(
             "the campaign has no free parameter to profile".into(),

@@ -15,6 +15,7 @@ use crate::calibration::load_measurement;
 use crate::campaign::{Campaign, Scale};
 use crate::error::{Error, Result};
 use crate::evaluator::{CacheStats, Evaluator};
+use crate::limits::MAX_SENSITIVITY_SAMPLES;
 use crate::objective::{Evaluation, Objective};
 use crate::optim::space::UnitBox;
 use crate::store::{encoding, Store, StoredEvaluator};
@@ -57,6 +58,20 @@ pub struct Settings {
     /// evaluations). Morris: trajectories (`samples · (parameters + 1)` evaluations).
     pub samples: usize,
     pub seed: u64,
+}
+
+impl Settings {
+    /// The settings held to their limits before a design is drawn: at least 2 samples, at
+    /// most [`MAX_SENSITIVITY_SAMPLES`].
+    pub fn check(&self) -> Result<()> {
+        if self.samples < 2 || self.samples > MAX_SENSITIVITY_SAMPLES {
+            return Err(Error::InvalidRequest(format!(
+                "samples: {} is not between 2 and {MAX_SENSITIVITY_SAMPLES}",
+                self.samples
+            )));
+        }
+        Ok(())
+    }
 }
 
 /// Default base samples (Sobol) and trajectories (Morris).
@@ -234,12 +249,7 @@ pub fn analyse_reporting<E: Evaluator>(
             "the campaign has no free parameter to analyse".into(),
         ));
     }
-    if settings.samples < 2 {
-        return Err(Error::InvalidRequest(format!(
-            "{} samples: at least 2 are needed",
-            settings.samples
-        )));
-    }
+    settings.check()?;
     if settings.methods.sobol()
         && (settings.samples > sampling::SALTELLI_MAX_SAMPLES
             || 2 * dim > sampling::SALTELLI_MAX_DIMENSIONS)
