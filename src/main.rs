@@ -77,15 +77,54 @@ enum Command {
     FmuHost(commands::fmu::HostArgs),
 }
 
-fn main() -> ExitCode {
-    // Die quietly when the reader of our output goes away (`calib models | head`), as
-    // command-line tools do, instead of panicking on a broken pipe.
-    #[cfg(unix)]
-    // SAFETY: restoring the default disposition of SIGPIPE before any thread starts.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+impl Command {
+    /// Whether the command serves others for as long as it runs.
+    fn is_server(&self) -> bool {
+        matches!(
+            self,
+            Command::Worker(_) | Command::Coordinator(_) | Command::Ui(_)
+        )
     }
+}
+
+/// SIGPIPE stays ignored (Rust's default) in every command: a write to a socket (TLS
+/// writes with `writev`, which raises it) or to a child's pipe whose reader is gone
+/// then fails with EPIPE, which the write's caller handles, instead of killing the
+/// process without a word: a coordinator whose worker went away mid-write, a client
+/// whose coordinator restarted, a parent whose FMU host crashed. A command that is not
+/// a server still dies quietly when the reader of its standard output goes away
+/// (`calib models | head`), as command-line tools do, by SIGPIPE as before: a print
+/// that fails with EPIPE ends the process instead of panicking.
+#[cfg(unix)]
+fn die_quietly_when_stdout_closes() {
+    let default = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let message = info
+            .payload()
+            .downcast_ref::<String>()
+            .map(String::as_str)
+            .or_else(|| info.payload().downcast_ref::<&str>().copied())
+            .unwrap_or_default();
+        // `print!` panics with "failed printing to stdout: <the io::Error>".
+        let broken_pipe = format!("(os error {})", libc::EPIPE);
+        if message.starts_with("failed printing to stdout") && message.ends_with(&broken_pipe) {
+            // SAFETY: restores SIGPIPE's default disposition and raises it, ending the
+            // process as an unhandled SIGPIPE would have.
+            unsafe {
+                libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+                libc::raise(libc::SIGPIPE);
+            }
+        }
+        default(info);
+    }));
+}
+
+fn main() -> ExitCode {
     let cli = Cli::parse();
+    #[cfg(unix)]
+    if !cli.command.is_server() {
+        die_quietly_when_stdout_closes();
+    }
     let filter = cli
         .log
         .clone()

@@ -420,3 +420,123 @@ fn a_bad_certificate_or_key_file_is_named() {
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(stderr.contains(garbage.to_str().unwrap()), "{stderr}");
 }
+
+/// A `calib` server process of `args` whose first line of standard output is
+/// `<prefix><address>`; the process and that address.
+fn spawn_server(args: &[&str], prefix: &str, stderr: &Path) -> (std::process::Child, String) {
+    use std::io::{BufRead, BufReader};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::fs::File::create(stderr).unwrap())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let address = line
+        .trim()
+        .strip_prefix(prefix)
+        .unwrap_or_else(|| panic!("unexpected first line: {line}"))
+        .split_whitespace()
+        .next()
+        .unwrap()
+        .to_string();
+    (child, address)
+}
+
+/// Trials of [`a_tls_coordinator_outlives_its_workers`].
+const WORKER_EXITS: usize = 50;
+
+/// A TLS coordinator whose TLS workers each finish a campaign and are then stopped with
+/// SIGTERM: the coordinator keeps serving through every one of their exits. (It used to
+/// die of SIGPIPE, without a word, when it wrote to a worker whose connection had closed.)
+#[test]
+fn a_tls_coordinator_outlives_its_workers() {
+    let pki = Pki::new();
+    let dir = tempfile::tempdir().unwrap();
+    let (ca, cert, key) = (
+        pki.ca.to_str().unwrap(),
+        pki.cert.to_str().unwrap(),
+        pki.key.to_str().unwrap(),
+    );
+    let coordinator_log = dir.path().join("coordinator.log");
+    let (mut coordinator, address) = spawn_server(
+        &[
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--tls-cert",
+            cert,
+            "--tls-key",
+            key,
+            "--tls-ca",
+            ca,
+        ],
+        "coordinator listening on ",
+        &coordinator_log,
+    );
+    let url = format!("https://{address}");
+    for trial in 0..WORKER_EXITS {
+        let (mut worker, _) = spawn_server(
+            &[
+                "worker",
+                "--listen",
+                "127.0.0.1:0",
+                "--slots",
+                "1",
+                "--register",
+                &url,
+                "--tls-cert",
+                cert,
+                "--tls-key",
+                key,
+                "--tls-ca",
+                ca,
+            ],
+            "worker listening on ",
+            &dir.path().join(format!("worker{trial}.log")),
+        );
+        // A new campaign each time (the seed changes its points), so the worker simulates.
+        let search = format!(
+            "methods = [\"differential-evolution\"]\nstarts = 1\nmax_evaluations = 40\nseed = {trial}"
+        );
+        let campaign = write(
+            dir.path(),
+            "tls.toml",
+            &clean_campaign(&search).replace("name = \"clean\"", &format!("name = \"tls{trial}\"")),
+        );
+        let out = dir.path().join("out");
+        let submitted = calib(&[
+            "submit",
+            campaign.to_str().unwrap(),
+            "--coordinator",
+            &url,
+            "--tls-ca",
+            ca,
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ]);
+        assert!(
+            submitted.status.success(),
+            "trial {trial}: {}",
+            String::from_utf8_lossy(&submitted.stderr)
+        );
+        // SAFETY: a signal to a child process of this test.
+        unsafe { libc::kill(worker.id() as i32, libc::SIGTERM) };
+        worker.wait().unwrap();
+        let health = calib(&["health", &url, "--tls-ca", ca]);
+        let exited = coordinator.try_wait().unwrap();
+        assert!(
+            exited.is_none() && health.status.success(),
+            "trial {trial}: the coordinator {exited:?} after its worker stopped; \
+             health said {}; its log: {}",
+            String::from_utf8_lossy(&health.stderr),
+            std::fs::read_to_string(&coordinator_log).unwrap()
+        );
+    }
+    coordinator.kill().unwrap();
+    coordinator.wait().unwrap();
+}

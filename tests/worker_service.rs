@@ -806,3 +806,89 @@ fn reflection_lists_exactly_the_served_services_in_both_versions() {
         assert_eq!(status.code(), Code::Unimplemented);
     });
 }
+
+/// Whether a reflection client of protocol version `$v` gets the file that defines
+/// `$symbol`, and which file that is (or the refusal).
+macro_rules! file_containing {
+    ($v:ident, $channel:expr, $symbol:expr) => {{
+        use tonic_reflection::pb::$v::server_reflection_client::ServerReflectionClient;
+        use tonic_reflection::pb::$v::server_reflection_request::MessageRequest;
+        use tonic_reflection::pb::$v::server_reflection_response::MessageResponse;
+        use tonic_reflection::pb::$v::ServerReflectionRequest;
+        let request = ServerReflectionRequest {
+            host: String::new(),
+            message_request: Some(MessageRequest::FileContainingSymbol($symbol.to_string())),
+        };
+        let mut answers = ServerReflectionClient::new($channel)
+            .server_reflection_info(tokio_stream::iter(vec![request]))
+            .await
+            .unwrap()
+            .into_inner();
+        let answer = answers.message().await.unwrap().unwrap();
+        match answer.message_response {
+            Some(MessageResponse::FileDescriptorResponse(files)) => {
+                Ok(files.file_descriptor_proto.len())
+            }
+            Some(MessageResponse::ErrorResponse(error)) => {
+                Err(format!("{}: {}", error.error_code, error.error_message))
+            }
+            other => panic!("unexpected answer {other:?}"),
+        }
+    }};
+}
+
+/// Every service a server lists can be described, in both versions of the protocol.
+async fn assert_every_listed_service_is_described(channel: Channel, server: &str) {
+    let listed = listed_services!(v1, channel.clone());
+    assert!(
+        listed.contains(&"grpc.reflection.v1alpha.ServerReflection".to_string()),
+        "{server}: {listed:?}"
+    );
+    for service in &listed {
+        let v1 = file_containing!(v1, channel.clone(), service);
+        let v1alpha = file_containing!(v1alpha, channel.clone(), service);
+        assert!(
+            matches!(v1, Ok(n) if n > 0),
+            "{server}, v1, {service}: {v1:?}"
+        );
+        assert!(
+            matches!(v1alpha, Ok(n) if n > 0),
+            "{server}, v1alpha, {service}: {v1alpha:?}"
+        );
+    }
+}
+
+#[test]
+fn reflection_describes_every_listed_service_in_both_versions() {
+    let worker = TestWorker::start(1, 16);
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .enable_all()
+        .build()
+        .unwrap();
+    runtime.block_on(async {
+        let channel = Channel::from_shared(worker.url())
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        assert_every_listed_service_is_described(channel, "worker").await;
+    });
+    let coordinator = runtime.block_on(async {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let config = calib_coordinator::server::CoordinatorConfig::new(
+            "127.0.0.1:0".parse().unwrap(),
+            calib_sandbox::cluster::dispatch_config(&[worker.url()]),
+        );
+        calib_coordinator::server::serve_coordinator(listener, config).unwrap()
+    });
+    runtime.block_on(async {
+        let channel = Channel::from_shared(format!("http://{}", coordinator.address()))
+            .unwrap()
+            .connect()
+            .await
+            .unwrap();
+        assert_every_listed_service_is_described(channel, "coordinator").await;
+        coordinator.shutdown().await;
+    });
+}

@@ -165,6 +165,10 @@ pub enum MeasurementError {
     #[error("{}: MAT file is truncated: {detail}", .path.display())]
     MatTruncated { path: PathBuf, detail: String },
 
+    /// Past one of the bounds of [`super::limits`].
+    #[error("{}: MAT file is too large: {detail}", .path.display())]
+    MatTooLarge { path: PathBuf, detail: String },
+
     #[error("{}: {detail}; supported are {SUPPORTED_MAT_CONTENT}", .path.display())]
     UnsupportedMat { path: PathBuf, detail: String },
 
@@ -199,6 +203,7 @@ impl MeasurementError {
             | MeasurementError::LengthMismatch { path, .. }
             | MeasurementError::NotAVector { path, .. }
             | MeasurementError::MatTruncated { path, .. }
+            | MeasurementError::MatTooLarge { path, .. }
             | MeasurementError::UnsupportedMat { path, .. }
             | MeasurementError::MalformedMat { path, .. }
             | MeasurementError::MalformedCsv { path, .. } => path,

@@ -19,6 +19,7 @@ mod v5;
 
 use std::path::Path;
 
+use super::limits::MAX_MAT_VALUES;
 use super::{check_finite, check_time_step, Location, Measurement, MeasurementError, TimeOrder};
 
 /// Whether `bytes` start like a MAT file of a version this module knows.
@@ -51,6 +52,25 @@ pub(super) fn read(
         let file = v4::PlainVariables::new(&matrices);
         assemble(path, &file, time_column, columns, TimeOrder::Strict)
     }
+}
+
+/// Refuses a variable of more than [`MAX_MAT_VALUES`] values, before they are converted.
+fn check_value_count(
+    path: &Path,
+    name: &str,
+    shape: &[usize],
+    count: usize,
+) -> Result<(), MeasurementError> {
+    if count <= MAX_MAT_VALUES {
+        return Ok(());
+    }
+    Err(MeasurementError::MatTooLarge {
+        path: path.to_owned(),
+        detail: format!(
+            "variable \"{name}\" has dimensions {shape:?}, {count} values, more than the \
+             {MAX_MAT_VALUES} (MAX_MAT_VALUES) a variable may hold"
+        ),
+    })
 }
 
 /// A variable's values as stored.

@@ -53,21 +53,29 @@ impl KeyFilter {
                     if let Some(gate) = gate {
                         let _ = gate.recv();
                     }
-                    let mut filter = GrowableBloom::new(ERROR_RATE, INITIAL_CAPACITY);
-                    for key in tree.iter().keys() {
-                        if cancel.load(Ordering::Relaxed) {
-                            return;
-                        }
-                        match key {
-                            Ok(key) => {
-                                filter.insert(&key[..]);
+                    // sled panics on some damaged files: the store's calls say so, this
+                    // thread stops without a word.
+                    let read = super::damage::quietly(|| {
+                        let mut filter = GrowableBloom::new(ERROR_RATE, INITIAL_CAPACITY);
+                        for key in tree.iter().keys() {
+                            if cancel.load(Ordering::Relaxed) {
+                                return None;
                             }
-                            Err(e) => {
-                                tracing::warn!(error = %e, "cannot read the store's keys");
-                                return;
+                            match key {
+                                Ok(key) => {
+                                    filter.insert(&key[..]);
+                                }
+                                Err(e) => {
+                                    tracing::warn!(error = %e, "cannot read the store's keys");
+                                    return None;
+                                }
                             }
                         }
-                    }
+                        Some(filter)
+                    });
+                    let Ok(Some(mut filter)) = read else {
+                        return;
+                    };
                     let mut state = write(&keys);
                     if let State::Reading(pending) = &*state {
                         for key in pending {

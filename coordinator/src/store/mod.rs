@@ -18,6 +18,7 @@
 //! has lost at most the evaluations it had not yet reported. The byte layouts are in
 //! [`encoding`]; [`export`] writes and reads a versioned, line-oriented copy of a store.
 
+mod damage;
 pub mod encoding;
 pub mod evaluator;
 pub mod export;
@@ -131,6 +132,15 @@ pub enum StoreError {
     Corrupt(String),
     #[error("cannot import: {0}")]
     Import(String),
+    /// sled cannot read the store's files (it panicked or reported corruption).
+    #[error(
+        "the store at {} is damaged and cannot be read ({detail}): restore that folder from a \
+         backup, or move it aside and import an export made earlier (`calib store import --db \
+         {} < EXPORT`); without either, moving it aside starts an empty store and every point \
+         is simulated again",
+        .path.display(), .path.display()
+    )]
+    Damaged { path: PathBuf, detail: String },
 }
 
 impl From<::sled::Error> for StoreError {

@@ -11,6 +11,7 @@
 //! runs writing at once therefore share a few flushes instead of queueing one each.
 //! `flush_async` is not used (it can deadlock in 0.34).
 
+use super::damage::{self, guarded};
 use super::encoding::{self, LAYOUT_VERSION};
 use super::key_filter::KeyFilter;
 use super::{
@@ -61,8 +62,16 @@ struct CommitState {
 }
 
 impl SledStore {
-    /// Open (or create) the store in `path`. Fails when another process has it open.
+    /// Open (or create) the store in `path`. Fails when another process has it open, and
+    /// with [`StoreError::Damaged`] when its files cannot be read.
     pub fn open(path: &Path) -> Result<Self, StoreError> {
+        guarded(path, || Self::open_unguarded(path)).map_err(|e| match e {
+            StoreError::Corrupt(detail) => damage::damaged(path, &detail),
+            e => e,
+        })
+    }
+
+    fn open_unguarded(path: &Path) -> Result<Self, StoreError> {
         let open_error = |message: String| StoreError::Open {
             path: path.to_path_buf(),
             message,
@@ -77,6 +86,7 @@ impl SledStore {
                         .into(),
                 )
             }
+            e @ sled::Error::Corruption { .. } => damage::damaged(path, &e.to_string()),
             e => open_error(e.to_string()),
         })?;
         let tree = |name: &str| db.open_tree(name).map_err(|e| open_error(e.to_string()));
@@ -136,6 +146,11 @@ impl SledStore {
         self.sled_lookups.load(Ordering::Relaxed)
     }
 
+    /// Run `call` on sled, a panic on damaged files being an error.
+    fn guard<T>(&self, call: impl FnOnce() -> Result<T, StoreError>) -> Result<T, StoreError> {
+        guarded(&self.path, call)
+    }
+
     fn tree(&self, collection: Collection) -> &sled::Tree {
         match collection {
             Collection::Evaluations => &self.evaluations,
@@ -162,7 +177,7 @@ impl SledStore {
             state.flushing = true;
             let covered = state.requested;
             drop(state);
-            let flushed = self.flush_now();
+            let flushed = self.guard(|| self.flush_now());
             state = self.commits.state.lock().expect("commit lock");
             state.flushing = false;
             if flushed.is_ok() {
@@ -202,7 +217,7 @@ impl SledStore {
 
 impl Drop for SledStore {
     fn drop(&mut self) {
-        if let Err(e) = self.flush_now() {
+        if let Err(e) = self.guard(|| self.flush_now()) {
             tracing::warn!(store = %self.path.display(), error = %e, "final flush failed");
         }
     }
@@ -213,20 +228,22 @@ impl Store for SledStore {
         &self,
         keys: &[EvaluationKey],
     ) -> Result<Vec<Option<Evaluation>>, StoreError> {
-        let maybe = self.evaluation_keys.may_hold(keys.iter().map(|k| &k[..]));
-        keys.iter()
-            .zip(maybe)
-            .map(|(k, maybe)| {
-                if !maybe {
-                    return Ok(None);
-                }
-                self.sled_lookups.fetch_add(1, Ordering::Relaxed);
-                self.evaluations
-                    .get(k)?
-                    .map(|v| encoding::decode_evaluation(&v))
-                    .transpose()
-            })
-            .collect()
+        self.guard(|| {
+            let maybe = self.evaluation_keys.may_hold(keys.iter().map(|k| &k[..]));
+            keys.iter()
+                .zip(maybe)
+                .map(|(k, maybe)| {
+                    if !maybe {
+                        return Ok(None);
+                    }
+                    self.sled_lookups.fetch_add(1, Ordering::Relaxed);
+                    self.evaluations
+                        .get(k)?
+                        .map(|v| encoding::decode_evaluation(&v))
+                        .transpose()
+                })
+                .collect()
+        })
     }
 
     /// Inserted one by one, not as a `sled::Batch`: an evaluation is complete in itself, so
@@ -235,13 +252,15 @@ impl Store for SledStore {
     /// before its manifest and seals the manifest's buffer after), tripling the syncs of a
     /// round.
     fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
-        self.evaluation_keys
-            .note(entries.iter().map(|(k, _)| &k[..]));
-        for (k, e) in entries {
-            self.evaluations
-                .insert(&k[..], encoding::encode_evaluation(e))?;
-        }
-        self.make_durable()
+        self.guard(|| {
+            self.evaluation_keys
+                .note(entries.iter().map(|(k, _)| &k[..]));
+            for (k, e) in entries {
+                self.evaluations
+                    .insert(&k[..], encoding::encode_evaluation(e))?;
+            }
+            self.make_durable()
+        })
     }
 
     fn count_lookups(&self, hits: u64, misses: u64) {
@@ -250,72 +269,86 @@ impl Store for SledStore {
     }
 
     fn put_campaign(&self, id: &CampaignId, record: &CampaignRecord) -> Result<(), StoreError> {
-        self.campaigns
-            .insert(&id[..], encoding::encode_campaign(record))?;
-        self.make_durable()
+        self.guard(|| {
+            self.campaigns
+                .insert(&id[..], encoding::encode_campaign(record))?;
+            self.make_durable()
+        })
     }
 
     fn campaign(&self, id: &CampaignId) -> Result<Option<CampaignRecord>, StoreError> {
-        self.campaigns
-            .get(id)?
-            .map(|v| encoding::decode_campaign(&v))
-            .transpose()
+        self.guard(|| {
+            self.campaigns
+                .get(id)?
+                .map(|v| encoding::decode_campaign(&v))
+                .transpose()
+        })
     }
 
     fn campaigns(&self) -> Result<Vec<(CampaignId, CampaignRecord)>, StoreError> {
-        self.campaigns
-            .iter()
-            .map(|entry| {
-                let (k, v) = entry?;
-                let id = k
-                    .as_ref()
-                    .try_into()
-                    .map_err(|_| StoreError::Corrupt("campaign id is not 32 bytes".into()))?;
-                Ok((id, encoding::decode_campaign(&v)?))
-            })
-            .collect()
+        self.guard(|| {
+            self.campaigns
+                .iter()
+                .map(|entry| {
+                    let (k, v) = entry?;
+                    let id = k
+                        .as_ref()
+                        .try_into()
+                        .map_err(|_| StoreError::Corrupt("campaign id is not 32 bytes".into()))?;
+                    Ok((id, encoding::decode_campaign(&v)?))
+                })
+                .collect()
+        })
     }
 
     fn put_dataset(&self, hash: &DatasetHash, bytes: &[u8]) -> Result<(), StoreError> {
-        self.datasets.insert(&hash[..], bytes)?;
-        self.make_durable()
+        self.guard(|| {
+            self.datasets.insert(&hash[..], bytes)?;
+            self.make_durable()
+        })
     }
 
     fn dataset(&self, hash: &DatasetHash) -> Result<Option<Vec<u8>>, StoreError> {
-        Ok(self.datasets.get(hash)?.map(|v| v.to_vec()))
+        self.guard(|| Ok(self.datasets.get(hash)?.map(|v| v.to_vec())))
     }
 
     fn raw_entries(&self, collection: Collection) -> Result<Vec<RawEntry>, StoreError> {
-        self.tree(collection)
-            .iter()
-            .map(|entry| {
-                let (k, v) = entry?;
-                Ok((k.to_vec(), v.to_vec()))
-            })
-            .collect()
+        self.guard(|| {
+            self.tree(collection)
+                .iter()
+                .map(|entry| {
+                    let (k, v) = entry?;
+                    Ok((k.to_vec(), v.to_vec()))
+                })
+                .collect()
+        })
     }
 
     fn put_raw(&self, collection: Collection, entries: &[RawEntry]) -> Result<(), StoreError> {
-        if collection == Collection::Evaluations {
-            self.evaluation_keys
-                .note(entries.iter().map(|(k, _)| &k[..]));
-        }
-        let mut batch = sled::Batch::default();
-        for (k, v) in entries {
-            batch.insert(&k[..], &v[..]);
-        }
-        self.tree(collection).apply_batch(batch)?;
-        self.make_durable()
+        self.guard(|| {
+            if collection == Collection::Evaluations {
+                self.evaluation_keys
+                    .note(entries.iter().map(|(k, _)| &k[..]));
+            }
+            let mut batch = sled::Batch::default();
+            for (k, v) in entries {
+                batch.insert(&k[..], &v[..]);
+            }
+            self.tree(collection).apply_batch(batch)?;
+            self.make_durable()
+        })
     }
 
     fn stats(&self) -> Result<StoreStats, StoreError> {
-        Ok(StoreStats {
-            evaluations: self.evaluations.len() as u64,
-            campaigns: self.campaigns.len() as u64,
-            datasets: self.datasets.len() as u64,
-            bytes: self.db.size_on_disk()?,
-            hits: self.counter(HITS_KEY)? + self.pending_hits.load(Ordering::Relaxed),
-            misses: self.counter(MISSES_KEY)? + self.pending_misses.load(Ordering::Relaxed),
+        self.guard(|| {
+            Ok(StoreStats {
+                evaluations: self.evaluations.len() as u64,
+                campaigns: self.campaigns.len() as u64,
+                datasets: self.datasets.len() as u64,
+                bytes: self.db.size_on_disk()?,
+                hits: self.counter(HITS_KEY)? + self.pending_hits.load(Ordering::Relaxed),
+                misses: self.counter(MISSES_KEY)? + self.pending_misses.load(Ordering::Relaxed),
+            })
         })
     }
 }

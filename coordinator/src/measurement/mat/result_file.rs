@@ -243,6 +243,9 @@ impl Variables for ResultFile<'_, '_> {
                 ),
             });
         };
+        if matrix_number != 1 {
+            super::check_value_count(path, name, &[data.rows(), 1], data.rows())?;
+        }
         let values = (0..data.rows())
             .filter_map(|time_index| data.get(time_index, column - 1))
             .map(|value| sign * value);

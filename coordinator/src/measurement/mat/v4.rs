@@ -404,6 +404,12 @@ pub(super) fn numeric_vector(path: &Path, matrix: &Matrix) -> Result<Vec<f64>, M
             shape: vec![matrix.rows, matrix.cols],
         });
     }
+    super::check_value_count(
+        path,
+        &matrix.name,
+        &[matrix.rows, matrix.cols],
+        matrix.len(),
+    )?;
     Ok(matrix.values())
 }
 

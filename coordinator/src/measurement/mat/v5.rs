@@ -14,8 +14,13 @@
 //!   parser (arithmetic overflow): the pre-scan checks every element's length against
 //!   the file, and the parser runs under `catch_unwind` for what the pre-scan cannot
 //!   see (the insides of compressed elements).
-//! * A compressed element is inflated whole into memory; deflate expands at most about
-//!   1,000-fold, which bounds what a corrupt or hostile file can make it allocate.
+//! * A compressed element is inflated whole into memory by `matfile`, however much it
+//!   expands (a 1 MB file of zeros inflates to 1 GB). Compressed elements are therefore
+//!   inflated here, within [`MAX_MAT_INFLATED_BYTES`] for the whole file and never beyond
+//!   the size the inflated element declares, and `matfile` parses the file with each of
+//!   them replaced by what it inflated to: it never inflates anything itself. The
+//!   pre-scan then also sees inside compressed arrays.
+//! * Numeric arrays of more than [`MAX_MAT_VALUES`] values are refused by the pre-scan.
 //! * Parse errors carry no position, so a corrupt file is reported as such, without an
 //!   offset.
 //! * It prints "Unsupported variable type" on standard output for unknown top-level
@@ -25,9 +30,12 @@
 //! MAT v7.3 files have the same header but are HDF5 inside: they are rejected with a
 //! hint to save in an older version.
 
+use std::borrow::Cow;
+use std::io::Read;
 use std::path::Path;
 
 use super::{Samples, Variables};
+use crate::measurement::limits::{MAX_MAT_INFLATED_BYTES, MAX_MAT_VALUES};
 use crate::measurement::MeasurementError;
 
 /// Size of the text-and-flags header.
@@ -45,6 +53,8 @@ const NON_NUMERIC_CLASSES: [(u32, &str); 5] = [
     (5, "sparse"),
 ];
 const CLASS_INT32: u32 = 12;
+/// Numeric array classes: double, single, int8 to uint64.
+const NUMERIC_CLASSES: std::ops::RangeInclusive<u32> = 6..=15;
 
 /// The version field of a MAT v5-style header.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -147,8 +157,8 @@ impl V5File {
                 })
             }
         };
-        let scan = scan(path, bytes, order)?;
-        let parsed = std::panic::catch_unwind(|| matfile::MatFile::parse(bytes));
+        let (scan, expanded) = scan(path, bytes, order, MAX_MAT_INFLATED_BYTES)?;
+        let parsed = std::panic::catch_unwind(|| matfile::MatFile::parse(&expanded[..]));
         let file = match parsed {
             Ok(Ok(file)) => file,
             Ok(Err(_)) if !scan.int32_arrays.is_empty() => {
@@ -286,10 +296,21 @@ fn read_tag(bytes: &[u8], offset: usize, order: ByteOrder, padded: bool) -> Opti
     })
 }
 
-/// Checks every top-level element's length against the file, and looks inside the
-/// uncompressed arrays for what `matfile` would choke on or skip.
-fn scan(path: &Path, bytes: &[u8], order: ByteOrder) -> Result<Scan, MeasurementError> {
+/// Checks every top-level element's length against the file, inflates the compressed
+/// ones (`inflate_limit` bytes at most in all), and looks inside every array for what
+/// `matfile` would choke on or skip. Returns what it learnt and the file with each
+/// compressed element replaced by the element it inflates to (the file itself when none
+/// is compressed).
+fn scan<'a>(
+    path: &Path,
+    bytes: &'a [u8],
+    order: ByteOrder,
+    inflate_limit: usize,
+) -> Result<(Scan, Cow<'a, [u8]>), MeasurementError> {
     let mut scan = Scan::default();
+    // Set at the first compressed element: everything before it, verbatim.
+    let mut expanded: Option<Vec<u8>> = None;
+    let mut inflated_total = 0usize;
     let mut offset = HEADER_LEN;
     while offset < bytes.len() {
         let remaining = bytes.len() - offset;
@@ -312,17 +333,142 @@ fn scan(path: &Path, bytes: &[u8], order: ByteOrder) -> Result<Scan, Measurement
             });
         }
         let data = &bytes[tag.data_start..tag.data_start + tag.size];
-        let next = if tag.data_type == MI_COMPRESSED {
-            tag.data_start + tag.size
-        } else {
-            tag.next
-        };
-        if tag.data_type == MI_MATRIX {
-            scan_array(path, data, offset, order, &mut scan)?;
+        if tag.data_type == MI_COMPRESSED {
+            let element =
+                inflate_element(path, data, offset, order, inflate_limit - inflated_total)?;
+            inflated_total += element.len();
+            let inner = read_tag(&element, 0, order, true).expect("an inflated tag is whole");
+            if inner.data_type == MI_MATRIX {
+                let array = &element[inner.data_start..inner.data_start + inner.size];
+                let place = format!("compressed array at offset {offset}");
+                scan_array(path, array, &place, order, &mut scan)?;
+            }
+            expanded
+                .get_or_insert_with(|| bytes[..offset].to_vec())
+                .extend_from_slice(&element);
+            offset = tag.data_start + tag.size;
+            continue;
         }
-        offset = next;
+        if tag.data_type == MI_MATRIX {
+            let place = format!("array at offset {offset}");
+            scan_array(path, data, &place, order, &mut scan)?;
+        }
+        if let Some(expanded) = &mut expanded {
+            expanded.extend_from_slice(&bytes[offset..tag.next.min(bytes.len())]);
+        }
+        offset = tag.next;
     }
-    Ok(scan)
+    let expanded = expanded.map_or(Cow::Borrowed(bytes), Cow::Owned);
+    Ok((scan, expanded))
+}
+
+/// The data element the zlib stream `compressed` (the data of the element at `offset`)
+/// inflates to, padded to 8 bytes as an uncompressed element is: its tag, then as many
+/// bytes as the tag declares. What follows them in the stream is ignored, as `matfile`
+/// ignores it. Refused when the element declares more than `limit` bytes, and the stream
+/// is never read past what it declares, so a lying tag cannot make it inflate more.
+fn inflate_element(
+    path: &Path,
+    compressed: &[u8],
+    offset: usize,
+    order: ByteOrder,
+    limit: usize,
+) -> Result<Vec<u8>, MeasurementError> {
+    let corrupt = |detail: String| MeasurementError::MalformedMat {
+        path: path.to_owned(),
+        detail: format!("the compressed element at offset {offset} {detail}"),
+    };
+    let mut inflater = flate2::read::ZlibDecoder::new(compressed);
+    let mut tag = [0u8; 8];
+    inflater
+        .read_exact(&mut tag)
+        .map_err(|e| corrupt(format!("does not inflate to a data element ({e})")))?;
+    let inner = read_tag(&tag, 0, order, true).expect("8 bytes hold a tag");
+    if inner.data_type == MI_COMPRESSED {
+        return Err(corrupt("holds another compressed element".to_owned()));
+    }
+    // A small element's data is inside its 8-byte tag.
+    let small = inner.data_start < tag.len();
+    if small && inner.size > tag.len() - inner.data_start {
+        return Err(corrupt(format!(
+            "inflates to a small data element of {} bytes (at most 4)",
+            inner.size
+        )));
+    }
+    let body = (inner.data_start + inner.size).saturating_sub(tag.len());
+    let padded = inner.next.max(tag.len());
+    if padded > limit {
+        return Err(MeasurementError::MatTooLarge {
+            path: path.to_owned(),
+            detail: format!(
+                "the compressed element at offset {offset} inflates to a {padded}-byte element, \
+                 more than the {} bytes left of the {MAX_MAT_INFLATED_BYTES} bytes \
+                 (MAX_MAT_INFLATED_BYTES) a MAT file may inflate to",
+                limit
+            ),
+        });
+    }
+    // Read through `take(body)`: the bound below is never passed, what follows is not read.
+    let data = read_to_end_bounded(inflater.take(body as u64), body).map_err(|e| match e {
+        BoundedReadError::Io(e) => corrupt(format!("does not inflate ({e})")),
+        BoundedReadError::TooLarge => corrupt(format!("inflates past its {body} bytes")),
+    })?;
+    if data.len() < body {
+        return Err(MeasurementError::MatTruncated {
+            path: path.to_owned(),
+            detail: format!(
+                "the compressed element at offset {offset} inflates to {} bytes of data but its \
+                 element declares {body}",
+                data.len()
+            ),
+        });
+    }
+    let mut element = Vec::with_capacity(padded);
+    element.extend_from_slice(&tag);
+    element.extend_from_slice(&data);
+    element.resize(padded, 0);
+    Ok(element)
+}
+
+/// Why [`read_to_end_bounded`] stopped.
+#[derive(Debug)]
+pub(crate) enum BoundedReadError {
+    /// The reader yields more than the bound.
+    TooLarge,
+    Io(std::io::Error),
+}
+
+/// Reads `reader` to its end, refusing once it yields more than `limit` bytes. Memory
+/// grows with what the reader really yields (doubling, capped at `limit`), never with
+/// what anything claims it will yield; the reader is read through `take(limit + 1)`, so
+/// one byte past the bound is the most ever inflated or read.
+pub(crate) fn read_to_end_bounded(
+    reader: impl Read,
+    limit: usize,
+) -> Result<Vec<u8>, BoundedReadError> {
+    let mut reader = reader.take((limit as u64).saturating_add(1));
+    let mut out: Vec<u8> = Vec::new();
+    let mut chunk = [0u8; 16 << 10];
+    loop {
+        let n = match reader.read(&mut chunk) {
+            Ok(0) => return Ok(out),
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(e) => return Err(BoundedReadError::Io(e)),
+        };
+        if n > limit - out.len() {
+            return Err(BoundedReadError::TooLarge);
+        }
+        if n > out.capacity() - out.len() {
+            let capacity = out
+                .capacity()
+                .saturating_mul(2)
+                .max(out.len() + n)
+                .min(limit);
+            out.reserve_exact(capacity - out.len());
+        }
+        out.extend_from_slice(&chunk[..n]);
+    }
 }
 
 /// Checks the sub-elements of an uncompressed array (flags, dimensions, name, data)
@@ -330,16 +476,32 @@ fn scan(path: &Path, bytes: &[u8], order: ByteOrder) -> Result<Scan, Measurement
 fn scan_array(
     path: &Path,
     array: &[u8],
-    offset: usize,
+    place: &str,
     order: ByteOrder,
     scan: &mut Scan,
 ) -> Result<(), MeasurementError> {
     let malformed = |detail: String| MeasurementError::MalformedMat {
         path: path.to_owned(),
-        detail: format!("the array at offset {offset} {detail}"),
+        detail: format!("the {place} {detail}"),
     };
     let mut class = None;
     let mut name = String::new();
+    // Dimensions and value count of a numeric array over MAX_MAT_VALUES, refused once its
+    // name is known (before `matfile` reads any of its values).
+    let mut too_large: Option<(Vec<i64>, i64)> = None;
+    let refuse = |name: Option<&str>, dims: &[i64], count: i64| {
+        let what = match name {
+            Some(name) => format!("variable \"{name}\" ({place})"),
+            None => format!("the {place}"),
+        };
+        MeasurementError::MatTooLarge {
+            path: path.to_owned(),
+            detail: format!(
+                "{what} has dimensions {dims:?}, {count} values, more than the \
+                 {MAX_MAT_VALUES} (MAX_MAT_VALUES) a variable may hold"
+            ),
+        }
+    };
     let mut position = 0;
     let mut index = 0;
     while position < array.len() {
@@ -362,11 +524,22 @@ fn scan_array(
                 let count = dims.iter().try_fold(1i64, |count, &dim| {
                     (dim >= 0).then(|| count.checked_mul(dim)).flatten()
                 });
-                if count.is_none_or(|count| count > i64::from(i32::MAX)) {
-                    return Err(malformed(format!("has invalid dimensions {dims:?}")));
+                match count {
+                    Some(count) if count <= i64::from(i32::MAX) => {
+                        let numeric = class.is_some_and(|class| NUMERIC_CLASSES.contains(&class));
+                        if numeric && count > MAX_MAT_VALUES as i64 {
+                            too_large = Some((dims, count));
+                        }
+                    }
+                    _ => return Err(malformed(format!("has invalid dimensions {dims:?}"))),
                 }
             }
-            2 => name = String::from_utf8_lossy(data).into_owned(),
+            2 => {
+                name = String::from_utf8_lossy(data).into_owned();
+                if let Some((dims, count)) = &too_large {
+                    return Err(refuse(Some(&name), dims, *count));
+                }
+            }
             3 if class == Some(CLASS_INT32) && tag.data_type == MI_INT32 => {
                 scan.int32_arrays.push(name.clone());
             }
@@ -385,7 +558,10 @@ fn scan_array(
         index += 1;
         position = tag.next;
     }
-    Ok(())
+    match too_large {
+        Some((dims, count)) => Err(refuse(None, &dims, count)),
+        None => Ok(()),
+    }
 }
 
 #[cfg(test)]
@@ -632,6 +808,118 @@ mod tests {
             matches!(error, MeasurementError::MalformedMat { .. }),
             "{error}"
         );
+    }
+
+    /// A reader that counts the bytes it yields.
+    struct Counted<R> {
+        inner: R,
+        yielded: usize,
+    }
+
+    impl<R: Read> Read for Counted<R> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.inner.read(buf)?;
+            self.yielded += n;
+            Ok(n)
+        }
+    }
+
+    fn zlib_zeros(zeros: usize) -> Vec<u8> {
+        use std::io::Write;
+        let mut encoder = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        let chunk = vec![0u8; 1 << 20];
+        let mut left = zeros;
+        while left > 0 {
+            let n = left.min(chunk.len());
+            encoder.write_all(&chunk[..n]).unwrap();
+            left -= n;
+        }
+        encoder.finish().unwrap()
+    }
+
+    #[test]
+    fn bounded_reading_holds_at_most_the_bound_and_reads_one_byte_past_it() {
+        let data = vec![7u8; 100_000];
+        let read = read_to_end_bounded(&data[..], 100_000).expect("at the bound");
+        assert_eq!(read, data);
+        assert!(read.capacity() <= 100_000, "{}", read.capacity());
+        let mut source = Counted {
+            inner: &data[..],
+            yielded: 0,
+        };
+        assert!(matches!(
+            read_to_end_bounded(&mut source, 99_999),
+            Err(BoundedReadError::TooLarge)
+        ));
+        assert!(source.yielded <= 100_000, "{}", source.yielded);
+        // A zlib bomb: 64 MiB of zeros in about 64 KB, read with a 1 MiB bound.
+        let bomb = zlib_zeros(64 << 20);
+        assert!(bomb.len() < 128 << 10, "{}", bomb.len());
+        let mut inflater = Counted {
+            inner: flate2::read::ZlibDecoder::new(&bomb[..]),
+            yielded: 0,
+        };
+        assert!(matches!(
+            read_to_end_bounded(&mut inflater, 1 << 20),
+            Err(BoundedReadError::TooLarge)
+        ));
+        assert!(
+            inflater.yielded <= (1 << 20) + (16 << 10),
+            "{}",
+            inflater.yielded
+        );
+        let small = read_to_end_bounded(flate2::read::ZlibDecoder::new(&bomb[..]), 64 << 20)
+            .expect("within the bound");
+        assert_eq!(small.len(), 64 << 20);
+        assert!(small.capacity() <= 64 << 20);
+    }
+
+    #[test]
+    fn compressed_elements_are_inflated_within_the_file_limit() {
+        let file = example(Order::Little, true);
+        let plain = example(Order::Little, false);
+        let (_, expanded) =
+            scan(&path(), &file, ByteOrder::Little, MAX_MAT_INFLATED_BYTES).expect("valid");
+        // Inflated, the compressed file is the plain one.
+        assert_eq!(&expanded[..], &plain[..]);
+        let (_, unchanged) =
+            scan(&path(), &plain, ByteOrder::Little, MAX_MAT_INFLATED_BYTES).expect("valid");
+        assert!(matches!(unchanged, Cow::Borrowed(_)));
+        // The same file with a bound smaller than what it inflates to.
+        let error = scan(&path(), &file, ByteOrder::Little, 200).expect_err("over the limit");
+        assert!(
+            matches!(error, MeasurementError::MatTooLarge { .. }),
+            "{error}"
+        );
+        assert!(
+            error.to_string().contains("MAX_MAT_INFLATED_BYTES"),
+            "{error}"
+        );
+    }
+
+    #[test]
+    fn numeric_arrays_past_the_value_limit_are_refused_naming_the_variable() {
+        // 4097 × 4097 = 16,785,409 values, over MAX_MAT_VALUES; the values are not there.
+        for compressed in [false, true] {
+            let writer = V5Writer::new(Order::Little);
+            let writer = if compressed {
+                writer.compressed()
+            } else {
+                writer
+            };
+            let bytes = writer
+                .double("time", &[2, 1], &[0.0, 1.0])
+                .double("huge", &[4097, 4097], &[1.0])
+                .finish();
+            let error = load(&bytes, "time", &[]).expect_err("too many values");
+            let message = error.to_string();
+            assert!(
+                matches!(error, MeasurementError::MatTooLarge { .. }),
+                "{message}"
+            );
+            assert!(message.contains("variable \"huge\""), "{message}");
+            assert!(message.contains("MAX_MAT_VALUES"), "{message}");
+        }
     }
 
     #[test]
