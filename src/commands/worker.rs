@@ -66,6 +66,14 @@ pub fn run(args: Args) -> Outcome {
     config.advertise = args.advertise;
     config.security = args.serve.server(&args.dial)?;
     config.register_security = args.dial.client()?;
+    if let Some(coordinator) = &config.register {
+        // Refused now (a token over plain http to another machine) rather than at every
+        // heartbeat.
+        config
+            .register_security
+            .endpoint(coordinator, None)
+            .map_err(|e| Failure::input(format!("--register {e}")))?;
+    }
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let worker = service::start_worker(config.clone())
