@@ -370,13 +370,15 @@ fn concurrent_uploads_of_one_file_all_succeed_with_one_intact_dataset() {
     for round in 0..6 {
         // Another file each round, so that every round writes.
         let csv: Vec<u8> = std::iter::once("time,x,y\n".to_string())
-            .chain((0..3000).map(|i| format!("{i},{},{round}\n", i * 7 % 13)))
+            .chain((0..40_000).map(|i| format!("{i},{},{round}\n", i * 7 % 13)))
             .collect::<String>()
             .into_bytes();
+        let together = std::sync::Barrier::new(16);
         let answers: Vec<Answer> = std::thread::scope(|scope| {
             let uploads: Vec<_> = (0..16)
                 .map(|_| {
                     scope.spawn(|| {
+                        together.wait();
                         request(
                             web,
                             "POST",
@@ -403,7 +405,7 @@ fn concurrent_uploads_of_one_file_all_succeed_with_one_intact_dataset() {
             &std::fs::read(dir.path().join(format!("api/datasets/{}.json", ids[0]))).unwrap(),
         )
         .unwrap();
-        assert_eq!(record["samples"], 3000);
+        assert_eq!(record["samples"], 40_000);
     }
     let names: Vec<String> = std::fs::read_dir(dir.path().join("api/datasets"))
         .unwrap()
