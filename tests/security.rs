@@ -540,3 +540,75 @@ fn a_tls_coordinator_outlives_its_workers() {
     coordinator.kill().unwrap();
     coordinator.wait().unwrap();
 }
+
+/// A token file of `text` with permissions `mode`.
+fn token_file(dir: &Path, text: &str, mode: u32) -> String {
+    use std::os::unix::fs::PermissionsExt;
+    let path = write(dir, "token", text);
+    std::fs::set_permissions(&path, std::fs::Permissions::from_mode(mode)).unwrap();
+    path.to_str().unwrap().to_string()
+}
+
+#[test]
+fn no_client_sends_the_token_over_plain_http_to_another_machine() {
+    let dir = tempfile::tempdir().unwrap();
+    let token = token_file(dir.path(), &format!("{TOKEN}\n"), 0o600);
+    // 192.0.2.0/24 is set aside for documentation: nothing is ever dialed there, the
+    // refusal comes first.
+    let remote = "http://192.0.2.7:50050";
+    let campaign = repo().join("examples/furuta.toml");
+    let campaign = campaign.to_str().unwrap();
+    for args in [
+        vec!["status", "--coordinator", remote],
+        vec!["submit", campaign, "--coordinator", remote],
+        vec!["worker", "--listen", "127.0.0.1:0", "--register", remote],
+        vec![
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--workers",
+            remote,
+        ],
+    ] {
+        let mut args = args.clone();
+        args.extend(["--token-file", token.as_str()]);
+        let out = calib(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(remote)
+                && stderr.contains("clear text")
+                && stderr.contains("--allow-plaintext-token"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!stderr.contains(TOKEN), "{stderr}");
+    }
+}
+
+#[test]
+fn a_weak_token_or_a_token_file_others_can_read_is_warned_about() {
+    let dir = tempfile::tempdir().unwrap();
+    // Nothing listens on port 1 of this machine: the command fails at once, after reading
+    // its token.
+    let status = |token: &str| {
+        let out = calib(&[
+            "status",
+            "--coordinator",
+            "http://127.0.0.1:1",
+            "--token-file",
+            token,
+        ]);
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let stderr = status(&token_file(dir.path(), "x\n", 0o644));
+    assert!(stderr.contains("shorter than 16"), "{stderr}");
+    assert!(
+        stderr.contains("can be read by other users") && stderr.contains("chmod 600"),
+        "{stderr}"
+    );
+    let stderr = status(&token_file(dir.path(), &format!("{TOKEN}\n"), 0o600));
+    assert!(
+        !stderr.contains("shorter than") && !stderr.contains("other users"),
+        "{stderr}"
+    );
+}

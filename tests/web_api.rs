@@ -1,6 +1,7 @@
 //! The web app's JSON routes on a coordinator (`--http`): each answers what the gRPC
 //! method it transcodes answers, on the same campaigns and workers; failures keep the
-//! RPC's status and message; a coordinator that requires a token refuses to serve the app.
+//! RPC's status and message. Its door (Host, same origin, login) is tested in
+//! `tests/web_door.rs`.
 
 mod common;
 
@@ -302,24 +303,6 @@ fn json_routes_fail_with_the_rpcs_status_and_message() {
 }
 
 #[test]
-fn a_coordinator_that_requires_a_token_does_not_serve_the_web_app() {
-    let dir = tempfile::tempdir().unwrap();
-    let mut config = config(dir.path(), &[]);
-    config.security.token =
-        Some(calib_security::Token::new("a-token-of-32-characters-or-more!").unwrap());
-    let runtime = runtime();
-    let refused = runtime.block_on(async {
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        serve_coordinator(listener, config).err()
-    });
-    let message = refused.expect("refused").to_string();
-    assert!(
-        message.starts_with("--http:") && message.contains("token"),
-        "{message}"
-    );
-}
-
-#[test]
 fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
     use calib_coordinator::store::{CampaignStatus, SledStore, Store};
     use calib_coordinator::web::local::{start_ui, UiConfig};
@@ -344,6 +327,7 @@ fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
             listen: "127.0.0.1:0".parse().unwrap(),
             store: db,
             api: Some(dir.path().join("api")),
+            allow_hosts: Vec::new(),
         }))
         .unwrap();
     let web = ui.address();

@@ -54,12 +54,7 @@ impl<S> RequireToken<S> {
                 "a bearer token is required (authorization: Bearer …)",
             ));
         };
-        let presented = value.as_bytes();
-        let presented = presented
-            .strip_prefix(b"Bearer ")
-            .or_else(|| presented.strip_prefix(b"bearer "))
-            .unwrap_or(presented);
-        if token.matches(presented) {
+        if token.matches(crate::token::bearer(value.as_bytes())) {
             None
         } else {
             Some(tonic::Status::unauthenticated(

@@ -14,6 +14,9 @@ pub struct ClientSecurity {
     /// CA to trust for `https://` servers instead of the system's roots.
     pub ca: Option<TrustedCa>,
     pub token: Option<Token>,
+    /// Send the token over plain `http://` to a server on another machine, where anyone on
+    /// the way can read it (`--allow-plaintext-token`). Without it such a URL is refused.
+    pub allow_plaintext_token: bool,
 }
 
 /// A channel that presents the token on every request.
@@ -33,6 +36,12 @@ impl ClientSecurity {
         };
         let endpoint = Endpoint::from_shared(url.to_string()).map_err(|e| url_error(chain(&e)))?;
         if !url.starts_with("https://") {
+            if self.token.is_some() && !self.allow_plaintext_token && !is_loopback(endpoint.uri()) {
+                return Err(url_error(
+                    "the token would travel in clear text over plain http to another                      machine; dial https:// (the server serving TLS with --tls-cert), or                      pass --allow-plaintext-token on a network you trust"
+                        .into(),
+                ));
+            }
             return Ok(endpoint);
         }
         let mut tls = ClientTlsConfig::new();
@@ -59,6 +68,18 @@ impl ClientSecurity {
     pub fn authorize(&self, channel: Channel) -> SecureChannel {
         InterceptedService::new(channel, PresentToken::new(self.token.as_ref()))
     }
+}
+
+/// True when `uri` names this machine: `localhost` or a loopback address.
+fn is_loopback(uri: &http::Uri) -> bool {
+    let Some(host) = uri.host() else {
+        return false;
+    };
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    host.eq_ignore_ascii_case("localhost")
+        || host
+            .parse::<std::net::IpAddr>()
+            .is_ok_and(|ip| ip.is_loopback())
 }
 
 /// Adds `authorization: Bearer <token>` to every request.
@@ -99,5 +120,50 @@ impl tonic::service::Interceptor for PresentToken {
                 .insert("authorization", value.clone());
         }
         Ok(request)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_token(allow_plaintext_token: bool) -> ClientSecurity {
+        ClientSecurity {
+            ca: None,
+            token: Some(Token::new("a-token-of-32-characters-or-more!").unwrap()),
+            allow_plaintext_token,
+        }
+    }
+
+    #[test]
+    fn a_token_is_not_sent_over_plain_http_to_another_machine_unless_allowed() {
+        for url in [
+            "http://10.0.0.5:50050",
+            "http://calib-coordinator:50050",
+            "http://[2001:db8::1]:50051",
+            "http://localhost.example:1",
+        ] {
+            let error = with_token(false)
+                .endpoint(url, None)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                error.starts_with(url) && error.contains("--allow-plaintext-token"),
+                "{error}"
+            );
+            assert!(with_token(true).endpoint(url, None).is_ok(), "{url}");
+            let tokenless = ClientSecurity::default();
+            assert!(tokenless.endpoint(url, None).is_ok(), "{url}");
+        }
+        for url in [
+            "http://127.0.0.1:50050",
+            "http://127.3.2.1:50050",
+            "http://localhost:50050",
+            "http://LOCALHOST:1",
+            "http://[::1]:50051",
+            "https://10.0.0.5:50050",
+        ] {
+            assert!(with_token(false).endpoint(url, None).is_ok(), "{url}");
+        }
     }
 }

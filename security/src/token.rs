@@ -39,8 +39,19 @@ impl Token {
         })
     }
 
-    /// The token of `file` when given, else of [`TOKEN_ENV`] when set, else none.
+    /// The token of `file` when given, else of [`TOKEN_ENV`] when set, else none. Each of
+    /// [`weaknesses`] is logged as a warning.
     pub fn configured(file: Option<&Path>) -> Result<Option<Self>, SecurityError> {
+        let token = Self::configured_quietly(file)?;
+        if let Some(token) = &token {
+            for weakness in weaknesses(token, file) {
+                tracing::warn!("{weakness}");
+            }
+        }
+        Ok(token)
+    }
+
+    fn configured_quietly(file: Option<&Path>) -> Result<Option<Self>, SecurityError> {
         if let Some(path) = file {
             return Self::from_file(path).map(Some);
         }
@@ -79,6 +90,51 @@ impl Token {
     }
 }
 
+/// Shortest token not warned about: 16 bytes, 128 bits when drawn from random bytes and
+/// written in hex or base64 (`openssl rand -hex 16`).
+pub const MIN_TOKEN_BYTES: usize = 16;
+
+/// What makes `token` (read from `file`, when it came from one) easy to steal or guess, in
+/// words with what to do: a file others may read, a token shorter than [`MIN_TOKEN_BYTES`].
+pub fn weaknesses(token: &Token, file: Option<&Path>) -> Vec<String> {
+    let mut found = Vec::new();
+    let source = match file {
+        Some(path) => format!("the token in {}", path.display()),
+        None => format!("the token of {TOKEN_ENV}"),
+    };
+    if token.0.len() < MIN_TOKEN_BYTES {
+        found.push(format!(
+            "{source} is {} bytes, shorter than {MIN_TOKEN_BYTES}: it can be guessed; make              one with `openssl rand -hex 32`",
+            token.0.len()
+        ));
+    }
+    #[cfg(unix)]
+    if let Some(path) = file {
+        use std::os::unix::fs::PermissionsExt;
+        if let Ok(meta) = std::fs::metadata(path) {
+            let mode = meta.permissions().mode();
+            if mode & 0o077 != 0 {
+                found.push(format!(
+                    "{} can be read by other users (mode {:o}); `chmod 600 {}`",
+                    path.display(),
+                    mode & 0o777,
+                    path.display()
+                ));
+            }
+        }
+    }
+    found
+}
+
+/// The token an `authorization` header's value presents: what follows `Bearer ` (or
+/// `bearer `), or the whole value.
+pub fn bearer(value: &[u8]) -> &[u8] {
+    value
+        .strip_prefix(b"Bearer ")
+        .or_else(|| value.strip_prefix(b"bearer "))
+        .unwrap_or(value)
+}
+
 impl std::fmt::Debug for Token {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str("Token(<redacted>)")
@@ -111,6 +167,38 @@ mod tests {
         for bad in ["", "  \n", "two words", "tab\there", "ünïcode"] {
             assert!(Token::new(bad).is_err(), "{bad:?}");
         }
+    }
+
+    #[test]
+    fn a_short_token_or_a_file_others_can_read_is_a_weakness() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("token");
+        let strong = "0123456789abcdef";
+        std::fs::write(&path, format!("{strong}\n")).unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let token = Token::from_file(&path).unwrap();
+        assert_eq!(weaknesses(&token, Some(&path)), Vec::<String>::new());
+
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o640)).unwrap();
+        let found = weaknesses(&token, Some(&path));
+        assert_eq!(found.len(), 1, "{found:?}");
+        assert!(
+            found[0].contains("read by other users") && found[0].contains("chmod 600"),
+            "{found:?}"
+        );
+
+        std::fs::write(&path, "x").unwrap();
+        std::fs::set_permissions(&path, std::fs::Permissions::from_mode(0o604)).unwrap();
+        let short = Token::from_file(&path).unwrap();
+        let found = weaknesses(&short, Some(&path));
+        assert_eq!(found.len(), 2, "{found:?}");
+        assert!(found[0].contains("1 bytes, shorter than 16"), "{found:?}");
+        let found = weaknesses(&short, None);
+        assert!(
+            found.len() == 1 && found[0].starts_with("the token of CALIB_TOKEN"),
+            "{found:?}"
+        );
     }
 
     #[test]

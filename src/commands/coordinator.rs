@@ -32,10 +32,15 @@ pub struct Args {
     #[arg(long, value_name = "DIR")]
     api_dir: Option<PathBuf>,
     /// Also serve the web app (Model, Measurement, Calibration and Diagnosis tabs) on this
-    /// address, over the same campaigns and workers. Plain HTTP without a login: not with a
-    /// token.
+    /// address, over the same campaigns and workers: plain HTTP, answering only its own page
+    /// (same origin) under its own address's name; with a token (--token-file), the page
+    /// asks for it once and every API route requires it.
     #[arg(long, value_name = "ADDR")]
     http: Option<SocketAddr>,
+    /// A host name (or NAME:PORT) the web app also answers as, besides its address and
+    /// localhost: the name users or a reverse proxy reach it by. Repeatable.
+    #[arg(long, value_name = "NAME", requires = "http", value_parser = calib_coordinator::web::door::parse_allowed_host)]
+    allow_host: Vec<String>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -54,6 +59,7 @@ pub fn run(args: Args) -> Outcome {
     config.results = args.out;
     config.api = args.api_dir;
     config.http = args.http;
+    config.http_allow_hosts = args.allow_host;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let coordinator = server::start_coordinator(config).await?;

@@ -28,6 +28,11 @@ pub struct DialArgs {
     /// CALIB_TOKEN environment variable; none when unset].
     #[arg(long, value_name = "FILE")]
     pub token_file: Option<PathBuf>,
+    /// Send the token over plain http:// to a server on another machine, where anyone on the
+    /// network path can read it [default: refused; http:// to localhost or a loopback
+    /// address is always allowed].
+    #[arg(long)]
+    pub allow_plaintext_token: bool,
 }
 
 impl DialArgs {
@@ -47,6 +52,7 @@ impl DialArgs {
         Ok(ClientSecurity {
             ca,
             token: self.token()?,
+            allow_plaintext_token: self.allow_plaintext_token,
         })
     }
 }

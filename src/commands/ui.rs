@@ -17,6 +17,11 @@ pub struct Args {
     /// calib-api/ beside it [default: results/.calib-db].
     #[arg(long, value_name = "DIR")]
     db: Option<PathBuf>,
+    /// A host name (or NAME:PORT) the app also answers as, besides its address and
+    /// localhost: requests naming any other Host, or sent by another web page, are refused.
+    /// Repeatable.
+    #[arg(long, value_name = "NAME", value_parser = calib_coordinator::web::door::parse_allowed_host)]
+    allow_host: Vec<String>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -26,6 +31,7 @@ pub fn run(args: Args) -> Outcome {
             .db
             .unwrap_or_else(|| PathBuf::from("results").join(".calib-db")),
         api: None,
+        allow_hosts: args.allow_host,
     };
     let runtime = super::runtime()?;
     runtime.block_on(async {

@@ -73,6 +73,14 @@ pub fn run(args: Args) -> Outcome {
     ) {
         eprintln!("{warning}");
     }
+    if let Some(coordinator) = &config.register {
+        // Refused now (a token over plain http to another machine) rather than at every
+        // heartbeat.
+        config
+            .register_security
+            .endpoint(coordinator, None)
+            .map_err(|e| Failure::input(format!("--register {e}")))?;
+    }
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let worker = service::start_worker(config.clone())

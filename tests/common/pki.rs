@@ -60,6 +60,7 @@ impl Pki {
         ClientSecurity {
             ca: Some(TrustedCa::load(&self.ca).unwrap()),
             token: token.map(|t| Token::new(t).unwrap()),
+            allow_plaintext_token: false,
         }
     }
 

@@ -2,12 +2,15 @@
 
     python3 web_ui.py workflow URL DATA.csv SCREENSHOTS_DIR OUT.json
     python3 web_ui.py broken URL BROKEN.csv OUT.json
+    python3 web_ui.py login URL TOKEN_FILE DATA.csv OUT.json
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
 two angles, free the two frictions, three methods x four starts, run, read the calibrated
 values off the page), the Diagnosis tab (run it, read the verdict); a screenshot of each
 tab. `broken`: upload a CSV that does not parse and read the message the page shows.
+`login`: a coordinator with a token: the page asks for it, refuses a wrong one, and once
+signed in simulates, uploads and draws the measurement's plots; what scripts can see of it.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
@@ -262,11 +265,63 @@ def broken(url, data, out):
         driver.quit()
 
 
+def login(url, token_file, data, out):
+    with open(token_file) as f:
+        token = f.read().strip()
+    driver = browser()
+    try:
+        driver.get(url)
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "login-token")))
+        asked = {
+            "tabs_hidden": not by_id(driver, "tab-model").is_displayed(),
+            "models_before": len(driver.find_elements(By.CSS_SELECTOR, "#model-select option")),
+        }
+        type_into(driver, "login-token", "not-the-token")
+        by_id(driver, "login-submit").click()
+        wait(driver).until(lambda d: by_id(d, "login-error").is_displayed())
+        wrong = by_id(driver, "login-error").text
+        by_id(driver, "login-token").clear()
+        by_id(driver, "login-token").send_keys(token)
+        by_id(driver, "login-submit").click()
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        login_hidden = not by_id(driver, "login").is_displayed()
+        type_into(driver, "model-stop", "2")
+        by_id(driver, "simulate").click()
+        wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#model-plots figure")) >= 1
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        upload(driver, data, "time_s")
+        wait(driver).until(lambda d: "samples" in by_id(d, "measurement-status").text
+                           or by_id(d, "measurement-error").is_displayed())
+        no_error(driver, "measurement-error")
+        # The plots are <img> elements: the browser fetches them with the session cookie.
+        wait(driver).until(lambda d: d.execute_script(
+            "const i = [...document.querySelectorAll('#measurement-plots img')];"
+            "return i.length > 0 && i.every(x => x.complete && x.naturalWidth > 0)"))
+        visible = driver.execute_script(
+            "return document.cookie + JSON.stringify(sessionStorage) + JSON.stringify(localStorage)")
+        with open(out, "w") as f:
+            json.dump({
+                **asked,
+                "wrong": wrong,
+                "login_hidden": login_hidden,
+                "model_plots": len(driver.find_elements(By.CSS_SELECTOR, "#model-plots figure")),
+                "measurement_status": by_id(driver, "measurement-status").text,
+                "measurement_plots": len(driver.find_elements(By.CSS_SELECTOR, "#measurement-plots img")),
+                "token_visible_to_scripts": token in visible,
+                "script_storage": visible,
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
 if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "workflow":
         workflow(*args)
     elif mode == "broken":
         broken(*args)
+    elif mode == "login":
+        login(*args)
     else:
         raise SystemExit(f"unknown mode {mode}")

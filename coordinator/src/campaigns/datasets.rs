@@ -70,7 +70,9 @@ impl Datasets {
             )));
         }
         let id = dataset_id(time_column, bytes);
-        if let Some(info) = self.get(&id)? {
+        // A record whose file does not match it (a crash between the two renames of an
+        // older version, a file edited by hand) is written again below.
+        if let Stored::Intact(info) = self.stored(&id)? {
             return Ok(info);
         }
         // Parsed under the name it was uploaded as, so that an error names the user's file
@@ -95,19 +97,52 @@ impl Datasets {
         Ok(info)
     }
 
-    /// The dataset `id`, if it was uploaded.
+    /// The dataset `id`, if it was uploaded. A record whose file is missing or holds other
+    /// bytes than the ones it was made from is an error, never read as the dataset.
     pub fn get(&self, id: &str) -> Result<Option<DatasetInfo>> {
+        match self.stored(id)? {
+            Stored::Intact(info) => Ok(Some(info)),
+            Stored::Absent => Ok(None),
+            Stored::Damaged(reason) => Err(Error::InvalidRequest(format!(
+                "dataset {id}: {reason}; upload the file again"
+            ))),
+        }
+    }
+
+    /// The record of `id` checked against its file: the file's bytes must hash to `id`.
+    fn stored(&self, id: &str) -> Result<Stored> {
         if id.len() != 64 || !id.bytes().all(|b| b.is_ascii_hexdigit()) {
-            return Ok(None);
+            return Ok(Stored::Absent);
         }
         let path = self.folder.join(format!("{id}.json"));
-        match std::fs::read(&path) {
-            Ok(bytes) => serde_json::from_slice(&bytes).map(Some).map_err(|e| {
-                Error::InvalidRequest(format!("dataset {id}: its record is unreadable: {e}"))
-            }),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
-            Err(e) => Err(Error::InvalidRequest(format!("dataset {id}: {e}"))),
+        let record = match std::fs::read(&path) {
+            Ok(bytes) => bytes,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Stored::Absent),
+            Err(e) => return Err(Error::InvalidRequest(format!("dataset {id}: {e}"))),
+        };
+        let info: DatasetInfo = match serde_json::from_slice(&record) {
+            Ok(info) => info,
+            Err(e) => return Ok(Stored::Damaged(format!("its record is unreadable: {e}"))),
+        };
+        if info.id != id {
+            return Ok(Stored::Damaged(format!(
+                "its record names another dataset ({})",
+                info.id
+            )));
         }
+        let data = match std::fs::read(self.file(&info)) {
+            Ok(data) => data,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+                return Ok(Stored::Damaged("its file is missing".into()))
+            }
+            Err(e) => return Err(Error::InvalidRequest(format!("dataset {id}: {e}"))),
+        };
+        if dataset_id(&info.time_column, &data) != id {
+            return Ok(Stored::Damaged(
+                "its file does not hold the bytes it was uploaded with".into(),
+            ));
+        }
+        Ok(Stored::Intact(info))
     }
 
     /// Where the file of dataset `info` is.
@@ -139,17 +174,34 @@ pub fn dataset_id(time_column: &str, bytes: &[u8]) -> String {
 
 const DATASET_TAG: &[u8] = b"calib.dataset.v1\0";
 
-/// Write `bytes` to a temporary file beside `path`, then rename it into place: a reader
-/// never sees half a file.
+/// What the folder holds for an id.
+enum Stored {
+    Intact(DatasetInfo),
+    Absent,
+    /// A record without its file, or with a file of other bytes: why.
+    Damaged(String),
+}
+
+/// Write `bytes` to a temporary file of its own beside `path` (a unique name for every
+/// call, so that concurrent writers of one dataset, or of a dataset's file and its record,
+/// never share one), flush it to disk, then rename it into place: a reader never sees half
+/// a file, and the last rename of identical bytes changes nothing.
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let partial = path.with_extension("partial");
-    let write = |p: &Path| std::fs::write(p, bytes);
-    write(&partial)
-        .and_then(|_| std::fs::rename(&partial, path))
-        .map_err(|source| Error::Write {
-            path: path.to_path_buf(),
-            source,
-        })
+    use std::io::Write;
+    let error = |source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    let folder = path.parent().unwrap_or(Path::new("."));
+    let mut partial = tempfile::Builder::new()
+        .prefix(".upload-")
+        .suffix(".partial")
+        .tempfile_in(folder)
+        .map_err(error)?;
+    partial.write_all(bytes).map_err(error)?;
+    partial.as_file().sync_all().map_err(error)?;
+    partial.persist(path).map_err(|e| error(e.error))?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -183,5 +235,66 @@ mod tests {
         assert_eq!(kept, 2, "only the good dataset and its record");
         assert_eq!(d.get("not-an-id").unwrap(), None);
         assert_eq!(d.get(&"0".repeat(64)).unwrap(), None);
+    }
+
+    #[test]
+    fn concurrent_uploads_of_one_file_all_succeed_with_one_intact_dataset() {
+        let csv: Vec<u8> = std::iter::once("time,a,b\n".to_string())
+            .chain((0..40_000).map(|i| format!("{i},{},{}\n", i * 3, i % 7)))
+            .collect::<String>()
+            .into_bytes();
+        for round in 0..10 {
+            let dir = tempfile::tempdir().unwrap();
+            let d = Datasets::open(dir.path()).unwrap();
+            let together = std::sync::Barrier::new(16);
+            let answers: Vec<_> = std::thread::scope(|scope| {
+                let uploads: Vec<_> = (0..16)
+                    .map(|_| {
+                        scope.spawn(|| {
+                            together.wait();
+                            d.put("rig.csv", "time", &csv)
+                        })
+                    })
+                    .collect();
+                uploads.into_iter().map(|u| u.join().unwrap()).collect()
+            });
+            let infos: Vec<DatasetInfo> = answers
+                .into_iter()
+                .map(|a| a.unwrap_or_else(|e| panic!("round {round}: {e}")))
+                .collect();
+            assert!(infos.iter().all(|i| *i == infos[0]), "round {round}");
+            let info = &infos[0];
+            assert_eq!(std::fs::read(d.file(info)).unwrap(), csv, "round {round}");
+            assert_eq!(d.get(&info.id).unwrap().as_ref(), Some(info));
+            let mut kept: Vec<String> = std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            kept.sort();
+            let expected = vec![format!("{}.csv", info.id), format!("{}.json", info.id)];
+            assert_eq!(kept, expected, "round {round}: no temporary file is left");
+        }
+    }
+
+    #[test]
+    fn a_record_whose_file_holds_other_bytes_is_not_the_dataset_and_heals_on_upload() {
+        let dir = tempfile::tempdir().unwrap();
+        let d = Datasets::open(dir.path()).unwrap();
+        let csv = b"time,a\n0,1\n1,2\n";
+        let info = d.put("rig.csv", "time", csv).unwrap();
+        // The file holding its own record, as a shared temporary name once made it.
+        let record = std::fs::read(dir.path().join(format!("{}.json", info.id))).unwrap();
+        std::fs::write(d.file(&info), &record).unwrap();
+        let err = d.get(&info.id).unwrap_err().to_string();
+        assert!(
+            err.contains(&info.id) && err.contains("upload the file again"),
+            "{err}"
+        );
+        std::fs::remove_file(d.file(&info)).unwrap();
+        let err = d.get(&info.id).unwrap_err().to_string();
+        assert!(err.contains("missing"), "{err}");
+        assert_eq!(d.put("rig.csv", "time", csv).unwrap(), info);
+        assert_eq!(std::fs::read(d.file(&info)).unwrap(), csv);
+        assert_eq!(d.get(&info.id).unwrap(), Some(info));
     }
 }

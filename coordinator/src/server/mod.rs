@@ -12,6 +12,7 @@ use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
 use crate::error::{Error, Result};
 use crate::store::{MemoryStore, SledStore, Store};
+use crate::web::door::DoorConfig;
 use crate::web::local::{serve_app, RunningUi};
 use crate::web::{self, WebApp};
 use calib_proto::v1::calibration_server::CalibrationServer;
@@ -53,9 +54,11 @@ pub struct CoordinatorConfig {
     pub api: Option<PathBuf>,
     /// TLS and the token this coordinator's server requires.
     pub security: ServerSecurity,
-    /// Serve the web app ([`crate::web`]) on this address too, over the same campaigns.
-    /// Plain HTTP without a login: refused beside a token.
+    /// Serve the web app ([`crate::web`]) on this address too, over the same campaigns,
+    /// behind a login when the server has a token.
     pub http: Option<SocketAddr>,
+    /// Host names the web app also answers as (`--allow-host`).
+    pub http_allow_hosts: Vec<String>,
 }
 
 impl CoordinatorConfig {
@@ -69,6 +72,7 @@ impl CoordinatorConfig {
             api: None,
             security: ServerSecurity::default(),
             http: None,
+            http_allow_hosts: Vec::new(),
         }
     }
 }
@@ -172,13 +176,6 @@ pub fn serve_coordinator(
     let address = listener
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
-    if config.http.is_some() && config.security.token.is_some() {
-        return Err(Error::InvalidRequest(
-            "--http: the web app has no login, so a coordinator that requires a token cannot \
-             serve it; serve it without --token-file, on an address only trusted users reach"
-                .into(),
-        ));
-    }
     let web_listener = match config.http {
         Some(http) => {
             let bound = std::net::TcpListener::bind(http)
@@ -215,7 +212,10 @@ pub fn serve_coordinator(
     let web = match web_listener {
         Some(listener) => Some(serve_app(
             listener,
-            WebApp::new(campaigns.clone(), web::local::simulator()),
+            WebApp::new(campaigns.clone(), web::local::simulator()).with_door(DoorConfig {
+                allow_hosts: config.http_allow_hosts.clone(),
+                token: config.security.token.clone(),
+            }),
         )?),
         None => None,
     };

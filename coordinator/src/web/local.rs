@@ -30,6 +30,9 @@ pub struct UiConfig {
     /// Uploaded datasets in `datasets/`, results in `results/<id>/` [default: `calib-api/`
     /// beside the store].
     pub api: Option<PathBuf>,
+    /// Host names the app also answers as (`--allow-host`), besides its address and
+    /// localhost.
+    pub allow_hosts: Vec<String>,
 }
 
 /// A Simulator service of this process, one slot per core: the Model tab's simulations.
@@ -96,7 +99,14 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
             Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
         }
     });
-    serve_app(listener, WebApp::new(campaigns, simulator()))
+    let door = super::door::DoorConfig {
+        allow_hosts: config.allow_hosts,
+        token: None,
+    };
+    serve_app(
+        listener,
+        WebApp::new(campaigns, simulator()).with_door(door),
+    )
 }
 
 /// Serve `app` on an already bound listener.
@@ -105,7 +115,7 @@ pub fn serve_app(listener: TcpListener, app: WebApp) -> Result<RunningUi> {
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
     let (tx, rx) = oneshot::channel::<()>();
-    let server = tokio::spawn(super::serve(listener, app.router(), async {
+    let server = tokio::spawn(super::serve(listener, app.router(address), async {
         let _ = rx.await;
     }));
     tracing::info!(%address, "web app serving");

@@ -12,8 +12,12 @@
 //! campaign file of a campaign.
 //!
 //! The page (`assets/`) is hand-written HTML, CSS and JavaScript compiled into the binary:
-//! nothing is loaded from elsewhere.
+//! nothing is loaded from elsewhere. Every route is behind the [`door`]: the Host check, the
+//! same-origin check and, on a server with a token, the login.
 
+pub mod door;
+#[cfg(test)]
+mod fuzz;
 pub mod local;
 pub mod plots;
 
@@ -31,6 +35,7 @@ use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
 use calib_proto::v1::simulator_server::Simulator;
 use calib_worker::service::simulator::SimulatorService;
+use door::{Door, DoorConfig};
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 use std::convert::Infallible;
@@ -55,6 +60,7 @@ pub struct WebApp {
     calibration: Arc<CalibrationApi>,
     simulator: Arc<SimulatorService>,
     campaigns: Arc<Campaigns>,
+    door: DoorConfig,
 }
 
 impl WebApp {
@@ -63,11 +69,23 @@ impl WebApp {
             calibration: Arc::new(CalibrationApi::new(campaigns.clone())),
             simulator,
             campaigns,
+            door: DoorConfig::default(),
         }
     }
 
-    /// Every route of the app.
-    pub fn router(self) -> Router {
+    /// Who may come in besides the bound address's own page, and the token required.
+    pub fn with_door(mut self, door: DoorConfig) -> Self {
+        self.door = door;
+        self
+    }
+
+    /// Every route of the app, behind the door of a server bound to `bound`.
+    pub fn router(self, bound: std::net::SocketAddr) -> Router {
+        let gate = Arc::new(Door::new(self.door.clone(), bound));
+        let login = Router::new()
+            .route("/login", get(door::login_state).post(door::login))
+            .route("/logout", post(door::logout))
+            .with_state(gate.clone());
         Router::new()
             .route(
                 "/",
@@ -101,6 +119,8 @@ impl WebApp {
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
             .route("/ui/campaigns/{id}/campaign.toml", get(campaign_file))
             .with_state(self)
+            .merge(login)
+            .layer(axum::middleware::from_fn_with_state(gate, door::guard))
     }
 }
 

@@ -70,6 +70,12 @@ impl From<tonic::Status> for Failure {
     fn from(status: tonic::Status) -> Self {
         match calib_security::failure::refusal(&status) {
             Some(reason) => Failure::Refused(reason),
+            // The coordinator will not dial the advertised address (a token over plain
+            // http to another machine, a malformed URL): asking again changes nothing.
+            None if status.code() == tonic::Code::InvalidArgument => Failure::Refused(format!(
+                "the coordinator refuses this worker's registration: {}",
+                status.message()
+            )),
             None => Failure::Other(status.message().to_string()),
         }
     }

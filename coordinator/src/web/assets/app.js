@@ -15,6 +15,7 @@ const app = {
   watching: null,     // AbortController of the watch
   plotting: false,
   plotDue: false,
+  started: false,     // the tabs' contents are loaded (after the login, if one is asked)
 };
 
 const $ = (id) => document.getElementById(id);
@@ -60,6 +61,7 @@ async function call(method, request, init = {}) {
   const text = await response.text();
   let answer;
   try { answer = JSON.parse(text); } catch { answer = { message: text }; }
+  if (response.status === 401) showLogin();
   if (!response.ok) throw new Error(answer.message || `${method}: HTTP ${response.status}`);
   return answer;
 }
@@ -67,6 +69,7 @@ async function call(method, request, init = {}) {
 // A server stream (Server-Sent Events, one whole state each) until it ends.
 async function follow(url, onState, signal) {
   const response = await fetch(url, { signal });
+  if (response.status === 401) showLogin();
   if (!response.ok) {
     const text = await response.text();
     let message = text;
@@ -120,8 +123,59 @@ async function plot(request) {
     body: JSON.stringify(request),
   });
   const text = await response.text();
+  if (response.status === 401) showLogin();
   if (!response.ok) throw new Error(JSON.parse(text).message);
   return text;
+}
+
+// ---- the login --------------------------------------------------------------------------
+// A server with a token (calib coordinator --token-file) asks for it once: POST /login
+// with it as the bearer token answers with a session cookie (HttpOnly, SameSite=Strict)
+// that every later call carries. The page never keeps the token.
+
+function showLogin() {
+  document.body.classList.add("signing-in");
+  $("login").hidden = false;
+  $("login-token").focus();
+}
+
+async function signIn(event) {
+  event.preventDefault();
+  const input = $("login-token");
+  $("login-submit").disabled = true;
+  try {
+    const response = await fetch("/login", {
+      method: "POST",
+      headers: { Authorization: `Bearer ${input.value.trim()}` },
+    });
+    if (!response.ok) {
+      const text = await response.text();
+      let message = text;
+      try { message = JSON.parse(text).message; } catch { /* plain text */ }
+      showError("login-error", message || `HTTP ${response.status}`);
+      return;
+    }
+    input.value = "";
+    showError("login-error", "");
+    $("login").hidden = true;
+    document.body.classList.remove("signing-in");
+    if (!app.started) begin();
+  } finally {
+    $("login-submit").disabled = false;
+  }
+}
+
+// Load what the tabs show, once signed in (at once on a server without a token).
+async function begin() {
+  let state = { required: false, signed_in: true };
+  try { state = await (await fetch("/login")).json(); } catch { /* an older server */ }
+  if (state.required && !state.signed_in) {
+    showLogin();
+    return;
+  }
+  app.started = true;
+  loadModels();
+  refreshCampaigns();
 }
 
 // ---- tabs -------------------------------------------------------------------------------
@@ -781,5 +835,5 @@ $("refresh-campaigns").addEventListener("click", refreshCampaigns);
 $("diagnose").addEventListener("click", diagnose);
 $("analyse").addEventListener("click", analyse);
 $("profile").addEventListener("click", profileParameters);
-loadModels();
-refreshCampaigns();
+$("login-form").addEventListener("submit", signIn);
+begin();
