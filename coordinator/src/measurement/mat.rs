@@ -19,7 +19,7 @@ mod v5;
 
 use std::path::Path;
 
-use super::limits::MAX_MAT_VALUES;
+use crate::limits::MAX_MAT_VALUES;
 use super::{check_finite, check_time_step, Location, Measurement, MeasurementError, TimeOrder};
 
 /// Whether `bytes` start like a MAT file of a version this module knows.

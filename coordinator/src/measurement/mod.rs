@@ -17,7 +17,6 @@
 
 mod csv;
 mod error;
-pub mod limits;
 mod mat;
 /// The bytes of the measurement file `path`; a missing file and an unreadable one are told
 /// apart.

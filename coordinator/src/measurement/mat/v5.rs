@@ -35,7 +35,7 @@ use std::io::Read;
 use std::path::Path;
 
 use super::{Samples, Variables};
-use crate::measurement::limits::{MAX_MAT_INFLATED_BYTES, MAX_MAT_VALUES};
+use crate::limits::{MAX_MAT_INFLATED_BYTES, MAX_MAT_VALUES};
 use crate::measurement::MeasurementError;
 
 /// Size of the text-and-flags header.
