@@ -3,7 +3,7 @@
 //! `calib calibrate examples/furuta.toml` gives, read off the page, and leaves a screenshot
 //! of each tab (in `docs/screenshots/` with `CALIB_SCREENSHOTS=docs/screenshots`); a CSV that does not parse shows the parser's message.
 //! Skipped (with the reason printed) where Chromium, chromedriver or selenium is missing,
-//! except under `CI=true`, where that fails the test.
+//! except under continuous integration (`CI` set), where that fails the test.
 
 mod common;
 

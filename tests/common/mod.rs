@@ -18,17 +18,15 @@ pub fn shared_data() -> PathBuf {
     repo().join("../shared/data")
 }
 
-/// Skip a test that cannot run here, saying why; under `CI=true` nothing required may skip,
-/// so there the same call fails the test.
+/// Skip a test that cannot run here, saying why; under continuous integration (`CI` set, see
+/// [`calib_worker::testing`]) nothing required may skip, so there the same call fails the
+/// test.
 pub fn skip(reason: &str) {
-    if std::env::var("CI").is_ok_and(|v| v == "true" || v == "1") {
-        panic!("required under CI=true, cannot skip: {reason}");
-    }
-    eprintln!("skipped: {reason}");
+    calib_worker::testing::skip(reason);
 }
 
 /// The real Furuta record, or `None` (with the reason printed) where the shared folder is
-/// absent; under `CI=true` its absence fails the test.
+/// absent; under continuous integration its absence fails the test.
 pub fn real_record() -> Option<PathBuf> {
     let path = shared_data().join("real/FurutaData.mat");
     if path.exists() {
