@@ -380,6 +380,49 @@ fn calibrate_over_a_worker_process() {
     assert_eq!(remote.to_string(), local.to_string());
 }
 
+/// An address another process holds is the machine's state, not the user's mistake: every
+/// serving command exits 1 (not 2), naming the option and the address.
+#[test]
+fn an_address_in_use_is_the_environments_failure() {
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = held.local_addr().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let db = db.to_str().unwrap();
+    let commands: [(&[&str], &str); 4] = [
+        (
+            &["ui", "--listen", &address, "--db", db, "--no-open"],
+            "--listen",
+        ),
+        (
+            &[
+                "coordinator",
+                "--listen",
+                "127.0.0.1:0",
+                "--http",
+                &address,
+                "--db",
+                db,
+            ],
+            "--http",
+        ),
+        (
+            &["coordinator", "--listen", &address, "--db", db],
+            "--listen",
+        ),
+        (&["worker", "--listen", &address], "--listen"),
+    ];
+    for (args, option) in commands {
+        let out = calib(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{option} {address}")) && stderr.contains("cannot listen"),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
 #[test]
 fn bad_worker_addresses_are_bad_input() {
     let dir = tempfile::tempdir().unwrap();

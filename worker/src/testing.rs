@@ -40,7 +40,15 @@ mod tests {
 
     #[test]
     fn ci_is_any_value_but_empty_zero_or_false() {
-        for on in ["true", "TRUE", "True", "1", "yes", "github-actions", " true "] {
+        for on in [
+            "true",
+            "TRUE",
+            "True",
+            "1",
+            "yes",
+            "github-actions",
+            " true ",
+        ] {
             assert!(ci(Some(on)), "{on:?}");
         }
         for off in ["", " ", "0", "false", "FALSE", "False"] {

@@ -340,7 +340,10 @@ mod tests {
         let shrink_batches = sizes[1..].iter().filter(|&&s| s > 1).count();
         assert!(shrinks >= 1, "the search never shrank: {sizes:?}");
         assert_eq!(shrink_batches, shrinks, "{sizes:?}");
-        assert!(sizes.contains(&1), "the search never left shrinking: {sizes:?}");
+        assert!(
+            sizes.contains(&1),
+            "the search never left shrinking: {sizes:?}"
+        );
         assert!(sizes[1..].iter().all(|&s| s == 1 || s == 3), "{sizes:?}");
         assert_eq!(problem.batches.load(Ordering::Relaxed), shrink_batches + 1);
         let evals = result.state().get_func_counts()["cost_count"] as usize;
