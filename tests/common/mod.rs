@@ -21,6 +21,7 @@ pub fn shared_data() -> PathBuf {
 /// Skip a test that cannot run here, saying why; under continuous integration (`CI` set, see
 /// [`calib_worker::testing`]) nothing required may skip, so there the same call fails the
 /// test.
+#[track_caller]
 pub fn skip(reason: &str) {
     calib_worker::testing::skip(reason);
 }

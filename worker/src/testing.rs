@@ -25,7 +25,8 @@ pub fn ci_requires_everything() -> bool {
 }
 
 /// Skip a test that cannot run here, saying why; under continuous integration the same call
-/// fails the test instead.
+/// fails the test instead (at the caller's line).
+#[track_caller]
 pub fn skip(reason: &str) {
     assert!(
         !ci_requires_everything(),
