@@ -315,20 +315,26 @@ impl Drop for WorkerProcess {
     }
 }
 
+/// A campaign over a worker process gives what the same campaign gives in this process, bit
+/// for bit, and the worker simulated every point of it. Each run has its own store, so
+/// neither replays the other.
 #[test]
 fn calibrate_over_a_worker_process() {
     let worker = WorkerProcess::start();
     let dir = tempfile::tempdir().unwrap();
     let search = "methods = [\"nelder-mead\"]\nmax_evaluations = 40\nseed = 2";
     let campaign = write(dir.path(), "c.toml", &clean_campaign(search));
-    let out_dir = dir.path().join("out");
     let workers = format!("http://{}", worker.address);
-    let run = |extra: &[&str]| {
+    let run = |name: &str, extra: &[&str]| {
+        let out_dir = dir.path().join(name).join("out");
+        let db = dir.path().join(name).join("db");
         let mut args = vec![
             "calibrate",
             campaign.to_str().unwrap(),
             "--out",
             out_dir.to_str().unwrap(),
+            "--db",
+            db.to_str().unwrap(),
             "--json",
         ];
         args.extend_from_slice(extra);
@@ -338,12 +344,83 @@ fn calibrate_over_a_worker_process() {
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        json["best"]["objective"].as_f64().unwrap()
+        let mut json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        json.as_object_mut().unwrap().remove("elapsed_seconds");
+        let stats = calib(&["store", "stats", "--db", db.to_str().unwrap(), "--json"]);
+        assert!(stats.status.success());
+        let stats: serde_json::Value = serde_json::from_slice(&stats.stdout).unwrap();
+        (json, stats["evaluations"].as_u64().unwrap())
     };
-    let remote = run(&["--workers", &workers]);
-    let local = run(&[]);
-    assert_eq!(remote.to_bits(), local.to_bits());
+    let (remote, remote_stored) = run("remote", &["--workers", &workers]);
+    let (local, local_stored) = run("local", &[]);
+    let simulated = remote["simulated"].as_u64().unwrap();
+    // Each run simulated its points itself, into its own store.
+    assert!(simulated > 0, "{remote}");
+    assert_eq!(local["simulated"], simulated, "{local}");
+    assert_eq!((remote_stored, local_stored), (simulated, simulated));
+    // The worker process, not this one, simulated the remote run's points.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .unwrap();
+    let status = runtime.block_on(async {
+        calib_proto::v1::simulator_client::SimulatorClient::connect(workers.clone())
+            .await
+            .unwrap()
+            .status(calib_proto::v1::StatusRequest {
+                protocol_version: calib_proto::PROTOCOL_VERSION,
+            })
+            .await
+            .unwrap()
+            .into_inner()
+    });
+    assert_eq!(status.simulations, simulated, "{status:?}");
+    // Every run, every best figure, every count: the same numbers, written the same way
+    // (shortest round-trip form, so equal text is equal bits).
+    assert_eq!(remote.to_string(), local.to_string());
+}
+
+/// An address another process holds is the machine's state, not the user's mistake: every
+/// serving command exits 1 (not 2), naming the option and the address.
+#[test]
+fn an_address_in_use_is_the_environments_failure() {
+    let held = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = held.local_addr().unwrap().to_string();
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("db");
+    let db = db.to_str().unwrap();
+    let commands: [(&[&str], &str); 4] = [
+        (
+            &["ui", "--listen", &address, "--db", db, "--no-open"],
+            "--listen",
+        ),
+        (
+            &[
+                "coordinator",
+                "--listen",
+                "127.0.0.1:0",
+                "--http",
+                &address,
+                "--db",
+                db,
+            ],
+            "--http",
+        ),
+        (
+            &["coordinator", "--listen", &address, "--db", db],
+            "--listen",
+        ),
+        (&["worker", "--listen", &address], "--listen"),
+    ];
+    for (args, option) in commands {
+        let out = calib(args);
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains(&format!("{option} {address}")) && stderr.contains("cannot listen"),
+            "{args:?}: {stderr}"
+        );
+    }
 }
 
 #[test]

@@ -87,15 +87,13 @@ fn a_worker_that_never_answers_is_waited_for_then_named() {
 fn an_unbounded_deadline_or_wait_is_refused_as_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let campaign = small_campaign(dir.path());
+    let (_held, refusing) = refusing_address();
+    let workers = format!("http://{refusing}");
     for option in ["--deadline", "--wait-for-workers"] {
         for value in ["inf", "0", "-3"] {
             let (code, stderr) = calibrate_on(
                 &campaign,
-                &[
-                    "--workers",
-                    "http://127.0.0.1:1",
-                    &format!("{option}={value}"),
-                ],
+                &["--workers", &workers, &format!("{option}={value}")],
             );
             assert_eq!(code, Some(2), "{option} {value}: {stderr}");
             assert!(stderr.contains(option), "{stderr}");

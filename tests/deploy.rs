@@ -270,12 +270,9 @@ fn the_cluster_survives_a_killed_worker_a_cut_network_and_a_restarted_coordinato
     } else if answers("ip", &["netns", "list"]) && is_root() {
         "netns"
     } else {
-        let why = "neither a Docker engine nor network namespaces (root and iproute2) here";
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "the fault test needs {why}"
+        calib_worker::testing::skip(
+            "the fault test needs a Docker engine or network namespaces (root and iproute2)",
         );
-        eprintln!("skipped: {why}");
         return;
     };
     // The figures go straight to the test's output.

@@ -570,11 +570,12 @@ fn calib_submit_says_the_calibration_api_takes_no_fmus_yet() {
     };
     let dir = tempfile::tempdir().unwrap();
     let campaign = van_der_pol_example(&path, dir.path());
+    let (_held, refusing) = refusing_address();
     let out = calib(&[
         "submit",
         campaign.to_str().unwrap(),
         "--coordinator",
-        "http://127.0.0.1:9",
+        &format!("http://{refusing}"),
     ]);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");

@@ -1,6 +1,6 @@
 //! A client in another language: Python's grpcio, with stubs generated from `proto/`,
 //! calls a worker, and runs a campaign on a coordinator through the Calibration API. Skipped (with the reason printed) where python3 or grpcio is missing,
-//! except under `CI=true`, where that fails the test.
+//! except under continuous integration (`CI` set), where that fails the test.
 
 mod common;
 

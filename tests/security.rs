@@ -371,6 +371,8 @@ fn a_worker_without_the_token_cannot_register() {
         calib_coordinator::server::serve_coordinator(listener, config).unwrap()
     });
     let registry = format!("https://{}", coordinator.address());
+    // Were the registration let in, the pool would find nothing at this address.
+    let (_held, refusing) = refusing_address();
     let refused = runtime.block_on(async {
         let security = pki.client(None);
         let channel = security
@@ -382,7 +384,7 @@ fn a_worker_without_the_token_cannot_register() {
         proto::registry_client::RegistryClient::new(security.authorize(channel))
             .register(proto::RegisterRequest {
                 protocol_version: calib_proto::PROTOCOL_VERSION,
-                address: "https://127.0.0.1:1".into(),
+                address: format!("https://{refusing}"),
             })
             .await
             .expect_err("a registration without the token is refused")

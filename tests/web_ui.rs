@@ -4,7 +4,7 @@
 //! of each tab (in `docs/screenshots/` with `CALIB_SCREENSHOTS=docs/screenshots`); a CSV that does not parse shows the parser's message;
 //! on `calib coordinator --http --token-file`, the page asks for the token, then works.
 //! Skipped (with the reason printed) where Chromium, chromedriver or selenium is missing,
-//! except under `CI=true`, where that fails the test.
+//! except under continuous integration (`CI` set), where that fails the test.
 
 mod common;
 

@@ -400,8 +400,9 @@ fn a_failed_simulation_is_a_typed_answer() {
 
 #[test]
 fn a_flood_beyond_the_queue_is_refused() {
-    // One slot, two waiting: a 300 s evaporator transient (≈ 16 ms) per request keeps the
-    // slot busy while the flood arrives.
+    // One slot, two waiting. Requests keep coming, each sent once the worker has taken in
+    // (or answered) the one before, until one finds the slot and the queue full: however
+    // fast the simulations run, that one is refused and nothing else is.
     let worker = TestWorker::start(1, 2);
     runtime().block_on(async {
         let c = client(&worker).await;
@@ -414,24 +415,52 @@ fn a_flood_beyond_the_queue_is_refused() {
             solver: None,
             fmu_hash: Vec::new(),
         };
-        let mut calls = tokio::task::JoinSet::new();
-        for _ in 0..24 {
-            let (mut c, request) = (c.clone(), long.clone());
-            calls.spawn(async move { c.simulate(request).await.map(|_| ()) });
-        }
-        let (mut served, mut refused) = (0, 0);
-        while let Some(result) = calls.join_next().await {
-            match result.unwrap() {
-                Ok(()) => served += 1,
-                Err(status) => {
-                    assert_eq!(status.code(), Code::ResourceExhausted, "{status:?}");
-                    refused += 1;
-                }
+        // Requests the worker has taken in: done, running or waiting.
+        let taken_in = |c: &SimulatorClient<Channel>| {
+            let mut c = c.clone();
+            async move {
+                let s = c
+                    .status(proto::StatusRequest {
+                        protocol_version: V,
+                    })
+                    .await
+                    .unwrap()
+                    .into_inner();
+                s.simulations + u64::from(s.running) + u64::from(s.queued)
             }
+        };
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        let (mut admitted, mut served) = (Vec::new(), 0);
+        let refusal = loop {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "no request found the queue full ({} waiting, {served} served)",
+                admitted.len()
+            );
+            let before = taken_in(&c).await;
+            let (mut c2, request) = (c.clone(), long.clone());
+            let call = tokio::spawn(async move { c2.simulate(request).await.map(|_| ()) });
+            while !call.is_finished() && taken_in(&c).await == before {
+                assert!(std::time::Instant::now() < deadline, "a request vanished");
+                tokio::task::yield_now().await;
+            }
+            if call.is_finished() {
+                match call.await.unwrap() {
+                    Ok(()) => served += 1,
+                    Err(refusal) => break refusal,
+                }
+            } else {
+                admitted.push(call);
+            }
+        };
+        assert_eq!(refusal.code(), Code::ResourceExhausted, "{refusal:?}");
+        // Refused with the slot and the queue full: three taken in before it, every one
+        // served.
+        for call in admitted {
+            call.await.unwrap().expect("a request taken in is served");
+            served += 1;
         }
-        println!("{served} served, {refused} refused");
         assert!(served >= 3, "{served} served");
-        assert!(refused > 0, "nothing refused");
         // Once the flood has drained, a batch larger than slots plus queue is answered.
         let answer = c.clone().evaluate(evaluate_request(4)).await.unwrap();
         assert_eq!(answer.into_inner().results.len(), 4);

@@ -17,6 +17,15 @@ pub enum Error {
     /// A request names something that does not exist or a value out of range.
     #[error("{0}")]
     InvalidRequest(String),
+    /// An address to serve on cannot be bound (in use, not this machine's, not permitted):
+    /// the machine's state, not the request, is at fault.
+    #[error("{option} {address}: cannot listen: {source}")]
+    Listen {
+        /// The command-line option that named the address.
+        option: &'static str,
+        address: std::net::SocketAddr,
+        source: std::io::Error,
+    },
     #[error("cannot write {path}: {source}")]
     Write {
         path: PathBuf,

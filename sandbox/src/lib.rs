@@ -12,4 +12,4 @@ pub mod worker;
 
 pub use cluster::{connect, NappingCluster, SandboxCluster};
 pub use napping::{serve_napping, NappingSimulator};
-pub use worker::SandboxWorker;
+pub use worker::{hold_port, SandboxWorker};

@@ -46,9 +46,7 @@ impl SandboxWorker {
             .build()
             .expect("worker runtime");
         let (worker, scheme) = runtime.block_on(async {
-            let listener = tokio::net::TcpListener::bind(address)
-                .await
-                .unwrap_or_else(|e| panic!("bind {address}: {e}"));
+            let listener = bind_shared(address).unwrap_or_else(|e| panic!("bind {address}: {e}"));
             let mut config = WorkerConfig::new(listener.local_addr().expect("bound"));
             config.queue_bound = 64;
             configure(&mut config);
@@ -94,6 +92,36 @@ impl SandboxWorker {
     pub fn is_alive(&self) -> bool {
         self.runtime.is_some()
     }
+}
+
+/// A socket bound to `address` with `SO_REUSEPORT` (and `SO_REUSEADDR` when it is to
+/// listen), as every sandbox worker binds.
+fn shared_socket(address: SocketAddr, listening: bool) -> std::io::Result<tokio::net::TcpSocket> {
+    let socket = if address.is_ipv4() {
+        tokio::net::TcpSocket::new_v4()?
+    } else {
+        tokio::net::TcpSocket::new_v6()?
+    };
+    // A listener may take a port its predecessor's connections still linger on; a socket
+    // that never listens must not, or any socket with SO_REUSEADDR could share its port.
+    socket.set_reuseaddr(listening)?;
+    #[cfg(unix)]
+    socket.set_reuseport(true)?;
+    socket.bind(address)?;
+    Ok(socket)
+}
+
+/// Listen on `address` so that [`hold_port`] can share the port.
+fn bind_shared(address: SocketAddr) -> std::io::Result<tokio::net::TcpListener> {
+    shared_socket(address, true)?.listen(1024)
+}
+
+/// Hold a sandbox worker's port: a socket bound there that never listens. While it lives,
+/// and the worker is killed, connections to the port are refused and only a socket that shares
+/// it on purpose (as sandbox workers do) can bind it: [`SandboxWorker::start_at`] finds it
+/// free when the worker comes back, whatever else runs on the machine.
+pub fn hold_port(address: SocketAddr) -> std::io::Result<tokio::net::TcpSocket> {
+    shared_socket(address, false)
 }
 
 impl Drop for SandboxWorker {

@@ -83,9 +83,9 @@ pub fn run(args: Args) -> Outcome {
     }
     let runtime = super::runtime()?;
     runtime.block_on(async {
-        let worker = service::start_worker(config.clone())
-            .await
-            .map_err(|e| Failure::input(format!("--listen {}: {e}", config.listen)))?;
+        let worker = service::start_worker(config.clone()).await.map_err(|e| {
+            Failure::internal(format!("--listen {}: cannot listen: {e}", config.listen))
+        })?;
         println!(
             "worker listening on {} ({} slots, queue bound {})",
             worker.address(),

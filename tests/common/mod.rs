@@ -18,17 +18,28 @@ pub fn shared_data() -> PathBuf {
     repo().join("../shared/data")
 }
 
-/// Skip a test that cannot run here, saying why; under `CI=true` nothing required may skip,
-/// so there the same call fails the test.
+/// Skip a test that cannot run here, saying why; under continuous integration (`CI` set, see
+/// [`calib_worker::testing`]) nothing required may skip, so there the same call fails the
+/// test.
+#[track_caller]
 pub fn skip(reason: &str) {
-    if std::env::var("CI").is_ok_and(|v| v == "true" || v == "1") {
-        panic!("required under CI=true, cannot skip: {reason}");
-    }
-    eprintln!("skipped: {reason}");
+    calib_worker::testing::skip(reason);
+}
+
+/// A loopback address that refuses connections for as long as the returned socket lives: the
+/// socket is bound but never listens, so a connection gets a reset and no other process can
+/// take the port meanwhile (where port 1 or 9 may well be served).
+pub fn refusing_address() -> (tokio::net::TcpSocket, std::net::SocketAddr) {
+    let socket = tokio::net::TcpSocket::new_v4().expect("a socket");
+    socket
+        .bind("127.0.0.1:0".parse().unwrap())
+        .expect("bind a loopback port");
+    let address = socket.local_addr().expect("its address");
+    (socket, address)
 }
 
 /// The real Furuta record, or `None` (with the reason printed) where the shared folder is
-/// absent; under `CI=true` its absence fails the test.
+/// absent; under continuous integration its absence fails the test.
 pub fn real_record() -> Option<PathBuf> {
     let path = shared_data().join("real/FurutaData.mat");
     if path.exists() {

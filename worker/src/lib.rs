@@ -13,6 +13,7 @@ pub mod models;
 pub mod ode;
 pub mod scoring;
 pub mod service;
+pub mod testing;
 pub mod validate;
 
 pub use model::{

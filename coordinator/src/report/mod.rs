@@ -9,9 +9,6 @@ use crate::error::{Error, Result};
 use serde_json::{json, Map, Value};
 use std::path::{Path, PathBuf};
 
-/// Relative distance to the best objective within which a run counts as having found it.
-pub const SPREAD_TOLERANCE: f64 = evidence::BEST_TOLERANCE;
-
 fn named(names: &[String], values: &[f64]) -> Value {
     Value::Object(
         names

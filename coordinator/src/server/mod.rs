@@ -164,7 +164,11 @@ impl RunningCoordinator {
 pub async fn start_coordinator(config: CoordinatorConfig) -> Result<RunningCoordinator> {
     let listener = TcpListener::bind(config.listen)
         .await
-        .map_err(|e| Error::InvalidRequest(format!("cannot listen on {}: {e}", config.listen)))?;
+        .map_err(|source| Error::Listen {
+            option: "--listen",
+            address: config.listen,
+            source,
+        })?;
     serve_coordinator(listener, config)
 }
 
@@ -181,7 +185,11 @@ pub fn serve_coordinator(
             let bound = std::net::TcpListener::bind(http)
                 .and_then(|l| l.set_nonblocking(true).map(|_| l))
                 .and_then(TcpListener::from_std)
-                .map_err(|e| Error::InvalidRequest(format!("--http {http}: cannot listen: {e}")))?;
+                .map_err(|source| Error::Listen {
+                    option: "--http",
+                    address: http,
+                    source,
+                })?;
             Some(bound)
         }
         None => None,

@@ -110,6 +110,14 @@ impl<'s, E: Evaluator> StoredEvaluator<'s, E> {
         self.rounds.waiting()
     }
 
+    /// Callers waiting on points another caller simulates.
+    #[cfg(test)]
+    pub(crate) fn waiting_on_others(&self) -> usize {
+        let in_flight = self.in_flight.lock().expect("in-flight lock");
+        // The map holds one reference to a slot; every waiter holds another.
+        in_flight.values().map(|s| Arc::strong_count(s) - 1).sum()
+    }
+
     fn note(&self, error: StoreError) {
         tracing::error!(error = %error, "evaluation store failed");
         self.error.lock().expect("error lock").get_or_insert(error);

@@ -372,8 +372,11 @@ fn objective_with_other_data() -> Objective {
 }
 
 /// Panics on its first batch, then behaves.
+/// Crashes on its first batch once let go (it says when that batch has started).
 struct PanicsOnce {
     armed: std::sync::atomic::AtomicBool,
+    started: AtomicBool,
+    let_go: AtomicBool,
     inner: Counting,
 }
 
@@ -384,10 +387,20 @@ impl Evaluator for PanicsOnce {
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
         if self.armed.swap(false, Ordering::SeqCst) {
-            std::thread::sleep(Duration::from_millis(50));
+            self.started.store(true, Ordering::SeqCst);
+            await_flag(&self.let_go);
             panic!("simulator crashed");
         }
         self.inner.evaluate(objective, points)
+    }
+}
+
+/// Wait until `flag` is set (at most 10 s, then the test fails).
+fn await_flag(flag: &AtomicBool) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !flag.load(Ordering::SeqCst) {
+        assert!(std::time::Instant::now() < deadline, "never set");
+        std::thread::yield_now();
     }
 }
 
@@ -396,6 +409,8 @@ fn a_crashed_simulation_does_not_leave_waiters_hanging() {
     let store = MemoryStore::new();
     let inner = PanicsOnce {
         armed: true.into(),
+        started: false.into(),
+        let_go: false.into(),
         inner: Counting::default(),
     };
     let evaluator = StoredEvaluator::new(&inner, &store);
@@ -403,8 +418,17 @@ fn a_crashed_simulation_does_not_leave_waiters_hanging() {
     let point = vec![vec![0.5]];
     let crashed = std::thread::scope(|scope| {
         let first = scope.spawn(|| evaluator.evaluate(&objective, &point));
-        std::thread::sleep(Duration::from_millis(10));
+        // The second caller asks while the first simulates the point, and waits on it...
+        await_flag(&inner.started);
         let second = scope.spawn(|| evaluator.evaluate(&objective, &point));
+        let deadline = std::time::Instant::now() + Duration::from_secs(10);
+        while evaluator.waiting_on_others() == 0 {
+            assert!(!second.is_finished(), "the second caller did not wait");
+            assert!(std::time::Instant::now() < deadline, "no caller waits");
+            std::thread::yield_now();
+        }
+        // ...when the simulation crashes.
+        inner.let_go.store(true, Ordering::SeqCst);
         let answer = second.join().unwrap().unwrap();
         assert_eq!(answer[0].objective, 0.5);
         first.join().is_err()

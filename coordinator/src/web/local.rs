@@ -87,7 +87,11 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
     ));
     let listener = TcpListener::bind(config.listen)
         .await
-        .map_err(|e| Error::InvalidRequest(format!("cannot listen on {}: {e}", config.listen)))?;
+        .map_err(|source| Error::Listen {
+            option: "--listen",
+            address: config.listen,
+            source,
+        })?;
     // Campaigns a killed `calib ui` or `calib calibrate` left running on this store finish
     // here, replayed from the store, their results where `calib calibrate` puts them.
     let live = campaigns.clone();

@@ -54,7 +54,7 @@ pub struct NelderMead {
     vertices: Vec<(Vec<f64>, f64)>,
     sd_tolerance: f64,
     x_tolerance: f64,
-    /// Whether the last iteration was a shrink (for the run's log).
+    /// Shrinks done so far.
     shrinks: u64,
 }
 
@@ -241,8 +241,10 @@ mod tests {
     use argmin::core::{Executor, State};
     use std::sync::atomic::{AtomicUsize, Ordering};
 
-    /// The Rosenbrock function, counting batches and single evaluations.
+    /// A cost function (the Rosenbrock function unless said), counting batches and single
+    /// evaluations.
     struct Counted {
+        f: fn(&[f64]) -> f64,
         batches: AtomicUsize,
         batch_sizes: std::sync::Mutex<Vec<usize>>,
     }
@@ -258,7 +260,7 @@ mod tests {
         type Output = f64;
         fn cost(&self, x: &Vec<f64>) -> Result<f64, Error> {
             self.batch_sizes.lock().unwrap().push(1);
-            Ok(rosenbrock(x))
+            Ok((self.f)(x))
         }
         fn bulk_cost<P>(&self, params: &[P]) -> Result<Vec<f64>, Error>
         where
@@ -268,12 +270,13 @@ mod tests {
         {
             self.batches.fetch_add(1, Ordering::Relaxed);
             self.batch_sizes.lock().unwrap().push(params.len());
-            Ok(params.iter().map(|p| rosenbrock(p.borrow())).collect())
+            Ok(params.iter().map(|p| (self.f)(p.borrow())).collect())
         }
     }
 
     fn run(simplex: Vec<Vec<f64>>) -> (Vec<f64>, f64, u64, Counted) {
         let problem = Counted {
+            f: rosenbrock,
             batches: AtomicUsize::new(0),
             batch_sizes: Default::default(),
         };
@@ -302,15 +305,26 @@ mod tests {
 
     #[test]
     fn shrinks_and_the_initial_simplex_are_single_batches() {
-        // A 3-D simplex straddling a sharp valley: the search shrinks many times.
+        // A bowl in a flat plateau: only the first vertex lies in the bowl, so no reflection
+        // or contraction beats the worst vertex and the search shrinks until the simplex is
+        // in the bowl, then descends it with single points.
+        fn well(x: &[f64]) -> f64 {
+            let r2: f64 = x.iter().map(|v| (v - 0.3).powi(2)).sum();
+            if r2 < 0.1f64.powi(2) {
+                r2
+            } else {
+                1.0
+            }
+        }
         let problem_simplex = vec![
-            vec![0.2, 0.2, 0.0],
-            vec![0.8, 0.2, 0.0],
-            vec![0.2, 0.8, 0.0],
-            vec![0.2, 0.2, 0.6],
+            vec![0.32, 0.3, 0.3],
+            vec![0.8, 0.3, 0.3],
+            vec![0.32, 0.8, 0.3],
+            vec![0.32, 0.3, 0.8],
         ];
         let solver = NelderMead::new(problem_simplex.clone()).unwrap();
         let problem = Counted {
+            f: well,
             batches: AtomicUsize::new(0),
             batch_sizes: Default::default(),
         };
@@ -318,11 +332,18 @@ mod tests {
             .configure(|s| s.max_iters(10_000).counting(true))
             .run()
             .unwrap();
+        let shrinks = result.solver.shrinks() as usize;
         let problem = result.problem.take_problem().unwrap();
         let sizes = problem.batch_sizes.lock().unwrap().clone();
         // The first evaluation is the whole simplex; every other batch is a shrink of n.
         assert_eq!(sizes[0], 4);
         let shrink_batches = sizes[1..].iter().filter(|&&s| s > 1).count();
+        assert!(shrinks >= 1, "the search never shrank: {sizes:?}");
+        assert_eq!(shrink_batches, shrinks, "{sizes:?}");
+        assert!(
+            sizes.contains(&1),
+            "the search never left shrinking: {sizes:?}"
+        );
         assert!(sizes[1..].iter().all(|&s| s == 1 || s == 3), "{sizes:?}");
         assert_eq!(problem.batches.load(Ordering::Relaxed), shrink_batches + 1);
         let evals = result.state().get_func_counts()["cost_count"] as usize;
