@@ -590,13 +590,15 @@ fn no_client_sends_the_token_over_plain_http_to_another_machine() {
 #[test]
 fn a_weak_token_or_a_token_file_others_can_read_is_warned_about() {
     let dir = tempfile::tempdir().unwrap();
-    // Nothing listens on port 1 of this machine: the command fails at once, after reading
-    // its token.
+    // A port this test holds without listening refuses: the command fails at once, after
+    // reading its token.
+    let (_held, refusing) = refusing_address();
+    let coordinator = format!("http://{refusing}");
     let status = |token: &str| {
         let out = calib(&[
             "status",
             "--coordinator",
-            "http://127.0.0.1:1",
+            &coordinator,
             "--token-file",
             token,
         ]);
