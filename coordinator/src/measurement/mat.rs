@@ -19,8 +19,8 @@ mod v5;
 
 use std::path::Path;
 
-use crate::limits::MAX_MAT_VALUES;
 use super::{check_finite, check_time_step, Location, Measurement, MeasurementError, TimeOrder};
+use crate::limits::MAX_MAT_VALUES;
 
 /// Whether `bytes` start like a MAT file of a version this module knows.
 pub(super) fn looks_like_mat(bytes: &[u8]) -> bool {
