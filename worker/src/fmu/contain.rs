@@ -139,36 +139,65 @@ pub fn spawn_supervisor(mut command: Command) -> io::Result<std::process::Child>
 
 /// Stop a supervisor: ask it (SIGTERM) to kill its FMU's processes and clean up, give it
 /// [`STOP_GRACE`], then kill whatever is left of its process group, and reap it.
-pub fn stop_supervisor(process: &mut std::process::Child) -> io::Result<ExitStatus> {
+///
+/// `ending` is how long it may take to end by itself first: a supervisor whose FMU's
+/// process ended (its answers stopped) is already cleaning up and then exits the way that
+/// process did (a crash's signal); asked to stop meanwhile, it would report the request
+/// instead of the crash.
+pub fn stop_supervisor(
+    process: &mut std::process::Child,
+    ending: Duration,
+) -> io::Result<ExitStatus> {
     let pid = process.id() as libc::pid_t;
     // SAFETY: plain system calls on our own child, which is not reaped before the end of
     // this function (so its pid, the group's id, is not reused meanwhile).
     unsafe {
-        libc::kill(pid, libc::SIGTERM);
-        let until = Instant::now() + STOP_GRACE;
-        let mut reaped_elsewhere = false;
-        loop {
-            let mut info: libc::siginfo_t = std::mem::zeroed();
-            let r = libc::waitid(
-                libc::P_PID,
-                pid as libc::id_t,
-                &mut info,
-                libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
-            );
-            if r != 0 {
-                reaped_elsewhere = true;
-                break;
-            }
-            if info.si_pid() != 0 || Instant::now() >= until {
-                break;
-            }
-            std::thread::sleep(Duration::from_millis(2));
+        let mut state = exited_within(pid, ending);
+        if state == Exit::Running {
+            libc::kill(pid, libc::SIGTERM);
+            state = exited_within(pid, STOP_GRACE);
         }
-        if !reaped_elsewhere {
+        if state != Exit::ReapedElsewhere {
             libc::killpg(pid, libc::SIGKILL);
         }
     }
     process.wait()
+}
+
+/// What became of a child while [`exited_within`] waited.
+#[derive(Debug, PartialEq, Eq)]
+enum Exit {
+    Running,
+    Exited,
+    ReapedElsewhere,
+}
+
+/// Wait up to `within` for the child `pid` to exit, without reaping it (`WNOWAIT`: its pid,
+/// the group's id, stays reserved).
+///
+/// # Safety
+/// `pid` is a child of this process not reaped before the caller is done with its group.
+unsafe fn exited_within(pid: libc::pid_t, within: Duration) -> Exit {
+    let until = Instant::now() + within;
+    loop {
+        let mut info: libc::siginfo_t = std::mem::zeroed();
+        let r = libc::waitid(
+            libc::P_PID,
+            pid as libc::id_t,
+            &mut info,
+            libc::WEXITED | libc::WNOHANG | libc::WNOWAIT,
+        );
+        if r != 0 {
+            return Exit::ReapedElsewhere;
+        }
+        if info.si_pid() != 0 {
+            return Exit::Exited;
+        }
+        if Instant::now() >= until {
+            return Exit::Running;
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
 }
 
 /// The supervisor's side (see the module documentation): start this program again as the
@@ -246,6 +275,13 @@ pub fn supervise() -> ! {
                     }
                 }
             } else if signal > 0 {
+                // Told to stop; the FMU's process may have ended already (its SIGCHLD still
+                // pending behind the lower-numbered stop signal): report that end, not the
+                // request.
+                let mut status = 0;
+                if libc::waitpid(inner, &mut status, libc::WNOHANG) == inner {
+                    ended = Some(status);
+                }
                 break;
             }
         }

@@ -32,6 +32,9 @@ use std::time::Duration;
 
 /// Lines of a child's stderr kept to explain its failure.
 const STDERR_KEPT: usize = 10;
+/// How long a host whose FMU's process ended may take to clean up and exit by itself before
+/// it is told to stop.
+const ENDING_GRACE: Duration = Duration::from_secs(5);
 /// Largest reply accepted from a child (the largest trajectory a request allows is far less).
 const MAX_FRAME: usize = 1 << 30;
 
@@ -82,11 +85,12 @@ struct Child {
 }
 
 impl Child {
-    /// Stop it and every process its FMU started, and reap it (once).
-    fn stop(&mut self) -> &std::io::Result<std::process::ExitStatus> {
+    /// Stop it and every process its FMU started, and reap it (once); `ending`: how long
+    /// it may take to end by itself first (see [`super::contain::stop_supervisor`]).
+    fn stop(&mut self, ending: Duration) -> &std::io::Result<std::process::ExitStatus> {
         self.ended.get_or_insert_with(|| {
             #[cfg(target_os = "linux")]
-            return super::contain::stop_supervisor(&mut self.process);
+            return super::contain::stop_supervisor(&mut self.process, ending);
             #[cfg(not(target_os = "linux"))]
             {
                 let _ = self.process.kill();
@@ -98,7 +102,7 @@ impl Child {
 
 impl Drop for Child {
     fn drop(&mut self) {
-        self.stop();
+        self.stop(Duration::ZERO);
     }
 }
 
@@ -218,7 +222,14 @@ impl Hosts {
     /// Kill and reap a child; what happened to it, with its last messages.
     fn lose(&self, mut child: Child, timed_out: Option<Duration>) -> String {
         self.lost.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let status = child.stop();
+        // Answers that stopped mean the FMU's process ended: its supervisor is cleaning up
+        // and will exit as that process did.
+        let ending = if timed_out.is_none() {
+            ENDING_GRACE
+        } else {
+            Duration::ZERO
+        };
+        let status = child.stop(ending);
         // Let the stderr reader take the last lines.
         std::thread::sleep(Duration::from_millis(20));
         let what = match (timed_out, status) {
