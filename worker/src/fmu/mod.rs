@@ -474,24 +474,24 @@ pub fn remember_archive(hash: &[u8; 32], path: &Path) {
 
 /// The content hash of the FMU model registered under `name`.
 pub fn hash_of(name: &str) -> Option<[u8; 32]> {
+    registered(name, |r| r.hash)
+}
+
+/// `what` of the FMU model registered under `name`, read under the registry's lock.
+fn registered<T>(name: &str, what: impl FnOnce(&Registered) -> T) -> Option<T> {
     registry()
         .lock()
         .unwrap_or_else(|e| e.into_inner())
         .iter()
         .find(|r| r.model.info().name == name)
-        .map(|r| r.hash)
+        .map(what)
 }
 
 /// The archive and content hash of the FMU model registered under `name`, to send it to a
 /// worker: read again from where it is kept, and only when its content is still the one
 /// opened.
 pub fn archive_of(name: &str) -> Option<([u8; 32], Arc<Vec<u8>>)> {
-    let (hash, path) = registry()
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .iter()
-        .find(|r| r.model.info().name == name)
-        .map(|r| (r.hash, r.archive.clone()))?;
+    let (hash, path) = registered(name, |r| (r.hash, r.archive.clone()))?;
     let path = path?;
     match archive::read(&path, &archive::Limits::default()) {
         Ok(bytes) if content_hash(&bytes) == hash => Some((hash, Arc::new(bytes))),
@@ -520,12 +520,7 @@ pub fn interface_in_name(name: &str) -> Option<Interface> {
 
 /// The FMU model registered under `name` (see the module documentation).
 pub fn find(name: &str) -> Option<&'static dyn Model> {
-    registry()
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .iter()
-        .find(|r| r.model.info().name == name)
-        .map(|r| r.model)
+    registered(name, |r| r.model)
 }
 
 /// The FMU at `path` with its instances in this process whatever [`isolate_with`] says, and
