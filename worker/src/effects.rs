@@ -16,8 +16,85 @@ use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, SimulationError, SolverOptions, Trajectory,
 };
 
+/// The measurement-chain effects every output has, in the order of their slots.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OutputEffect {
+    /// `y + c`, in the output's unit.
+    Offset,
+    /// `(1 + g)·y`.
+    Gain,
+    /// `y(t − τ)`, τ in seconds.
+    Delay,
+    /// A first-order sensor of time constant T seconds.
+    Lag,
+}
+
+impl OutputEffect {
+    /// Every kind, in slot order.
+    pub const ALL: [OutputEffect; 4] = [Self::Offset, Self::Gain, Self::Delay, Self::Lag];
+
+    /// The kind's word in an effect's name: `offset` in `offset(<output>)`.
+    pub fn word(self) -> &'static str {
+        match self {
+            Self::Offset => "offset",
+            Self::Gain => "gain",
+            Self::Delay => "delay",
+            Self::Lag => "lag",
+        }
+    }
+
+    /// The effect's slot among its output's [`PER_OUTPUT`].
+    fn slot(self) -> usize {
+        self as usize
+    }
+
+    /// The effect's name on `output`.
+    pub fn name(self, output: &str) -> String {
+        format!("{}({output})", self.word())
+    }
+
+    /// The kind and the output of an effect named `kind(output)`; `None` for any other
+    /// effect (a model's own, such as `stiffness.arm`).
+    pub fn parse(name: &str) -> Option<(OutputEffect, &str)> {
+        let (word, rest) = name.split_once('(')?;
+        let output = rest.strip_suffix(')')?;
+        let kind = Self::ALL.into_iter().find(|k| k.word() == word)?;
+        Some((kind, output))
+    }
+
+    /// Unit (`None`: the output's own), bounds and description of the effect on `output`.
+    fn spec(self, output: &str) -> (Option<&'static str>, f64, f64, String) {
+        match self {
+            Self::Offset => (
+                None,
+                -1e9,
+                1e9,
+                format!("constant offset of the measured {output}"),
+            ),
+            Self::Gain => (
+                Some("1"),
+                -0.9,
+                10.0,
+                format!("relative gain error of the measured {output}: (1+g)*y"),
+            ),
+            Self::Delay => (
+                Some("s"),
+                0.0,
+                10.0,
+                format!("dead time of the measured {output}"),
+            ),
+            Self::Lag => (
+                Some("s"),
+                0.0,
+                100.0,
+                format!("time constant of a first-order sensor measuring {output}"),
+            ),
+        }
+    }
+}
+
 /// Effect slots per output.
-const PER_OUTPUT: usize = 4;
+const PER_OUTPUT: usize = OutputEffect::ALL.len();
 
 /// A model with the measurement-chain effects of every output.
 pub struct WithOutputEffects<M> {
@@ -33,46 +110,18 @@ impl<M: Model> WithOutputEffects<M> {
         let inner_len = info.full_len();
         for output in inner.info().outputs.iter() {
             let o = &output.name;
-            let unit = &output.unit;
-            let spec =
-                |kind: &str, unit: &str, min: f64, max: f64, description: String| EffectSpec {
-                    name: format!("{kind}({o})"),
-                    unit: unit.into(),
-                    min,
-                    max,
-                    description,
-                    parameter: None,
-                };
-            info.effects.extend([
-                spec(
-                    "offset",
-                    unit,
-                    -1e9,
-                    1e9,
-                    format!("constant offset of the measured {o}"),
-                ),
-                spec(
-                    "gain",
-                    "1",
-                    -0.9,
-                    10.0,
-                    format!("relative gain error of the measured {o}: (1+g)*y"),
-                ),
-                spec(
-                    "delay",
-                    "s",
-                    0.0,
-                    10.0,
-                    format!("dead time of the measured {o}"),
-                ),
-                spec(
-                    "lag",
-                    "s",
-                    0.0,
-                    100.0,
-                    format!("time constant of a first-order sensor measuring {o}"),
-                ),
-            ]);
+            info.effects
+                .extend(OutputEffect::ALL.into_iter().map(|kind| {
+                    let (unit, min, max, description) = kind.spec(o);
+                    EffectSpec {
+                        name: kind.name(o),
+                        unit: unit.unwrap_or(&output.unit).into(),
+                        min,
+                        max,
+                        description,
+                        parameter: None,
+                    }
+                }));
         }
         Self {
             inner,
@@ -104,10 +153,13 @@ impl<M: Model> Model for WithOutputEffects<M> {
     ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
         let (inner_params, effects) = params.split_at(self.inner_len);
-        let effect = |output: usize, kind: usize| effects[output * PER_OUTPUT + kind];
-        let delays: Vec<f64> = outputs.iter().map(|&o| effect(o, 2)).collect();
+        let effect = |output: usize, kind: OutputEffect| effects[output * PER_OUTPUT + kind.slot()];
+        let delays: Vec<f64> = outputs
+            .iter()
+            .map(|&o| effect(o, OutputEffect::Delay))
+            .collect();
         if delays.iter().any(|d| *d < 0.0)
-            || (0..effects.len()).any(|i| i % PER_OUTPUT == 3 && effects[i] < 0.0)
+            || (0..effects.len() / PER_OUTPUT).any(|o| effect(o, OutputEffect::Lag) < 0.0)
         {
             return Err(SimulationError::InvalidInput(
                 "delays and lags must be non-negative".into(),
@@ -147,12 +199,12 @@ impl<M: Model> Model for WithOutputEffects<M> {
 
         for (k, &o) in outputs.iter().enumerate() {
             let series = &mut trajectory.values[k];
-            let lag = effect(o, 3);
+            let lag = effect(o, OutputEffect::Lag);
             if lag > 0.0 {
                 first_order_lag(grid, series, lag);
             }
-            let gain = effect(o, 1);
-            let offset = effect(o, 0);
+            let gain = effect(o, OutputEffect::Gain);
+            let offset = effect(o, OutputEffect::Offset);
             if gain != 0.0 || offset != 0.0 {
                 for v in series.iter_mut() {
                     *v = (1.0 + gain) * *v + offset;
@@ -188,6 +240,21 @@ fn first_order_lag(time: &[f64], series: &mut [f64], tau: f64) {
 mod tests {
     use super::*;
     use crate::model::{OutputSpec, ParameterSpec, SolverStats};
+
+    #[test]
+    fn effect_names_parse_back_to_their_kind_and_output() {
+        for kind in OutputEffect::ALL {
+            let name = kind.name("armJoint.phi");
+            assert_eq!(OutputEffect::parse(&name), Some((kind, "armJoint.phi")));
+        }
+        assert_eq!(
+            OutputEffect::parse("lag(a(b))"),
+            Some((OutputEffect::Lag, "a(b)"))
+        );
+        for other in ["stiffness.arm", "offset", "offset(x", "drift(x)", "(x)"] {
+            assert_eq!(OutputEffect::parse(other), None, "{other}");
+        }
+    }
 
     /// y = a·t, for checking the effects in closed form.
     struct Ramp {

@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 use crate::evaluator::{Evaluator, Simulator};
 use crate::measurement::Measurement;
 use crate::objective::Objective;
+use calib_worker::effects::OutputEffect;
 
 /// Most Gauss–Newton steps per candidate.
 pub const GAUSS_NEWTON_STEPS: usize = 6;
@@ -29,13 +30,11 @@ pub const SCAN: [f64; 8] = [0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0];
 /// A first finite-difference step for switching on `effect`, before rescaling to the
 /// residual's size.
 fn initial_step(effect: &FreeParameter, residual_rms: f64, dt: f64) -> f64 {
-    let kind = effect.name.split('(').next().unwrap_or("");
-    let range = effect.max - effect.min;
-    match kind {
-        "offset" => residual_rms.max(1e-12),
-        "gain" => 1e-3,
-        "delay" | "lag" => dt.max(1e-6),
-        _ => 1e-4 * range,
+    match OutputEffect::parse(&effect.name) {
+        Some((OutputEffect::Offset, _)) => residual_rms.max(1e-12),
+        Some((OutputEffect::Gain, _)) => 1e-3,
+        Some((OutputEffect::Delay | OutputEffect::Lag, _)) => dt.max(1e-6),
+        None => 1e-4 * (effect.max - effect.min),
     }
 }
 
