@@ -134,3 +134,40 @@ fn a_slow_heat_flow_sensor_is_found() {
 fn heat_lost_to_the_room_is_found() {
     finds("ambient_loss", 20.0);
 }
+
+/// The shipped example (`examples/hx_lag.toml`, its record made with an 8 s sensor lag on
+/// CF_RefHT = 1.5, CF_Refdp = 1.3) reaches the figures docs/diagnosis.md gives for it.
+#[test]
+fn the_shipped_lag_example_finds_the_lag_docs_report() {
+    let c = Campaign::load(&repo().join("examples/hx_lag.toml")).unwrap();
+    let d = diagnose(&c, &LocalEvaluator, &Silent).unwrap();
+    let value = |name: &str| {
+        d.final_fit
+            .parameters
+            .iter()
+            .find(|p| p.name == name)
+            .unwrap_or_else(|| panic!("{name} not in the final fit"))
+            .value
+    };
+    let ratio = d.final_fit.objective / d.noise_floor;
+    println!(
+        "hx_lag: selected {:?}, lag {:.4}, CF_RefHT {:.4}, CF_Refdp {:.5}, {:.4e} -> {:.4e}, \
+         {ratio:.3}x the floor",
+        d.selected,
+        value("lag(Qdot_refTotal)"),
+        value("CF_RefHT"),
+        value("CF_Refdp"),
+        d.baseline.objective,
+        d.final_fit.objective,
+    );
+    assert_eq!(d.verdict, Verdict::Explained);
+    assert_eq!(d.selected, ["lag(Qdot_refTotal)"]);
+    // docs: 7.982 s [7.915, 8.048], CF_RefHT 1.487, CF_Refdp 1.3002, 1.11x the floor.
+    assert!((value("lag(Qdot_refTotal)") - 8.0).abs() < 0.1);
+    assert!((value("CF_RefHT") / 1.5 - 1.0).abs() < 0.015);
+    assert!((value("CF_Refdp") / 1.3 - 1.0).abs() < 0.002);
+    assert!(ratio <= 1.2, "{ratio}x the noise floor");
+    assert!(d.baseline.objective / d.final_fit.objective > 100.0);
+    let simulations = d.stats.evaluations.simulated + d.stats.trajectories;
+    assert!(simulations <= 1_500, "{simulations} simulations");
+}
