@@ -100,9 +100,18 @@ fn the_real_rig_with_a_naive_model_leads_back_to_coulomb_friction() {
         d.selected
     );
     assert!(d.candidates[0].effect.starts_with("coulomb_friction."));
-    // Down to the level of the seed's model (2.729 in the seed's tool chain).
-    assert!(d.final_fit.objective < 2.729, "{}", d.final_fit.objective);
-    assert!(d.final_fit.objective * 50.0 < d.baseline.objective);
+    // Below the seed's own model in the seed's tool chain (2.729): docs give 0.944 from a
+    // baseline of 64.63, 68x lower; held here to 1% and to over 60x.
+    println!(
+        "naive model on the real rig: {:.5} -> {:.5}, selected {:?}",
+        d.baseline.objective, d.final_fit.objective, d.selected
+    );
+    assert!(
+        (d.final_fit.objective / 0.944 - 1.0).abs() < 0.01,
+        "{}",
+        d.final_fit.objective
+    );
+    assert!(d.final_fit.objective * 60.0 < d.baseline.objective);
 }
 
 /// A synthetic record of the furuta with `set` (name, value) applied and 2 mrad noise,
