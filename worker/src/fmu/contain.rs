@@ -201,8 +201,9 @@ unsafe fn exited_within(pid: libc::pid_t, within: Duration) -> Exit {
 }
 
 /// The supervisor's side (see the module documentation): start this program again as the
-/// FMU's process, wait, clean up and exit as it did.
-pub fn supervise() -> ! {
+/// FMU's process, handing it `channel` (the descriptor of the channel to the worker, which
+/// the supervisor then closes) and its stdout and stderr, wait, clean up and exit as it did.
+pub fn supervise(channel: libc::c_int) -> ! {
     // SAFETY: plain system calls; this process runs a single thread.
     unsafe {
         libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0);
@@ -251,14 +252,10 @@ pub fn supervise() -> ! {
                 libc::_exit(1);
             }
         };
-        // Only the FMU's process answers on the pipes: let go of them, so that the worker
-        // sees their end when it ends.
-        let null = libc::open(c"/dev/null".as_ptr(), libc::O_RDWR);
-        if null >= 0 {
-            libc::dup2(null, 0);
-            libc::dup2(null, 1);
-            libc::close(null);
-        }
+        // Only the FMU's process answers on the channel: let go of it, so that the worker
+        // sees its end when that process ends. (Its stdout and stderr stay open here: they
+        // end when this process does, after the last of the FMU's processes.)
+        libc::close(channel);
         let mut ended: Option<libc::c_int> = None;
         'wait: loop {
             let signal = libc::sigwaitinfo(&set, std::ptr::null_mut());

@@ -2,9 +2,10 @@
 //! `libloading` and declared here from the standard's headers (`fmi2FunctionTypes.h`,
 //! `fmi3FunctionTypes.h`), and one instance with the FMU's log messages kept.
 //!
-//! FMI 2.0's logger is variadic; the function given to the FMU takes the five fixed
-//! arguments and keeps the message as the FMU passes it (the reference FMUs and most
-//! exporters format it themselves; a `%` left in it is shown as is).
+//! FMI 2.0's logger is variadic and printf-style: the function given to the FMU is a C one
+//! (`csrc/fmi2_logger.c`, built by the worker's build script) that formats the message with
+//! `vsnprintf` and passes the text on; value-reference escapes (`#r123#`) are kept as they
+//! are. FMI 3.0's logger receives the message already formatted.
 
 #![allow(non_snake_case, non_camel_case_types)]
 
@@ -29,7 +30,8 @@ type Fmi2Instantiate = unsafe extern "C" fn(
     c_int,
     c_int,
 ) -> Ptr;
-type Fmi2Logger = unsafe extern "C" fn(Ptr, *const c_char, c_int, *const c_char, *const c_char);
+type Fmi2Logger =
+    unsafe extern "C" fn(Ptr, *const c_char, c_int, *const c_char, *const c_char, ...);
 type Fmi2Status0 = unsafe extern "C" fn(Ptr) -> c_int;
 type Fmi2FreeInstance = unsafe extern "C" fn(Ptr);
 type Fmi2SetupExperiment =
@@ -122,8 +124,25 @@ pub fn echo_log_to_stderr() {
     ECHO.store(true, std::sync::atomic::Ordering::Relaxed);
 }
 
-/// Where an instance's log messages go: the instance environment the FMU passes back.
+extern "C" {
+    /// FMI 2.0's logger (`csrc/fmi2_logger.c`): formats the message and calls the
+    /// environment's [`LogSink::forward`].
+    fn calib_fmi2_logger(
+        environment: Ptr,
+        instance: *const c_char,
+        status: c_int,
+        category: *const c_char,
+        format: *const c_char,
+        ...
+    );
+}
+
+/// Where an instance's log messages go: the instance environment the FMU passes back. Its
+/// head is what the C logger knows of it (`calib_log_sink`).
+#[repr(C)]
 struct LogSink {
+    /// Where the C logger sends the formatted text: [`fmi3_logger`], FMI 3.0's own.
+    forward: unsafe extern "C" fn(Ptr, c_int, *const c_char, *const c_char),
     messages: Mutex<Vec<String>>,
 }
 
@@ -163,18 +182,6 @@ fn status_name(status: c_int) -> &'static str {
         3 => "error",
         4 => "fatal",
         _ => "pending",
-    }
-}
-
-unsafe extern "C" fn fmi2_logger(
-    environment: Ptr,
-    _instance: *const c_char,
-    status: c_int,
-    category: *const c_char,
-    message: *const c_char,
-) {
-    if let Some(sink) = unsafe { (environment as *const LogSink).as_ref() } {
-        sink.push(status, category, message);
     }
 }
 
@@ -361,6 +368,7 @@ impl Library {
     /// A new instance of the FMU.
     pub fn instantiate(self: &Arc<Self>) -> Result<Instance, FmuError> {
         let sink = Box::new(LogSink {
+            forward: fmi3_logger,
             messages: Mutex::new(Vec::new()),
         });
         let environment = &*sink as *const LogSink as Ptr;
@@ -370,7 +378,7 @@ impl Library {
             FmiVersion::V2 => {
                 let instantiate: Fmi2Instantiate = sym!(self, "fmi2Instantiate")?;
                 let cb = Box::new(Fmi2Callbacks {
-                    logger: fmi2_logger,
+                    logger: calib_fmi2_logger,
                     allocate: fmi2_calloc,
                     free: fmi2_free,
                     step_finished: None,

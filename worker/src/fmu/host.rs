@@ -4,11 +4,18 @@
 //! The parent starts children as `HOST DIR INTERFACE` (the `calib` binary's hidden
 //! `fmu-host` subcommand, see [`super::isolate_with`]), at most one per simulation running
 //! at once (so one per worker slot), and keeps idle ones for the next simulation. Each child
-//! opens the unpacked FMU in its own process and answers requests on its stdin with replies
-//! on its stdout, framed as a 4-byte little-endian length and a body of little-endian
-//! numbers (values travel as their bits: results are those of an in-process run, bit for
-//! bit). The FMU's log messages go to the child's stderr, which the parent keeps (the last
-//! lines) to explain a crash.
+//! opens the unpacked FMU in its own process and answers requests with replies on a channel
+//! of their own (a Unix socket, the child's descriptor [`CHANNEL_FD`]), framed as a 4-byte
+//! little-endian length and a body of little-endian numbers (values travel as their bits:
+//! results are those of an in-process run, bit for bit).
+//!
+//! The child's stdout and stderr carry nothing of the protocol: they are the FMU's own
+//! (what its code prints, C `stdout` made line-buffered) and its log messages. The parent
+//! reads both as they come: each line is logged (`tracing`, info for stdout and for
+//! messages of status ok, warn for stderr and for warnings and errors), prefixed with the
+//! FMU's model identifier, at most [`LINES_LOGGED`] per simulation, each cut at
+//! [`LINE_MAX`] bytes; the last lines are kept to explain a crash. The reading never stops,
+//! so an FMU that prints a lot is never blocked by it, and never holds more than one line.
 //!
 //! A child that dies (a signal, an exit) or does not answer within the deadline
 //! ([`deadline`]: `CALIB_FMU_DEADLINE` seconds, default 60) is killed and forgotten; the
@@ -23,15 +30,30 @@
 use super::{FmuError, Interface};
 use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
 use std::collections::VecDeque;
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
+use std::os::fd::{AsRawFd, FromRawFd, RawFd};
+use std::os::unix::net::UnixStream;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
-use std::process::{ChildStdin, Command, Stdio};
+use std::process::{Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
-use std::sync::{Arc, Mutex};
-use std::time::Duration;
+use std::sync::{Arc, Condvar, Mutex};
+use std::time::{Duration, Instant};
 
-/// Lines of a child's stderr kept to explain its failure.
-const STDERR_KEPT: usize = 10;
+/// The child's descriptor of its channel to the parent (named in its environment as
+/// [`CHANNEL`]).
+pub const CHANNEL_FD: RawFd = 3;
+/// Set in a child's environment: the descriptor of its channel.
+pub const CHANNEL: &str = "CALIB_FMU_CHANNEL";
+/// Lines of a child's output kept to explain its failure.
+const OUTPUT_KEPT: usize = 10;
+/// Lines of a child's output logged per simulation; the rest are counted.
+pub const LINES_LOGGED: usize = 1000;
+/// Longest line of a child's output kept or logged [bytes]; the rest of it is dropped.
+pub const LINE_MAX: usize = 4096;
+/// How long a lost child's output may take to end once the child is reaped.
+const OUTPUT_GRACE: Duration = Duration::from_secs(2);
 /// How long a host whose FMU's process ended may take to clean up and exit by itself before
 /// it is told to stop.
 const ENDING_GRACE: Duration = Duration::from_secs(5);
@@ -70,6 +92,8 @@ pub fn parse_interface(arg: &str) -> Option<Interface> {
 pub struct Hosts {
     dir: PathBuf,
     interface: Interface,
+    /// What its output lines are prefixed with (the model identifier).
+    name: String,
     idle: Mutex<Vec<Child>>,
     /// Children that died or were killed, for tests and benchmarks.
     lost: std::sync::atomic::AtomicUsize,
@@ -77,9 +101,9 @@ pub struct Hosts {
 
 struct Child {
     process: std::process::Child,
-    stdin: ChildStdin,
+    channel: UnixStream,
     replies: mpsc::Receiver<std::io::Result<Vec<u8>>>,
-    stderr: Arc<Mutex<VecDeque<String>>>,
+    output: Arc<Output>,
     /// How it ended, once stopped.
     ended: Option<std::io::Result<std::process::ExitStatus>>,
 }
@@ -107,10 +131,11 @@ impl Drop for Child {
 }
 
 impl Hosts {
-    pub(super) fn new(dir: PathBuf, interface: Interface) -> Self {
+    pub(super) fn new(dir: PathBuf, interface: Interface, name: String) -> Self {
         Self {
             dir,
             interface,
+            name,
             idle: Mutex::new(Vec::new()),
             lost: std::sync::atomic::AtomicUsize::new(0),
         }
@@ -121,14 +146,36 @@ impl Hosts {
             .ok_or_else(|| FmuError::Host("no host program to run FMU instances in".into()))?;
         // The FMU's process works in a folder of its own: the FMU's by its full path.
         let dir = std::fs::canonicalize(&self.dir).unwrap_or_else(|_| self.dir.clone());
+        let cannot = |e: std::io::Error| {
+            FmuError::Host(format!("cannot start {}: {e}", command.program.display()))
+        };
+        // The channel: our end here, theirs (close-on-exec like every descriptor of this
+        // process) the child's CHANNEL_FD.
+        let (channel, theirs) = UnixStream::pair().map_err(cannot)?;
+        let their_fd = theirs.as_raw_fd();
         let mut process = Command::new(&command.program);
         process
             .args(&command.args)
             .arg(&dir)
             .arg(interface_arg(self.interface))
-            .stdin(Stdio::piped())
+            .env(CHANNEL, CHANNEL_FD.to_string())
+            .stdin(Stdio::null())
             .stdout(Stdio::piped())
             .stderr(Stdio::piped());
+        // SAFETY: only async-signal-safe calls between fork and exec.
+        unsafe {
+            process.pre_exec(move || {
+                let done = if their_fd == CHANNEL_FD {
+                    libc::fcntl(CHANNEL_FD, libc::F_SETFD, 0)
+                } else {
+                    libc::dup2(their_fd, CHANNEL_FD)
+                };
+                if done < 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                Ok(())
+            });
+        }
         #[cfg(target_os = "linux")]
         let started = {
             static SAID: std::sync::Once = std::sync::Once::new();
@@ -144,37 +191,36 @@ impl Hosts {
         };
         #[cfg(not(target_os = "linux"))]
         let started = process.spawn();
-        let mut process = started.map_err(|e| {
-            FmuError::Host(format!("cannot start {}: {e}", command.program.display()))
-        })?;
-        let stdin = process.stdin.take().expect("piped");
-        let mut stdout = process.stdout.take().expect("piped");
-        let stderr_pipe = process.stderr.take().expect("piped");
+        let mut process = started.map_err(cannot)?;
+        // Only the child holds its end now: the replies end when it does.
+        drop(theirs);
+        let stdout = process.stdout.take().expect("piped");
+        let stderr = process.stderr.take().expect("piped");
+        let mut replies_from = channel.try_clone().map_err(cannot)?;
         let (send, replies) = mpsc::channel();
         std::thread::spawn(move || loop {
-            let frame = read_frame(&mut stdout);
+            let frame = read_frame(&mut replies_from);
             let end = frame.is_err();
             if send.send(frame).is_err() || end {
                 return;
             }
         });
-        let stderr = Arc::new(Mutex::new(VecDeque::new()));
-        let kept = Arc::clone(&stderr);
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr_pipe).lines() {
-                let Ok(line) = line else { return };
-                let mut kept = kept.lock().unwrap_or_else(|e| e.into_inner());
-                if kept.len() == STDERR_KEPT {
-                    kept.pop_front();
-                }
-                kept.push_back(line);
-            }
-        });
+        let output = Arc::new(Output::new(
+            self.name.clone(),
+            [
+                (std::os::fd::OwnedFd::from(stdout), Stream::Stdout),
+                (std::os::fd::OwnedFd::from(stderr), Stream::Stderr),
+            ],
+        ));
+        for pipe in 0..output.pipes.len() {
+            let output = Arc::clone(&output);
+            std::thread::spawn(move || output.follow(pipe));
+        }
         Ok(Child {
             process,
-            stdin,
+            channel,
             replies,
-            stderr,
+            output,
             ended: None,
         })
     }
@@ -198,13 +244,16 @@ impl Hosts {
             None => self.spawn().map_err(|e| failed(e.to_string()))?,
         };
         let request = encode_request(params, grid, outputs, options);
-        let sent = write_frame(&mut child.stdin, &request);
+        child.output.logged.store(0, Ordering::Relaxed);
+        let sent = write_frame(&mut child.channel, &request);
         let reply = match sent {
             Ok(()) => child.replies.recv_timeout(deadline()),
             Err(e) => Ok(Err(e)),
         };
         match reply {
             Ok(Ok(frame)) => {
+                // What the FMU printed before it replied is logged before the result.
+                child.output.catch_up();
                 let result = decode_reply(&frame, grid).map_err(|e| failed(e.to_string()))?;
                 self.idle
                     .lock()
@@ -229,9 +278,10 @@ impl Hosts {
         } else {
             Duration::ZERO
         };
+        let output = Arc::clone(&child.output);
         let status = child.stop(ending);
-        // Let the stderr reader take the last lines.
-        std::thread::sleep(Duration::from_millis(20));
+        // Every process of the FMU is gone: its output ends once read.
+        output.wait_closed(OUTPUT_GRACE);
         let what = match (timed_out, status) {
             (Some(d), _) => format!(
                 "the FMU did not finish within {} s and was stopped",
@@ -247,8 +297,8 @@ impl Hosts {
             }
             (None, Err(e)) => format!("the FMU's process was lost: {e}"),
         };
-        let lines: Vec<String> = child
-            .stderr
+        let lines: Vec<String> = output
+            .kept
             .lock()
             .unwrap_or_else(|e| e.into_inner())
             .iter()
@@ -272,6 +322,237 @@ impl Drop for Hosts {
     }
 }
 
+/// Which of a child's output streams a line came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Stream {
+    Stdout,
+    Stderr,
+}
+
+/// What a child writes on its stdout and stderr: logged as it comes, the last lines kept.
+struct Output {
+    name: String,
+    pipes: Vec<Mutex<Pipe>>,
+    kept: Mutex<VecDeque<String>>,
+    /// Lines logged since the last request.
+    logged: AtomicUsize,
+    /// Pipes whose reader has not yet seen their end.
+    open: Mutex<usize>,
+    closed: Condvar,
+}
+
+/// One of a child's output pipes (non-blocking), with the line it is in the middle of.
+struct Pipe {
+    file: std::fs::File,
+    stream: Stream,
+    lines: Lines,
+    ended: bool,
+}
+
+/// Most bytes read from a pipe by [`Output::catch_up`] at once (what a process the FMU
+/// left behind writes meanwhile is read by the pipe's own thread).
+const CATCH_UP_MAX: usize = 64 << 20;
+
+impl Output {
+    fn new(name: String, pipes: [(std::os::fd::OwnedFd, Stream); 2]) -> Self {
+        let pipes: Vec<Mutex<Pipe>> = pipes
+            .into_iter()
+            .map(|(fd, stream)| {
+                // SAFETY: a plain system call on a descriptor this process owns.
+                unsafe {
+                    let flags = libc::fcntl(fd.as_raw_fd(), libc::F_GETFL);
+                    libc::fcntl(fd.as_raw_fd(), libc::F_SETFL, flags | libc::O_NONBLOCK);
+                }
+                Mutex::new(Pipe {
+                    file: std::fs::File::from(fd),
+                    stream,
+                    lines: Lines::default(),
+                    ended: false,
+                })
+            })
+            .collect();
+        Self {
+            name,
+            kept: Mutex::new(VecDeque::new()),
+            logged: AtomicUsize::new(0),
+            open: Mutex::new(pipes.len()),
+            pipes,
+            closed: Condvar::new(),
+        }
+    }
+
+    /// The thread of pipe `index`: read it as it becomes readable, to its end.
+    fn follow(&self, index: usize) {
+        let fd = self.pipe(index).file.as_raw_fd();
+        loop {
+            let mut poll = libc::pollfd {
+                fd,
+                events: libc::POLLIN,
+                revents: 0,
+            };
+            // SAFETY: one valid pollfd; the descriptor lives as long as `self`.
+            let ready = unsafe { libc::poll(&mut poll, 1, -1) };
+            if ready < 0
+                && std::io::Error::last_os_error().kind() != std::io::ErrorKind::Interrupted
+            {
+                break;
+            }
+            let mut pipe = self.pipe(index);
+            if pipe.ended || !self.drain(&mut pipe, usize::MAX) {
+                pipe.ended = true;
+                break;
+            }
+        }
+        *self.open.lock().unwrap_or_else(|e| e.into_inner()) -= 1;
+        self.closed.notify_all();
+    }
+
+    fn pipe(&self, index: usize) -> std::sync::MutexGuard<'_, Pipe> {
+        self.pipes[index].lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Read what `pipe` holds now (at most `max` bytes), line by line; whether it has not
+    /// ended.
+    fn drain(&self, pipe: &mut Pipe, max: usize) -> bool {
+        let mut buffer = [0u8; 8192];
+        let mut read = 0;
+        while read < max {
+            match pipe.file.read(&mut buffer) {
+                Ok(0) => break,
+                Ok(n) => {
+                    read += n;
+                    let stream = pipe.stream;
+                    pipe.lines
+                        .push(&buffer[..n], |line| self.line(line, stream));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return true,
+                Err(_) => break,
+            }
+        }
+        if read >= max {
+            return true;
+        }
+        let stream = pipe.stream;
+        pipe.lines.finish(|line| self.line(line, stream));
+        pipe.ended = true;
+        false
+    }
+
+    /// Read what the pipes hold now: everything the child wrote before it replied.
+    fn catch_up(&self) {
+        for index in 0..self.pipes.len() {
+            let mut pipe = self.pipe(index);
+            if !pipe.ended {
+                self.drain(&mut pipe, CATCH_UP_MAX);
+            }
+        }
+    }
+
+    fn line(&self, line: String, stream: Stream) {
+        let logged = self.logged.fetch_add(1, Ordering::Relaxed);
+        if logged < LINES_LOGGED {
+            let name = &self.name;
+            if warns(&line, stream) {
+                tracing::warn!("{name}: {line}");
+            } else {
+                tracing::info!("{name}: {line}");
+            }
+        } else if logged == LINES_LOGGED {
+            tracing::warn!(
+                "{name}: more than {LINES_LOGGED} lines of output in one simulation; the rest \
+                 are not logged",
+                name = self.name
+            );
+        }
+        let mut kept = self.kept.lock().unwrap_or_else(|e| e.into_inner());
+        if kept.len() == OUTPUT_KEPT {
+            kept.pop_front();
+        }
+        kept.push_back(line);
+    }
+
+    /// Wait (at most `within`) until every stream has ended.
+    fn wait_closed(&self, within: Duration) {
+        let until = Instant::now() + within;
+        let mut open = self.open.lock().unwrap_or_else(|e| e.into_inner());
+        while *open > 0 {
+            let left = until.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return;
+            }
+            open = self
+                .closed
+                .wait_timeout(open, left)
+                .unwrap_or_else(|e| e.into_inner())
+                .0;
+        }
+    }
+}
+
+/// Whether a line of output is logged as a warning: the FMU's log messages by their status
+/// (`[warning] …`, as the child writes them), other lines by their stream.
+fn warns(line: &str, stream: Stream) -> bool {
+    let status = line
+        .strip_prefix('[')
+        .and_then(|rest| rest.split_once("] "))
+        .map(|(status, _)| status);
+    match status {
+        Some("ok" | "pending") => false,
+        Some("warning" | "discard" | "error" | "fatal") => true,
+        _ => stream == Stream::Stderr,
+    }
+}
+
+/// Bytes cut into lines of at most [`LINE_MAX`] bytes (the rest of a longer one dropped,
+/// and said so), holding one line at most.
+#[derive(Default)]
+struct Lines {
+    line: Vec<u8>,
+    dropped: usize,
+}
+
+impl Lines {
+    fn push(&mut self, mut bytes: &[u8], mut emit: impl FnMut(String)) {
+        while !bytes.is_empty() {
+            let (part, end) = match bytes.iter().position(|&b| b == b'\n') {
+                Some(i) => (&bytes[..i], Some(i + 1)),
+                None => (bytes, None),
+            };
+            let room = LINE_MAX - self.line.len();
+            let taken = part.len().min(room);
+            self.line.extend_from_slice(&part[..taken]);
+            self.dropped += part.len() - taken;
+            match end {
+                Some(i) => {
+                    emit(self.take());
+                    bytes = &bytes[i..];
+                }
+                None => bytes = &[],
+            }
+        }
+    }
+
+    fn finish(&mut self, emit: impl FnOnce(String)) {
+        if !self.line.is_empty() || self.dropped > 0 {
+            emit(self.take());
+        }
+    }
+
+    fn take(&mut self) -> String {
+        if self.line.last() == Some(&b'\r') {
+            self.line.pop();
+        }
+        let mut line = String::from_utf8_lossy(&self.line).into_owned();
+        if self.dropped > 0 {
+            line.push_str(&format!(" … ({} more bytes not shown)", self.dropped));
+        }
+        self.line.clear();
+        self.dropped = 0;
+        line
+    }
+}
+
 fn signal_name(signal: i32) -> String {
     let name = match signal {
         4 => "SIGILL",
@@ -287,25 +568,54 @@ fn signal_name(signal: i32) -> String {
     format!("signal {signal}, {name}")
 }
 
-/// The child's side: open the FMU unpacked at `dir` and answer requests on stdin until it
-/// closes. FMU log messages are written to stderr as they come. On Linux the child first
-/// becomes the supervisor of the FMU's own process ([`super::contain`]), which serves.
+extern "C" {
+    /// C `stdout` line-buffered, `stderr` unbuffered (`csrc/fmi2_logger.c`).
+    fn calib_stdio_line_buffered();
+}
+
+/// The child's side: open the FMU unpacked at `dir` and answer requests on the channel the
+/// parent gave ([`CHANNEL`]) until it closes. FMU log messages are written to stderr as they
+/// come. On Linux the child first becomes the supervisor of the FMU's own process
+/// ([`super::contain`]), which serves.
 pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
+    let fd: RawFd = std::env::var(CHANNEL)
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&fd| fd > 2)
+        .ok_or_else(|| {
+            FmuError::Host(format!(
+                "no channel to the parent (the FMU host is started by calib, with {CHANNEL})"
+            ))
+        })?;
+    // SAFETY: a plain query of a descriptor.
+    if unsafe { libc::fcntl(fd, libc::F_GETFD) } < 0 {
+        return Err(FmuError::Host(format!("no channel to the parent at {fd}")));
+    }
     #[cfg(target_os = "linux")]
     {
         if std::env::var_os(super::contain::INNER).is_none() {
-            super::contain::supervise();
+            super::contain::supervise(fd);
         }
         let workdir = std::env::current_dir()
             .map_err(|e| FmuError::Host(format!("no working folder: {e}")))?;
         super::contain::confine(dir, &workdir);
     }
+    // SAFETY: the descriptor is open and this process's alone to own from here; made
+    // close-on-exec, so that no program the FMU runs holds it.
+    let channel = unsafe {
+        libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC);
+        UnixStream::from_raw_fd(fd)
+    };
+    // SAFETY: before any FMU code runs, nothing else uses C stdio.
+    unsafe { calib_stdio_line_buffered() };
     super::ffi::echo_log_to_stderr();
     let model = super::open_unpacked(dir, interface)?;
-    let stdin = std::io::stdin();
-    let stdout = std::io::stdout();
-    let mut input = stdin.lock();
-    let mut output = stdout.lock();
+    let mut input = std::io::BufReader::new(
+        channel
+            .try_clone()
+            .map_err(|e| FmuError::Host(format!("the channel to the parent: {e}")))?,
+    );
+    let mut output = channel;
     loop {
         let frame = match read_frame(&mut input) {
             Ok(frame) => frame,
@@ -322,6 +632,9 @@ pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
                 "malformed request to the FMU host".into(),
             ))),
         };
+        // What the FMU printed is in the pipes before the reply is sent.
+        // SAFETY: flushes every C output stream.
+        unsafe { libc::fflush(std::ptr::null_mut()) };
         if write_frame(&mut output, &reply).is_err() {
             return Ok(());
         }
@@ -341,8 +654,10 @@ fn read_frame(r: &mut impl Read) -> std::io::Result<Vec<u8>> {
 }
 
 fn write_frame(w: &mut impl Write, body: &[u8]) -> std::io::Result<()> {
-    w.write_all(&(body.len() as u32).to_le_bytes())?;
-    w.write_all(body)?;
+    let mut frame = Vec::with_capacity(4 + body.len());
+    frame.extend_from_slice(&(body.len() as u32).to_le_bytes());
+    frame.extend_from_slice(body);
+    w.write_all(&frame)?;
     w.flush()
 }
 
@@ -523,6 +838,38 @@ fn decode_reply(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn output_is_cut_into_bounded_lines_across_reads() {
+        let mut lines = Lines::default();
+        let mut out = Vec::new();
+        lines.push(b"one\r\ntw", |l| out.push(l));
+        lines.push(b"o\n", |l| out.push(l));
+        let long = vec![b'z'; LINE_MAX + 10];
+        lines.push(&long, |l| out.push(l));
+        lines.push(b"zz\nrest", |l| out.push(l));
+        lines.finish(|l| out.push(l));
+        assert_eq!(out.len(), 4, "{out:?}");
+        assert_eq!((out[0].as_str(), out[1].as_str()), ("one", "two"));
+        assert!(out[2].starts_with(&"z".repeat(LINE_MAX)));
+        assert!(
+            out[2].ends_with(" … (12 more bytes not shown)"),
+            "{}",
+            &out[2][LINE_MAX..]
+        );
+        assert_eq!(out[3], "rest");
+        assert!(lines.line.capacity() <= 2 * LINE_MAX);
+    }
+
+    #[test]
+    fn log_messages_warn_by_their_status_and_other_lines_by_their_stream() {
+        assert!(!warns("[ok] logAll: fine", Stream::Stderr));
+        assert!(warns("[warning] logStatusWarning: careful", Stream::Stdout));
+        assert!(warns("[error] x: y", Stream::Stdout));
+        assert!(!warns("printed", Stream::Stdout));
+        assert!(warns("printed", Stream::Stderr));
+        assert!(!warns("[note] printed", Stream::Stdout));
+    }
 
     #[test]
     fn requests_and_replies_travel_bit_for_bit() {

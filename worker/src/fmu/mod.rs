@@ -198,7 +198,7 @@ impl FmuModel {
             effects: Vec::new(),
         };
         let runner = if isolated {
-            Runner::Isolated(host::Hosts::new(dir.clone(), interface))
+            Runner::Isolated(host::Hosts::new(dir.clone(), interface, identifier.clone()))
         } else {
             Runner::Local(Local {
                 library: OnceLock::new(),
