@@ -66,4 +66,13 @@ pub trait HybridSystem {
     fn on_chattering(&mut self, _t: f64, _y: &mut [f64], _event: usize) -> bool {
         false
     }
+
+    /// Called at the end `t` (state `y`) of every accepted step that ends without an event,
+    /// once its outputs are recorded: whether the system asks for an event there (a step
+    /// event, as an FMU's `fmi*CompletedIntegratorStep` may). If so the driver calls
+    /// [`HybridSystem::on_event`] at `t` with the event number `event_count()` and restarts
+    /// from there, as after a located event.
+    fn step_completed(&mut self, _t: f64, _y: &[f64]) -> bool {
+        false
+    }
 }

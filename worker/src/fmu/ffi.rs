@@ -47,6 +47,8 @@ type Fmi2Array = unsafe extern "C" fn(Ptr, *mut c_double, usize) -> c_int;
 type Fmi2SetArray = unsafe extern "C" fn(Ptr, *const c_double, usize) -> c_int;
 type Fmi2BooleanStatus = unsafe extern "C" fn(Ptr, c_int, *mut c_int) -> c_int;
 type Fmi2DoStep = unsafe extern "C" fn(Ptr, c_double, c_double, c_int) -> c_int;
+type Fmi2CompletedStep = unsafe extern "C" fn(Ptr, c_int, *mut c_int, *mut c_int) -> c_int;
+type Fmi3CompletedStep = unsafe extern "C" fn(Ptr, bool, *mut bool, *mut bool) -> c_int;
 
 #[repr(C)]
 struct Fmi2Callbacks {
@@ -213,7 +215,8 @@ extern "C" {
 
 /// The loaded shared library of one interface of an FMU.
 /// Every FMI function calib calls; a library resolves them once, when it is loaded.
-const FUNCTIONS: [&str; 39] = [
+const FUNCTIONS: [&str; 41] = [
+    "fmi2CompletedIntegratorStep",
     "fmi2DoStep",
     "fmi2EnterContinuousTimeMode",
     "fmi2EnterEventMode",
@@ -234,6 +237,7 @@ const FUNCTIONS: [&str; 39] = [
     "fmi2SetReal",
     "fmi2SetTime",
     "fmi2SetupExperiment",
+    "fmi3CompletedIntegratorStep",
     "fmi3DoStep",
     "fmi3EnterContinuousTimeMode",
     "fmi3EnterEventMode",
@@ -778,6 +782,46 @@ impl Instance {
             "fmi3GetEventIndicators",
             |f| f(h, z.as_mut_ptr(), z.len())
         )
+    }
+
+    /// Whether the library has `fmi*CompletedIntegratorStep` (every Model Exchange FMU
+    /// should; one that lacks it is taken not to need it).
+    pub fn has_completed_integrator_step(&self) -> bool {
+        let slot = match self.lib.version {
+            FmiVersion::V2 => const { slot("fmi2CompletedIntegratorStep") },
+            FmiVersion::V3 => const { slot("fmi3CompletedIntegratorStep") },
+        };
+        self.lib.functions[slot] != 0
+    }
+
+    /// A Model Exchange instance's integrator step is complete at the time and states set
+    /// last (no state before them will be set again): `(enter event mode, terminate)`.
+    pub fn completed_integrator_step(&mut self) -> Result<(bool, bool), FmuError> {
+        let h = self.handle;
+        match self.lib.version {
+            FmiVersion::V2 => {
+                let (mut event, mut terminate): (c_int, c_int) = (0, 0);
+                call!(
+                    self,
+                    Fmi2CompletedStep,
+                    "fmi2CompletedIntegratorStep",
+                    "",
+                    |f| f(h, 1, &mut event, &mut terminate)
+                )?;
+                Ok((event != 0, terminate != 0))
+            }
+            FmiVersion::V3 => {
+                let (mut event, mut terminate) = (false, false);
+                call!(
+                    self,
+                    Fmi3CompletedStep,
+                    "",
+                    "fmi3CompletedIntegratorStep",
+                    |f| f(h, true, &mut event, &mut terminate)
+                )?;
+                Ok((event, terminate))
+            }
+        }
     }
 
     /// Advance a Co-Simulation instance from `t` by `dt`; `true` when the FMU asks to stop.

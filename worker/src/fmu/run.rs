@@ -4,15 +4,30 @@
 //! outputs after each step (the FMU's own solver sets the accuracy).
 //!
 //! **Model Exchange**: initialise, run the event iteration, then integrate the FMU's
-//! derivatives with calib's Dormand–Prince ([`crate::ode`]) at the requested tolerance.
-//! Event functions are each event indicator `z_k` (an event when it goes from ≥ 0 to < 0)
-//! and `−z_k` (from ≤ 0 to > 0), located on the dense output; a time event is the function
-//! `t_next − δ − t`, with δ = 1e-10·max(1, t_next): the FMU is told the event's exact time,
-//! and an output at that time reports the values after it, as FMI's reference results do. At
-//! each event the FMU enters event mode, iterates its discrete states and gives back its
-//! continuous states. A model without continuous states (a pure time-event model) is
-//! integrated with one dummy state. When the FMU asks to terminate, its outputs are held.
-//! Step events are not supported: `fmi*CompletedIntegratorStep` is not called.
+//! derivatives with calib's Dormand–Prince ([`crate::ode`]) at the requested tolerance, in
+//! the order of the standard's simulation algorithm (and of FMPy's):
+//! - after setting time and states, the FMU computes its derivatives there
+//!   (`fmi*GetDerivatives`) before anything else is read, and the time and states are set
+//!   again before event indicators or outputs are read: some FMUs compute their other
+//!   variables only in `GetDerivatives`, others (OpenModelica's) compute only the
+//!   derivatives there and the rest when a variable is read after a change;
+//! - event functions are each event indicator `z_k` (an event when it goes from ≥ 0 to < 0)
+//!   and `−z_k` (from ≤ 0 to > 0), located on the dense output; a time event is the
+//!   function `t_next − δ − t`, with δ = 1e-10·max(1, t_next): the FMU is told the event's
+//!   exact time, and an output at that time reports the values after it, as FMI's reference
+//!   results do;
+//! - at an event the FMU computes at the event's time and states (derivatives and event
+//!   indicators) before it enters event mode: FMUs such as MapleSim's decide there on what
+//!   they computed last, not on the time and states set since; then the discrete states are
+//!   iterated until the FMU needs no more, the continuous states read back, and the
+//!   integration restarts from them;
+//! - after every accepted step `fmi*CompletedIntegratorStep` is called at the step's end
+//!   (when the FMU has it), and an event is handled there when it asks (a step event);
+//! - when the FMU asks to terminate (at an event or a completed step) its outputs then are
+//!   held to the end.
+//!
+//! A model without continuous states (a pure time-event model) is integrated with one dummy
+//! state.
 //!
 //! Any call that returns Discard, Error or Fatal ends the simulation with
 //! [`SimulationError::Failed`] carrying the function, the status and the FMU's messages.
@@ -166,19 +181,40 @@ fn co_simulate(
     })
 }
 
-/// A Model Exchange FMU seen as a hybrid system.
-struct Exchange<'a> {
-    fmu: &'a RefCell<&'a mut Instance>,
-    states: usize,
-    indicators: usize,
-    z: RefCell<Vec<f64>>,
-    next_event: Cell<Option<f64>>,
-    terminated: &'a Cell<bool>,
-    /// The first failure; the integration runs on with NaN derivatives and is then discarded.
-    error: &'a RefCell<Option<(f64, FmuError)>>,
+/// Where the FMU's continuous-time variables stand: the time and states set last, and
+/// whether it has computed its derivatives there since.
+#[derive(Default)]
+struct Point {
+    t: f64,
+    x: Vec<f64>,
+    set: bool,
+    evaluated: bool,
 }
 
-impl Exchange<'_> {
+/// A Model Exchange FMU instance and what calib knows of where it stands; shared by the
+/// hybrid system and the reading of the outputs.
+struct Host<'a> {
+    fmu: RefCell<&'a mut Instance>,
+    outputs: &'a Outputs,
+    states: usize,
+    indicators: usize,
+    completed_step: bool,
+    point: RefCell<Point>,
+    dx: RefCell<Vec<f64>>,
+    z: RefCell<Vec<f64>>,
+    /// Once the FMU asks to terminate: its outputs then, held to the end.
+    held: RefCell<Option<Vec<f64>>>,
+    /// The first failure; the integration runs on with NaN derivatives and is then discarded.
+    error: RefCell<Option<(f64, FmuError)>>,
+}
+
+/// A Model Exchange FMU seen as a hybrid system.
+struct Exchange<'a> {
+    host: &'a Host<'a>,
+    next_event: Cell<Option<f64>>,
+}
+
+impl Host<'_> {
     fn fail(&self, t: f64, e: FmuError) {
         let mut slot = self.error.borrow_mut();
         if slot.is_none() {
@@ -190,7 +226,50 @@ impl Exchange<'_> {
         self.error.borrow().is_some()
     }
 
+    fn terminated(&self) -> bool {
+        self.held.borrow().is_some()
+    }
+
+    /// Set time `t` and states `y` (unless they are set already).
     fn set_point(&self, fmu: &mut Instance, t: f64, y: &[f64]) -> Result<(), FmuError> {
+        let x = &y[..self.states];
+        let mut point = self.point.borrow_mut();
+        if point.set && point.t == t && point.x == x {
+            return Ok(());
+        }
+        point.set = false;
+        point.evaluated = false;
+        fmu.set_time(t)?;
+        if self.states > 0 {
+            fmu.set_states(x)?;
+        }
+        point.t = t;
+        point.x.clear();
+        point.x.extend_from_slice(x);
+        point.set = true;
+        Ok(())
+    }
+
+    /// Set time `t` and states `y` and have the FMU compute its derivatives there, as FMI's
+    /// simulation algorithm does before anything else is read: many FMUs compute their
+    /// other continuous-time variables only in `fmi*GetDerivatives`.
+    fn evaluate(&self, fmu: &mut Instance, t: f64, y: &[f64]) -> Result<(), FmuError> {
+        self.set_point(fmu, t, y)?;
+        if self.point.borrow().evaluated {
+            return Ok(());
+        }
+        fmu.get_derivatives(&mut self.dx.borrow_mut())?;
+        self.point.borrow_mut().evaluated = true;
+        Ok(())
+    }
+
+    /// Make the FMU's variables at `t`, `y` readable, whichever way it computes them: its
+    /// derivatives there first (some FMUs compute their other variables only in
+    /// `fmi*GetDerivatives`), then the time and states set again (others compute only the
+    /// derivatives there and the rest when a variable is read after a change; OpenModelica's
+    /// do, and then take `fmi*GetDerivatives` to have computed everything).
+    fn prepare_read(&self, fmu: &mut Instance, t: f64, y: &[f64]) -> Result<(), FmuError> {
+        self.evaluate(fmu, t, y)?;
         fmu.set_time(t)?;
         if self.states > 0 {
             fmu.set_states(&y[..self.states])?;
@@ -198,21 +277,69 @@ impl Exchange<'_> {
         Ok(())
     }
 
-    /// The event iteration at `t`: discrete states, then back to continuous time.
-    fn handle_event(&self, t: f64, y: &mut [f64]) -> Result<(), FmuError> {
-        let mut fmu = self.fmu.borrow_mut();
-        self.set_point(&mut fmu, t, y)?;
-        fmu.enter_event_mode()?;
-        let update = event_iteration(&mut fmu)?;
-        fmu.enter_continuous_time_mode()?;
-        if update.values_changed && self.states > 0 {
-            fmu.get_states(&mut y[..self.states])?;
-        }
-        self.next_event.set(update.next_event_time);
-        if update.terminate {
-            self.terminated.set(true);
+    /// The event indicators at `t`, `y` into `self.z`.
+    fn indicators_at(&self, fmu: &mut Instance, t: f64, y: &[f64]) -> Result<(), FmuError> {
+        self.prepare_read(fmu, t, y)?;
+        if self.indicators > 0 {
+            fmu.get_event_indicators(&mut self.z.borrow_mut())?;
         }
         Ok(())
+    }
+
+    /// Every output at `t`, `y` into `values`: the held ones once the FMU asked to stop.
+    fn read(&self, t: f64, y: &[f64], values: &mut [f64]) -> Result<(), FmuError> {
+        if let Some(held) = &*self.held.borrow() {
+            values.copy_from_slice(held);
+            return Ok(());
+        }
+        let mut fmu = self.fmu.borrow_mut();
+        self.prepare_read(&mut fmu, t, y)?;
+        self.outputs.read(&mut fmu, values)
+    }
+
+    /// The FMU asked to terminate at `t`: hold its outputs as they are.
+    fn terminate(&self, fmu: &mut Instance) -> Result<(), FmuError> {
+        let mut values = vec![0.0; self.outputs.len()];
+        self.outputs.read(fmu, &mut values)?;
+        *self.held.borrow_mut() = Some(values);
+        Ok(())
+    }
+
+    /// The FMU's integrator step is complete at `t`, `y`: whether it asks for an event.
+    fn complete_step(&self, t: f64, y: &[f64]) -> Result<bool, FmuError> {
+        if !self.completed_step {
+            return Ok(false);
+        }
+        let mut fmu = self.fmu.borrow_mut();
+        self.evaluate(&mut fmu, t, y)?;
+        let (event, terminate) = fmu.completed_integrator_step()?;
+        if terminate {
+            self.terminate(&mut fmu)?;
+            return Ok(false);
+        }
+        Ok(event)
+    }
+
+    /// The event iteration at `t`: discrete states, then back to continuous time with the
+    /// states the FMU gives back; the time of the next time event.
+    fn handle_event(&self, t: f64, y: &mut [f64]) -> Result<Option<f64>, FmuError> {
+        let mut fmu = self.fmu.borrow_mut();
+        // The FMU sees the event's time and states as after a step to it (derivatives and
+        // event indicators there), then switches.
+        self.indicators_at(&mut fmu, t, y)?;
+        fmu.enter_event_mode()?;
+        let update = event_iteration(&mut fmu)?;
+        if update.terminate {
+            self.terminate(&mut fmu)?;
+            return Ok(None);
+        }
+        fmu.enter_continuous_time_mode()?;
+        if self.states > 0 {
+            fmu.get_states(&mut y[..self.states])?;
+        }
+        // A new mode: what the FMU computed before the event is stale.
+        self.point.borrow_mut().set = false;
+        Ok(update.next_event_time)
     }
 }
 
@@ -236,50 +363,49 @@ fn time_event_lead(t_next: f64) -> f64 {
 
 impl HybridSystem for Exchange<'_> {
     fn dim(&self) -> usize {
-        self.states.max(1)
+        self.host.states.max(1)
     }
 
     fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        let host = self.host;
         dy.fill(0.0);
-        if self.failed() {
+        if host.failed() {
             dy.fill(f64::NAN);
             return;
         }
-        if self.states == 0 || self.terminated.get() {
+        if host.terminated() {
             return;
         }
-        let mut fmu = self.fmu.borrow_mut();
-        let result = self
-            .set_point(&mut fmu, t, y)
-            .and_then(|()| fmu.get_derivatives(dy));
-        if let Err(e) = result {
+        let mut fmu = host.fmu.borrow_mut();
+        if let Err(e) = host.evaluate(&mut fmu, t, y) {
             drop(fmu);
-            self.fail(t, e);
+            host.fail(t, e);
             dy.fill(f64::NAN);
+            return;
         }
+        let nx = host.states;
+        dy[..nx].copy_from_slice(&host.dx.borrow());
     }
 
     fn event_count(&self) -> usize {
-        2 * self.indicators + 1
+        2 * self.host.indicators + 1
     }
 
     fn events(&self, t: f64, y: &[f64], g: &mut [f64]) {
+        let host = self.host;
         g.fill(1.0);
-        if self.failed() || self.terminated.get() {
+        if host.failed() || host.terminated() {
             return;
         }
-        let nz = self.indicators;
+        let nz = host.indicators;
         if nz > 0 {
-            let mut z = self.z.borrow_mut();
-            let mut fmu = self.fmu.borrow_mut();
-            let result = self
-                .set_point(&mut fmu, t, y)
-                .and_then(|()| fmu.get_event_indicators(&mut z));
-            if let Err(e) = result {
+            let mut fmu = host.fmu.borrow_mut();
+            if let Err(e) = host.indicators_at(&mut fmu, t, y) {
                 drop(fmu);
-                self.fail(t, e);
+                host.fail(t, e);
                 return;
             }
+            let z = host.z.borrow();
             for k in 0..nz {
                 g[k] = z[k];
                 g[nz + k] = -z[k];
@@ -291,23 +417,41 @@ impl HybridSystem for Exchange<'_> {
     }
 
     fn on_event(&mut self, t: f64, y: &mut [f64], event: usize) {
-        if self.failed() {
+        let host = self.host;
+        if host.failed() || host.terminated() {
             return;
         }
         // A time event happens at its own time, which the lead puts just after `t`.
         let at = match self.next_event.get() {
-            Some(t_next) if event == 2 * self.indicators => t_next,
+            Some(t_next) if event == 2 * host.indicators => t_next,
             _ => t,
         };
-        if let Err(e) = self.handle_event(at, y) {
-            self.fail(at, e);
+        match host.handle_event(at, y) {
+            Ok(next) => self.next_event.set(next),
+            Err(e) => host.fail(at, e),
+        }
+    }
+
+    fn step_completed(&mut self, t: f64, y: &[f64]) -> bool {
+        let host = self.host;
+        if host.failed() || host.terminated() {
+            return false;
+        }
+        match host.complete_step(t, y) {
+            Ok(event) => event,
+            Err(e) => {
+                host.fail(t, e);
+                false
+            }
         }
     }
 
     fn event_name(&self, event: usize) -> String {
-        let nz = self.indicators;
+        let nz = self.host.indicators;
         if event == 2 * nz {
             "time event".into()
+        } else if event > 2 * nz {
+            "step event".into()
         } else {
             format!("event indicator #{}", event % nz.max(1))
         }
@@ -321,68 +465,59 @@ fn integrate(
     options: &SolverOptions,
 ) -> Result<Trajectory, SimulationError> {
     let nx = plan.states;
-    let update = event_iteration(instance).map_err(|e| failed(0.0, e))?;
-    instance
-        .enter_continuous_time_mode()
-        .map_err(|e| failed(0.0, e))?;
-    let mut y0 = vec![0.0; nx.max(1)];
-    if nx > 0 {
-        instance
-            .get_states(&mut y0[..nx])
-            .map_err(|e| failed(0.0, e))?;
-    }
     let n_out = plan.outputs.len();
-    let error = RefCell::new(None);
-    let terminated = Cell::new(update.terminate);
-    let fmu = RefCell::new(instance);
-    let mut system = Exchange {
-        fmu: &fmu,
+    let update = event_iteration(instance).map_err(|e| failed(0.0, e))?;
+    let held = RefCell::new(None);
+    let mut y0 = vec![0.0; nx.max(1)];
+    if update.terminate {
+        // Asked to stop at the start: the outputs after initialisation, throughout.
+        let mut values = vec![0.0; n_out];
+        plan.outputs
+            .read(instance, &mut values)
+            .map_err(|e| failed(0.0, e))?;
+        *held.borrow_mut() = Some(values);
+    } else {
+        instance
+            .enter_continuous_time_mode()
+            .map_err(|e| failed(0.0, e))?;
+        if nx > 0 {
+            instance
+                .get_states(&mut y0[..nx])
+                .map_err(|e| failed(0.0, e))?;
+        }
+    }
+    let completed_step = instance.has_completed_integrator_step();
+    let host = Host {
+        fmu: RefCell::new(instance),
+        outputs: plan.outputs,
         states: nx,
         indicators: plan.indicators,
+        completed_step,
+        point: RefCell::new(Point::default()),
+        dx: RefCell::new(vec![0.0; nx]),
         z: RefCell::new(vec![0.0; plan.indicators]),
+        held,
+        error: RefCell::new(None),
+    };
+    let mut system = Exchange {
+        host: &host,
         next_event: Cell::new(update.next_event_time),
-        terminated: &terminated,
-        error: &error,
     };
     let mut values = vec![vec![0.0; grid.len()]; n_out];
     let mut sample = vec![0.0; n_out];
-    let mut held = false;
-    let stats = {
-        // The output closure reads the FMU through the same cell as the system.
-        let fmu = &fmu;
-        let error = &error;
-        let values = &mut values;
-        let sample = &mut sample;
-        let mut read = move |i: usize, y: &[f64], stop: bool| {
-            if error.borrow().is_some() {
-                return;
-            }
-            if !held {
-                let mut f = fmu.borrow_mut();
-                let t = grid[i];
-                let result = (|| {
-                    f.set_time(t)?;
-                    if nx > 0 {
-                        f.set_states(&y[..nx])?;
-                    }
-                    plan.outputs.read(&mut f, sample)
-                })();
-                if let Err(e) = result {
-                    *error.borrow_mut() = Some((t, e));
-                    return;
-                }
-                held = stop;
-            }
-            for (series, v) in values.iter_mut().zip(sample.iter()) {
-                series[i] = *v;
-            }
-        };
-        let terminated = &terminated;
-        ode::integrate(&mut system, &y0, grid, options, |i, y| {
-            read(i, y, terminated.get())
-        })
-    };
-    if let Some((t, e)) = error.into_inner() {
+    let stats = ode::integrate(&mut system, &y0, grid, options, |i, y| {
+        if host.failed() {
+            return;
+        }
+        if let Err(e) = host.read(grid[i], y, &mut sample) {
+            host.fail(grid[i], e);
+            return;
+        }
+        for (series, v) in values.iter_mut().zip(&sample) {
+            series[i] = *v;
+        }
+    });
+    if let Some((t, e)) = host.error.take() {
         return Err(failed(t, e));
     }
     let stats = stats?;

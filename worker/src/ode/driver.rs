@@ -7,8 +7,8 @@
 //! everything the methods share: the outputs at the requested times (read off the continuous
 //! extension, so the output grid never sets the step size), the step limit, the clamp of the
 //! last step to the end time, the retries after rejected steps, the event location on the
-//! continuous extension, the mode switch and the restart from the event, and the guard
-//! against events that accumulate.
+//! continuous extension, the mode switch and the restart from the event (or from the end of a
+//! step where the system asks for a step event), and the guard against events that accumulate.
 //!
 //! The split follows the one of Hairer's codes (`DOPRI5`, and Sommeijer's `RKC` built the same
 //! way): the method proposes, the driver decides what becomes of the proposal. The order of
@@ -174,7 +174,7 @@ where
         let t_new = if last_step { t_end } else { t + h };
         let event = run.accepted(&*system, stepper, t, t_new);
         let t_step = t;
-        match event {
+        let switched = match event {
             None => {
                 t = t_new;
                 stepper.advance();
@@ -182,7 +182,17 @@ where
                 if run.done() {
                     return Ok(stats);
                 }
-                h = stepper.next_step(h, err, last_rejected);
+                if system.step_completed(t, stepper.state()) {
+                    // A step event: the system switches mode at the step's end.
+                    stats.events += 1;
+                    run.ytmp.copy_from_slice(stepper.state());
+                    let e = system.event_count();
+                    switch_mode(system, &mut run.zeno, t, &mut run.ytmp, e)?;
+                    true
+                } else {
+                    h = stepper.next_step(h, err, last_rejected);
+                    false
+                }
             }
             Some((e, te)) => {
                 stats.events += 1;
@@ -190,12 +200,15 @@ where
                 if run.switch(system, stepper, te, e)? {
                     return Ok(stats);
                 }
-                stepper.restart(&*system, t, &run.ytmp, &mut stats)?;
-                system.events(t, stepper.state(), &mut run.g_old);
-                // Restart with the step that reached the event, at least a fraction of the
-                // accepted one so the controller does not crawl after every switch.
-                h = (te - t_step).max(0.1 * h).max(1e-6);
+                true
             }
+        };
+        if switched {
+            stepper.restart(&*system, t, &run.ytmp, &mut stats)?;
+            system.events(t, stepper.state(), &mut run.g_old);
+            // Restart with the step that reached the event, at least a fraction of the
+            // accepted one so the controller does not crawl after every switch.
+            h = (t - t_step).max(0.1 * h).max(1e-6);
         }
         last_rejected = false;
     }
