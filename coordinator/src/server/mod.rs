@@ -7,6 +7,7 @@ pub mod resume;
 
 use crate::api::CalibrationApi;
 use crate::campaigns::datasets::Datasets;
+use crate::campaigns::fmus::Fmus;
 use crate::campaigns::{self, Campaigns};
 use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
@@ -208,19 +209,26 @@ pub fn serve_coordinator(
         Some(s) => s.clone(),
         None => Arc::new(MemoryStore::new()),
     };
-    let campaigns = Arc::new(Campaigns::new(
-        api_store,
-        Arc::new(GrpcEvaluator::new(
-            pool.clone(),
-            tokio::runtime::Handle::current(),
-        )),
-        Datasets::open(&api_folder.join("datasets"))?,
-        api_folder.join("results"),
-    ));
+    let campaigns = Arc::new(
+        Campaigns::new(
+            api_store,
+            Arc::new(GrpcEvaluator::new(
+                pool.clone(),
+                tokio::runtime::Handle::current(),
+            )),
+            Datasets::open(&api_folder.join("datasets"))?,
+            api_folder.join("results"),
+        )
+        .with_fmus(Fmus::open(&api_folder.join("fmus"))?),
+    );
     let web = match web_listener {
         Some(listener) => Some(serve_app(
             listener,
-            WebApp::new(campaigns.clone(), web::local::simulator()).with_door(DoorConfig {
+            WebApp::new(
+                campaigns.clone(),
+                web::local::simulator_with_fmus(campaigns.fmus()?)?,
+            )
+            .with_door(DoorConfig {
                 allow_hosts: config.http_allow_hosts.clone(),
                 token: config.security.token.clone(),
             }),

@@ -24,6 +24,7 @@ pub mod plots;
 use crate::api::CalibrationApi;
 use crate::campaigns::datasets::MAX_DATASET_BYTES;
 use crate::campaigns::Campaigns;
+use crate::limits::MAX_FMU_BYTES;
 use axum::body::Bytes;
 use axum::extract::{DefaultBodyLimit, Path, RawQuery, State};
 use axum::http::{header, StatusCode};
@@ -103,6 +104,11 @@ impl WebApp {
                 "/api/v1/UploadDataset",
                 post(upload_dataset).layer(DefaultBodyLimit::max(MAX_DATASET_BYTES)),
             )
+            .route(
+                "/api/v1/UploadFmu",
+                post(upload_fmu).layer(DefaultBodyLimit::max(MAX_FMU_BYTES)),
+            )
+            .route("/api/v1/GetFmu", post(get_fmu))
             .route("/api/v1/SubmitCampaign", post(submit_campaign))
             .route("/api/v1/GetCampaign", post(get_campaign))
             .route("/api/v1/ListCampaigns", post(list_campaigns))
@@ -231,6 +237,38 @@ async fn upload_dataset(
     Ok(json(&dataset))
 }
 
+/// `POST /api/v1/UploadFmu?file_name=NAME` with the archive as the body: the client stream
+/// of `FmuChunk`s in one piece.
+async fn upload_fmu(
+    State(app): State<WebApp>,
+    RawQuery(query): RawQuery,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let file_name = query_value(query.as_deref(), "file_name");
+    let fmu = app
+        .calibration
+        .upload_fmu_bytes(file_name, body.to_vec())
+        .await?;
+    Ok(json(&fmu))
+}
+
+/// The value of `key` in a query string, percent-decoded; empty when absent.
+fn query_value(query: Option<&str>, key: &str) -> String {
+    query
+        .unwrap_or("")
+        .split('&')
+        .filter_map(|pair| {
+            let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+            (k == key).then(|| {
+                percent_encoding::percent_decode_str(&v.replace('+', " "))
+                    .decode_utf8_lossy()
+                    .into_owned()
+            })
+        })
+        .next_back()
+        .unwrap_or_default()
+}
+
 macro_rules! unary {
     ($name:ident, $service:ident, $method:ident, $request:ty) => {
         async fn $name(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
@@ -265,6 +303,7 @@ unary!(
     cancel_campaign,
     pb::CancelCampaignRequest
 );
+unary!(get_fmu, calibration, get_fmu, pb::GetFmuRequest);
 unary!(list_models, simulator, list_models, pb::ListModelsRequest);
 unary!(describe, simulator, describe, pb::DescribeRequest);
 unary!(simulate, simulator, simulate, pb::SimulateRequest);
