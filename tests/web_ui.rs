@@ -472,7 +472,7 @@ fn the_page_of_a_coordinator_with_a_token_asks_for_it_then_works() {
 }
 
 #[test]
-fn an_fmu_uploaded_on_the_model_tab_is_simulated_and_calibrated() {
+fn an_fmu_dropped_or_picked_on_the_model_tab_is_simulated_and_calibrated() {
     if let Some(reason) = browser_missing() {
         common::skip(&reason);
         return;
@@ -511,10 +511,31 @@ fn an_fmu_uploaded_on_the_model_tab_is_simulated_and_calibrated() {
         String::from_utf8_lossy(&made.stderr)
     );
     let ui = Ui::start(&dir.path().join("db"));
+    let dropped = fmus.join("fmi2/BouncingBall.fmu");
     let page = drive(
         "fmu",
-        &[&ui.url, fmu.to_str().unwrap(), record.to_str().unwrap()],
+        &[
+            &ui.url,
+            fmu.to_str().unwrap(),
+            record.to_str().unwrap(),
+            dropped.to_str().unwrap(),
+        ],
         dir.path(),
+    );
+    // Dropped on the Model tab: uploaded and chosen.
+    assert!(
+        page["dropped_chosen"]
+            .as_str()
+            .unwrap()
+            .starts_with("BouncingBall.me@"),
+        "{page}"
+    );
+    assert!(
+        page["dropped_status"]
+            .as_str()
+            .unwrap()
+            .starts_with("BouncingBall.fmu: FMU "),
+        "{page}"
     );
     // Listed with its parameters and outputs, the default interface chosen.
     let chosen = page["chosen"].as_str().unwrap();

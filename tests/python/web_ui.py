@@ -3,7 +3,7 @@
     python3 web_ui.py workflow URL DATA.csv SCREENSHOTS_DIR OUT.json
     python3 web_ui.py broken URL BROKEN.csv OUT.json
     python3 web_ui.py login URL TOKEN_FILE DATA.csv OUT.json
-    python3 web_ui.py fmu URL MODEL.fmu RECORD.csv OUT.json
+    python3 web_ui.py fmu URL MODEL.fmu RECORD.csv DROPPED.fmu OUT.json
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
@@ -12,12 +12,13 @@ values off the page), the Diagnosis tab (run it, read the verdict); a screenshot
 tab. `broken`: upload a CSV that does not parse and read the message the page shows.
 `login`: a coordinator with a token: the page asks for it, refuses a wrong one, and once
 signed in simulates, uploads and draws the measurement's plots; what scripts can see of it.
-`fmu`: the Reference FMU VanDerPol as the user's own model: chosen with the Model tab's file
-picker, its parameters and outputs listed, simulated and plotted; its record uploaded; mu
+`fmu`: an FMU dropped on the Model tab (DROPPED.fmu, a drop event carrying the file), then
+the Reference FMU VanDerPol as the user's own model: chosen with the Model tab's file picker, its parameters and outputs listed, simulated and plotted; its record uploaded; mu
 freed on the Calibration tab and calibrated; the calibrated value read off the page.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
+import base64
 import json
 import os
 import shutil
@@ -319,13 +320,35 @@ def login(url, token_file, data, out):
         driver.quit()
 
 
-def fmu(url, model, record, out):
+DROP = """
+const [name, data] = arguments;
+const bytes = Uint8Array.from(atob(data), (c) => c.charCodeAt(0));
+const transfer = new DataTransfer();
+transfer.items.add(new File([bytes], name, { type: "application/octet-stream" }));
+const zone = document.getElementById("fmu-drop");
+zone.dispatchEvent(new DragEvent("dragover", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+zone.dispatchEvent(new DragEvent("drop", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+"""
+
+
+def fmu(url, model, record, dropped, out):
     driver = browser()
     try:
         driver.get(url)
         wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
-        # Model: the FMU, through the file picker (dropping it on the zone calls the same upload).
+        # An FMU dropped on the Model tab, as a file dragged from the desktop arrives.
+        with open(dropped, "rb") as f:
+            data = base64.b64encode(f.read()).decode()
+        driver.execute_script(DROP, os.path.basename(dropped), data)
+        wait(driver).until(lambda d: "parameters" in by_id(d, "fmu-status").text
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        dropped_status = by_id(driver, "fmu-status").text
+        dropped_chosen = Select(by_id(driver, "model-select")).first_selected_option.get_attribute("value")
+        # Model: the FMU, through the file picker.
         by_id(driver, "fmu-file").send_keys(os.path.abspath(model))
+        wait(driver).until(lambda d: "VanDerPol" in by_id(d, "fmu-status").text
+                           or by_id(d, "model-error").is_displayed())
         wait(driver).until(lambda d: "parameters" in by_id(d, "fmu-status").text
                            or by_id(d, "model-error").is_displayed())
         no_error(driver, "model-error")
@@ -376,6 +399,8 @@ def fmu(url, model, record, out):
             calibrated[row.get_attribute("data-parameter")] = cell.get_attribute("data-value")
         with open(out, "w") as f:
             json.dump({
+                "dropped_status": dropped_status,
+                "dropped_chosen": dropped_chosen,
                 "fmu_status": status,
                 "chosen": chosen,
                 "parameters": parameters,
