@@ -2,7 +2,8 @@
 //! refused (403) while the page and its own calls keep working; a coordinator with a token
 //! serves the app behind its login (401 without the token, the session cookie after
 //! `/login`); concurrent uploads of one file all succeed with one intact dataset; an FMU
-//! upload passes the same door, and the uploaded FMU simulates on the Model tab's route.
+//! upload passes the same door, and the uploaded FMU simulates on the Model tab's route
+//! (on a coordinator only behind its token).
 
 mod common;
 #[allow(dead_code)]
@@ -445,6 +446,23 @@ fn a_coordinator_without_a_token_asks_no_login() {
     assert!(state.body.contains("\"required\":false"), "{}", state.body);
     let listed = request(web, "POST", "/api/v1/ListCampaigns", &[], b"{}");
     assert_eq!(listed.code, 200, "{}", listed.body);
+    // Anyone may reach it: the Model tab runs no FMU code here.
+    let simulate = serde_json::json!({
+        "protocol_version": 1,
+        "model": "BouncingBall.me@000000000000",
+        "fmu_hash": vec![0u8; 32],
+        "times": [0.0, 0.1],
+        "outputs": ["h"],
+    });
+    let refused = request(
+        web,
+        "POST",
+        "/api/v1/Simulate",
+        &[],
+        simulate.to_string().as_bytes(),
+    );
+    assert_eq!(refused.code, 403, "{}", refused.body);
+    assert!(refused.body.contains("--token-file"), "{}", refused.body);
 }
 
 #[test]

@@ -128,7 +128,12 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
         allow_hosts: config.allow_hosts,
         token: None,
     };
-    serve_app(listener, WebApp::new(campaigns, simulator).with_door(door))
+    serve_app(
+        listener,
+        WebApp::new(campaigns, simulator)
+            .with_door(door)
+            .with_fmu_simulation(true),
+    )
 }
 
 /// Serve `app` on an already bound listener.

@@ -62,6 +62,9 @@ pub struct WebApp {
     simulator: Arc<SimulatorService>,
     campaigns: Arc<Campaigns>,
     door: DoorConfig,
+    /// Whether the Model tab may simulate uploaded FMUs here (their code runs in this
+    /// machine's host processes).
+    simulates_fmus: bool,
 }
 
 impl WebApp {
@@ -71,7 +74,16 @@ impl WebApp {
             simulator,
             campaigns,
             door: DoorConfig::default(),
+            simulates_fmus: false,
         }
+    }
+
+    /// Let the Model tab simulate uploaded FMUs (`simulator` must take them): `calib ui`,
+    /// and a coordinator behind a token. Otherwise such a simulation is refused and FMUs
+    /// run only on workers, in campaigns.
+    pub fn with_fmu_simulation(mut self, yes: bool) -> Self {
+        self.simulates_fmus = yes;
+        self
     }
 
     /// Who may come in besides the bound address's own page, and the token required.
@@ -306,7 +318,20 @@ unary!(
 unary!(get_fmu, calibration, get_fmu, pb::GetFmuRequest);
 unary!(list_models, simulator, list_models, pb::ListModelsRequest);
 unary!(describe, simulator, describe, pb::DescribeRequest);
-unary!(simulate, simulator, simulate, pb::SimulateRequest);
+
+/// `POST /api/v1/Simulate`: the Simulator's `Simulate`; an uploaded FMU only where the app
+/// may run FMU code ([`WebApp::with_fmu_simulation`]).
+async fn simulate(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
+    let request: pb::SimulateRequest = decode(&body)?;
+    if !request.fmu_hash.is_empty() && !app.simulates_fmus {
+        return Err(ApiError(Status::permission_denied(
+            "fmu_hash: this coordinator runs no FMU code for the web app without a token \
+             (--token-file); campaigns on the FMU run on its workers",
+        )));
+    }
+    let answer = app.simulator.simulate(Request::new(request)).await?;
+    Ok(json(answer.get_ref()))
+}
 
 type EventStream =
     Sse<axum::response::sse::KeepAliveStream<ReceiverStream<Result<Event, Infallible>>>>;
