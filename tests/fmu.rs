@@ -566,22 +566,3 @@ fn a_diagnosis_of_the_van_der_pol_fmu_finds_an_offset_on_its_output() {
         .unwrap();
     assert!((offset - 0.3).abs() < 0.01, "offset {offset}");
 }
-
-#[test]
-fn calib_submit_says_the_calibration_api_takes_no_fmus_yet() {
-    let Some(path) = fmu(2, "VanDerPol") else {
-        return;
-    };
-    let dir = tempfile::tempdir().unwrap();
-    let campaign = van_der_pol_example(&path, dir.path());
-    let (_held, refusing) = refusing_address();
-    let out = calib(&[
-        "submit",
-        campaign.to_str().unwrap(),
-        "--coordinator",
-        &format!("http://{refusing}"),
-    ]);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_eq!(out.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("does not take FMUs yet"), "{stderr}");
-}

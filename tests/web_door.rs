@@ -1,9 +1,14 @@
 //! The web app's door: requests from other web pages and under other Host names are
 //! refused (403) while the page and its own calls keep working; a coordinator with a token
 //! serves the app behind its login (401 without the token, the session cookie after
-//! `/login`); concurrent uploads of one file all succeed with one intact dataset.
+//! `/login`); concurrent uploads of one file all succeed with one intact dataset; an FMU
+//! upload passes the same door, and the uploaded FMU simulates on the Model tab's route
+//! (on a coordinator only behind its token).
 
 mod common;
+#[allow(dead_code)]
+#[path = "../worker/tests/common/reference_fmus.rs"]
+mod reference_fmus;
 
 use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_coordinator::web::local::{start_ui, RunningUi, UiConfig};
@@ -351,6 +356,88 @@ fn a_coordinator_with_a_token_serves_the_web_app_behind_its_login() {
 }
 
 #[test]
+fn an_fmu_upload_passes_the_door_and_the_fmu_simulates_through_the_web_routes() {
+    let Some(fmus) = reference_fmus::reference_fmus() else {
+        return;
+    };
+    let fmu = std::fs::read(fmus.join("fmi2/BouncingBall.fmu")).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(dir.path(), Some(TOKEN));
+    let web = c.http();
+    let right = format!("Bearer {TOKEN}");
+    let path = "/api/v1/UploadFmu?file_name=BouncingBall.fmu";
+    for headers in [
+        vec![],
+        vec![("Authorization", "Bearer wrong")],
+        vec![
+            ("Authorization", right.as_str()),
+            ("Origin", "http://evil.example"),
+        ],
+        vec![("Authorization", right.as_str()), ("Host", "evil.example")],
+    ] {
+        let refused = request(web, "POST", path, &headers, &fmu);
+        assert!(
+            [401, 403].contains(&refused.code),
+            "{headers:?}: {} {}",
+            refused.code,
+            refused.body
+        );
+    }
+    let kept = || {
+        std::fs::read_dir(dir.path().join("api/fmus"))
+            .unwrap()
+            .filter(|e| {
+                e.as_ref()
+                    .unwrap()
+                    .path()
+                    .extension()
+                    .is_some_and(|x| x == "fmu")
+            })
+            .count()
+    };
+    assert_eq!(kept(), 0, "nothing was kept");
+
+    let uploaded = request(web, "POST", path, &[("Authorization", &right)], &fmu);
+    assert_eq!(uploaded.code, 200, "{}", uploaded.body);
+    let answer: serde_json::Value = serde_json::from_str(&uploaded.body).unwrap();
+    let id = answer["id"].as_str().unwrap();
+    assert_eq!(kept(), 1);
+    let model = answer["models"][0]["name"].as_str().unwrap();
+    assert!(model.starts_with("BouncingBall.me@"), "{answer}");
+    // A JSON body that is not an FMU is refused as one.
+    let refused = request(web, "POST", path, &[("Authorization", &right)], b"{}");
+    assert_eq!(refused.code, 400, "{}", refused.body);
+    assert!(refused.body.contains("fmu: "), "{}", refused.body);
+
+    // The Model tab's simulation of it: free fall from h = 1 m until the first bounce.
+    let hash: Vec<u8> = (0..32)
+        .map(|i| u8::from_str_radix(&id[2 * i..2 * i + 2], 16).unwrap())
+        .collect();
+    let simulate = serde_json::json!({
+        "protocol_version": 1,
+        "model": model,
+        "fmu_hash": hash,
+        "times": [0.0, 0.1, 0.2, 0.3],
+        "outputs": ["h"],
+    });
+    let simulated = request(
+        web,
+        "POST",
+        "/api/v1/Simulate",
+        &[("Authorization", &right)],
+        simulate.to_string().as_bytes(),
+    );
+    assert_eq!(simulated.code, 200, "{}", simulated.body);
+    let answer: serde_json::Value = serde_json::from_str(&simulated.body).unwrap();
+    let h = answer["series"][0]["values"].as_array().unwrap();
+    for (i, t) in [0.0, 0.1, 0.2, 0.3].iter().enumerate() {
+        let expected = 1.0 - 0.5 * 9.81 * t * t;
+        let value = h[i].as_f64().unwrap();
+        assert!((value - expected).abs() < 1e-6, "h({t}) = {value}");
+    }
+}
+
+#[test]
 fn a_coordinator_without_a_token_asks_no_login() {
     let dir = tempfile::tempdir().unwrap();
     let c = Coordinator::start(dir.path(), None);
@@ -359,6 +446,23 @@ fn a_coordinator_without_a_token_asks_no_login() {
     assert!(state.body.contains("\"required\":false"), "{}", state.body);
     let listed = request(web, "POST", "/api/v1/ListCampaigns", &[], b"{}");
     assert_eq!(listed.code, 200, "{}", listed.body);
+    // Anyone may reach it: the Model tab runs no FMU code here.
+    let simulate = serde_json::json!({
+        "protocol_version": 1,
+        "model": "BouncingBall.me@000000000000",
+        "fmu_hash": vec![0u8; 32],
+        "times": [0.0, 0.1],
+        "outputs": ["h"],
+    });
+    let refused = request(
+        web,
+        "POST",
+        "/api/v1/Simulate",
+        &[],
+        simulate.to_string().as_bytes(),
+    );
+    assert_eq!(refused.code, 403, "{}", refused.body);
+    assert!(refused.body.contains("--token-file"), "{}", refused.body);
 }
 
 #[test]

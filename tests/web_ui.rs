@@ -2,11 +2,15 @@
 //! (`tests/python/web_ui.py`). The whole workflow on the Furuta record gives the values
 //! `calib calibrate examples/furuta.toml` gives, read off the page, and leaves a screenshot
 //! of each tab (in `docs/screenshots/` with `CALIB_SCREENSHOTS=docs/screenshots`); a CSV that does not parse shows the parser's message;
-//! on `calib coordinator --http --token-file`, the page asks for the token, then works.
+//! on `calib coordinator --http --token-file`, the page asks for the token, then works; an
+//! FMU uploaded on the Model tab is simulated there and calibrated on the Calibration tab.
 //! Skipped (with the reason printed) where Chromium, chromedriver or selenium is missing,
 //! except under continuous integration (`CI` set), where that fails the test.
 
 mod common;
+#[allow(dead_code)]
+#[path = "../worker/tests/common/reference_fmus.rs"]
+mod reference_fmus;
 
 use common::repo;
 use serde_json::Value;
@@ -463,6 +467,112 @@ fn the_page_of_a_coordinator_with_a_token_asks_for_it_then_works() {
             .as_str()
             .unwrap()
             .contains("calib_session"),
+        "{page}"
+    );
+}
+
+#[test]
+fn an_fmu_dropped_or_picked_on_the_model_tab_is_simulated_and_calibrated() {
+    if let Some(reason) = browser_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let Some(fmus) = reference_fmus::reference_fmus() else {
+        return;
+    };
+    let fmu = fmus.join("fmi2/VanDerPol.fmu");
+    let dir = tempfile::tempdir().unwrap();
+    // The record: VanDerPol at mu = 1.7, with noise, made by `calib simulate`.
+    const TRUE_MU: f64 = 1.7;
+    let record = dir.path().join("vanderpol.csv");
+    let made = common::calib(&[
+        "simulate",
+        fmu.to_str().unwrap(),
+        "--set",
+        &format!("mu={TRUE_MU}"),
+        "--stop",
+        "20",
+        "--step",
+        "0.05",
+        "--outputs",
+        "x0,x1",
+        "--noise",
+        "x0=0.02",
+        "--noise",
+        "x1=0.02",
+        "--seed",
+        "7",
+        "--out",
+        record.to_str().unwrap(),
+    ]);
+    assert!(
+        made.status.success(),
+        "{}",
+        String::from_utf8_lossy(&made.stderr)
+    );
+    let ui = Ui::start(&dir.path().join("db"));
+    let dropped = fmus.join("fmi2/BouncingBall.fmu");
+    let page = drive(
+        "fmu",
+        &[
+            &ui.url,
+            fmu.to_str().unwrap(),
+            record.to_str().unwrap(),
+            dropped.to_str().unwrap(),
+        ],
+        dir.path(),
+    );
+    // Dropped on the Model tab: uploaded and chosen.
+    assert!(
+        page["dropped_chosen"]
+            .as_str()
+            .unwrap()
+            .starts_with("BouncingBall.me@"),
+        "{page}"
+    );
+    assert!(
+        page["dropped_status"]
+            .as_str()
+            .unwrap()
+            .starts_with("BouncingBall.fmu: FMU "),
+        "{page}"
+    );
+    // Listed with its parameters and outputs, the default interface chosen.
+    let chosen = page["chosen"].as_str().unwrap();
+    assert!(chosen.starts_with("VanDerPol.me@"), "{page}");
+    assert!(
+        page["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|p| p == "mu"),
+        "{page}"
+    );
+    let outputs = page["outputs"].as_array().unwrap();
+    assert_eq!(&outputs[..2], ["x0", "x1"], "{page}");
+    // Simulated and plotted.
+    assert!(
+        page["simulated"]
+            .as_str()
+            .unwrap()
+            .starts_with("simulated 20 s"),
+        "{page}"
+    );
+    assert_eq!(page["model_plots"].as_array().unwrap().len(), 2, "{page}");
+    // Calibrated: mu within 0.5% of the truth the record was made with (the tolerance of
+    // the same campaign from its file in tests/fmu.rs).
+    let mu: f64 = page["calibrated"]["mu"]
+        .as_str()
+        .expect("mu calibrated")
+        .parse()
+        .unwrap();
+    eprintln!("calibrated on the page: mu = {mu}");
+    assert!((mu / TRUE_MU - 1.0).abs() < 0.005, "mu = {mu}: {page}");
+    assert!(
+        page["calibration_status"]
+            .as_str()
+            .unwrap()
+            .contains("finished"),
         "{page}"
     );
 }

@@ -65,6 +65,13 @@ pub const MAX_IDEMPOTENCY_KEY_BYTES: usize = 256;
 /// Largest chunk of an upload [bytes].
 pub const MAX_CHUNK_BYTES: usize = 1 << 20;
 
+/// Largest FMU archive `UploadFmu` (and the web app's upload) accepts [bytes]: the most a
+/// worker's `UploadFmu` message carries ([`calib_worker::limits::MAX_MESSAGE_BYTES`], less
+/// room for the message's other fields), since every campaign on it sends it to workers.
+/// Its entries and what they inflate to are held to the workers' own limits
+/// ([`calib_worker::fmu::archive::Limits`]).
+pub const MAX_FMU_BYTES: usize = calib_worker::limits::MAX_MESSAGE_BYTES - 16;
+
 /// Largest page of `ListCampaigns`.
 pub const MAX_PAGE: usize = 100;
 

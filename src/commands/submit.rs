@@ -93,13 +93,18 @@ fn rpc(status: tonic::Status) -> Failure {
 
 pub fn submit(args: SubmitArgs) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
-    if calib_worker::fmu::hash_of(&campaign.model.info().name).is_some() {
-        return Err(Failure::input(format!(
-            "{}: `model.fmu`: the Calibration API does not take FMUs yet; run the campaign \
-             with `calib calibrate` (here, or on workers with --workers)",
-            args.campaign.display()
-        )));
-    }
+    // A campaign on an FMU: its archive, as read when the campaign was loaded.
+    let fmu = match calib_worker::fmu::hash_of(&campaign.model.info().name) {
+        None => None,
+        Some(_) => Some(
+            calib_worker::fmu::archive_of(&campaign.model.info().name).ok_or_else(|| {
+                Failure::input(format!(
+                    "{}: `model.fmu`: the FMU cannot be read again",
+                    args.campaign.display()
+                ))
+            })?,
+        ),
+    };
     let text = std::fs::read_to_string(&args.campaign)
         .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
     let bytes = std::fs::read(&campaign.measurement_file)
@@ -133,8 +138,11 @@ pub fn submit(args: SubmitArgs) -> Outcome {
             .await
             .map_err(rpc)?
             .into_inner();
-        let message = calib_coordinator::api::spec::campaign_message(&text, &dataset.id)
+        let mut message = calib_coordinator::api::spec::campaign_message(&text, &dataset.id)
             .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
+        if let Some((hash, archive)) = &fmu {
+            message.fmu_id = send_fmu(&mut client, hash, archive, &campaign).await?;
+        }
         let submitted = client
             .submit_campaign(pb::SubmitCampaignRequest {
                 campaign: Some(message),
@@ -160,6 +168,60 @@ pub fn submit(args: SubmitArgs) -> Outcome {
         let last = follow(&args.coordinator, client, &submitted.id).await?;
         finish(&args, &campaign, &last)
     })
+}
+
+/// Make sure the coordinator has the FMU `archive` (content hash `hash`): asked first, sent
+/// only when it lacks it. Its id.
+async fn send_fmu(
+    client: &mut Client,
+    hash: &[u8; 32],
+    archive: &[u8],
+    campaign: &Campaign,
+) -> Result<String, Failure> {
+    let id: String = hash.iter().map(|b| format!("{b:02x}")).collect();
+    match client.get_fmu(pb::GetFmuRequest { id: id.clone() }).await {
+        Ok(_) => {
+            eprintln!("FMU {id} is on the coordinator already");
+            return Ok(id);
+        }
+        Err(status) if status.code() == tonic::Code::NotFound => {}
+        Err(status) => return Err(rpc(status)),
+    }
+    // Named after the model's identifier ("VanDerPol.me@…" was VanDerPol.fmu).
+    let model = &campaign.model.info().name;
+    let identifier = model
+        .rsplit_once('@')
+        .map_or(model.as_str(), |(head, _)| head);
+    let identifier = identifier
+        .strip_suffix(".me")
+        .or_else(|| identifier.strip_suffix(".cs"))
+        .unwrap_or(identifier);
+    let file_name = format!("{identifier}.fmu");
+    let chunks: Vec<pb::FmuChunk> = archive
+        .chunks(CHUNK)
+        .enumerate()
+        .map(|(i, data)| pb::FmuChunk {
+            file_name: if i == 0 {
+                file_name.clone()
+            } else {
+                String::new()
+            },
+            data: data.to_vec(),
+        })
+        .collect();
+    let uploaded = client
+        .upload_fmu(tokio_stream::iter(chunks))
+        .await
+        .map_err(rpc)?
+        .into_inner();
+    if uploaded.id != id {
+        return Err(Failure::internal(format!(
+            "coordinator: the FMU was kept as `{}`, not as its hash `{id}`",
+            uploaded.id
+        )));
+    }
+    eprintln!("FMU {id} uploaded ({} bytes)", archive.len());
+    Ok(id)
 }
 
 /// How long a follower keeps reconnecting to a coordinator it lost (restarted, rescheduled,

@@ -3,6 +3,7 @@
     python3 web_ui.py workflow URL DATA.csv SCREENSHOTS_DIR OUT.json
     python3 web_ui.py broken URL BROKEN.csv OUT.json
     python3 web_ui.py login URL TOKEN_FILE DATA.csv OUT.json
+    python3 web_ui.py fmu URL MODEL.fmu RECORD.csv DROPPED.fmu OUT.json
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
@@ -11,9 +12,13 @@ values off the page), the Diagnosis tab (run it, read the verdict); a screenshot
 tab. `broken`: upload a CSV that does not parse and read the message the page shows.
 `login`: a coordinator with a token: the page asks for it, refuses a wrong one, and once
 signed in simulates, uploads and draws the measurement's plots; what scripts can see of it.
+`fmu`: an FMU dropped on the Model tab (DROPPED.fmu, a drop event carrying the file), then
+the Reference FMU VanDerPol as the user's own model: chosen with the Model tab's file picker, its parameters and outputs listed, simulated and plotted; its record uploaded; mu
+freed on the Calibration tab and calibrated; the calibrated value read off the page.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
+import base64
 import json
 import os
 import shutil
@@ -315,6 +320,100 @@ def login(url, token_file, data, out):
         driver.quit()
 
 
+DROP = """
+const [name, data] = arguments;
+const bytes = Uint8Array.from(atob(data), (c) => c.charCodeAt(0));
+const transfer = new DataTransfer();
+transfer.items.add(new File([bytes], name, { type: "application/octet-stream" }));
+const zone = document.getElementById("fmu-drop");
+zone.dispatchEvent(new DragEvent("dragover", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+zone.dispatchEvent(new DragEvent("drop", { dataTransfer: transfer, bubbles: true, cancelable: true }));
+"""
+
+
+def fmu(url, model, record, dropped, out):
+    driver = browser()
+    try:
+        driver.get(url)
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        # An FMU dropped on the Model tab, as a file dragged from the desktop arrives.
+        with open(dropped, "rb") as f:
+            data = base64.b64encode(f.read()).decode()
+        driver.execute_script(DROP, os.path.basename(dropped), data)
+        wait(driver).until(lambda d: "parameters" in by_id(d, "fmu-status").text
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        dropped_status = by_id(driver, "fmu-status").text
+        dropped_chosen = Select(by_id(driver, "model-select")).first_selected_option.get_attribute("value")
+        # Model: the FMU, through the file picker.
+        by_id(driver, "fmu-file").send_keys(os.path.abspath(model))
+        wait(driver).until(lambda d: "VanDerPol" in by_id(d, "fmu-status").text
+                           or by_id(d, "model-error").is_displayed())
+        wait(driver).until(lambda d: "parameters" in by_id(d, "fmu-status").text
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        status = by_id(driver, "fmu-status").text
+        chosen = Select(by_id(driver, "model-select")).first_selected_option.get_attribute("value")
+        parameters = [r.find_element(By.CSS_SELECTOR, "th").text
+                      for r in driver.find_elements(By.CSS_SELECTOR, "#model-parameters tbody tr")]
+        outputs = [i.get_attribute("value")
+                   for i in driver.find_elements(By.CSS_SELECTOR, 'input[name="model-output"]')]
+        type_into(driver, "value-mu", "1.7")
+        type_into(driver, "model-stop", "20")
+        type_into(driver, "model-step", "0.05")
+        by_id(driver, "simulate").click()
+        wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#model-plots figure")) >= 2
+                           or by_id(d, "model-error").is_displayed())
+        no_error(driver, "model-error")
+        simulated = by_id(driver, "model-status").text
+        model_plots = [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#model-plots figcaption")]
+        # Back to the FMU's default mu, so that the campaign fixes nothing else.
+        type_into(driver, "value-mu", "1")
+
+        upload(driver, record, "time")
+        wait(driver).until(lambda d: "samples" in by_id(d, "measurement-status").text
+                           or by_id(d, "measurement-error").is_displayed())
+        no_error(driver, "measurement-error")
+
+        # Calibration: the campaign of examples/vanderpol.toml.
+        tab(driver, "calibration")
+        for output in ("x0", "x1"):
+            Select(by_id(driver, f"measured-{output}")).select_by_value(output)
+        by_id(driver, "free-mu").click()
+        type_into(driver, "nominal-mu", "1.0")
+        type_into(driver, "min-mu", "0.2")
+        type_into(driver, "max-mu", "3.0")
+        type_into(driver, "campaign-name", "vanderpol")
+        type_into(driver, "window-start", "0")
+        type_into(driver, "window-stop", "20")
+        type_into(driver, "starts", "2")
+        type_into(driver, "max-evaluations", "200")
+        type_into(driver, "seed", "0")
+        by_id(driver, "start").click()
+        wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
+                                 or by_id(d, "calibration-error").is_displayed())
+        no_error(driver, "calibration-error")
+        calibrated = {}
+        for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr"):
+            cell = row.find_element(By.CSS_SELECTOR, "td.calibrated")
+            calibrated[row.get_attribute("data-parameter")] = cell.get_attribute("data-value")
+        with open(out, "w") as f:
+            json.dump({
+                "dropped_status": dropped_status,
+                "dropped_chosen": dropped_chosen,
+                "fmu_status": status,
+                "chosen": chosen,
+                "parameters": parameters,
+                "outputs": outputs,
+                "simulated": simulated,
+                "model_plots": model_plots,
+                "calibrated": calibrated,
+                "calibration_status": by_id(driver, "calibration-status").text,
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
 if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "workflow":
@@ -323,5 +422,7 @@ if __name__ == "__main__":
         broken(*args)
     elif mode == "login":
         login(*args)
+    elif mode == "fmu":
+        fmu(*args)
     else:
         raise SystemExit(f"unknown mode {mode}")

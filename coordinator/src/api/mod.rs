@@ -6,12 +6,15 @@ pub mod spec;
 use crate::campaigns::analyses::AnalysisSnapshot;
 use crate::campaigns::datasets::DatasetInfo;
 use crate::campaigns::diagnoses::DiagnosisSnapshot;
+use crate::campaigns::fmus::FmuInfo;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
-use crate::limits::{MAX_DATASET_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
+use crate::limits::{MAX_DATASET_BYTES, MAX_FMU_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
 use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
+use calib_worker::fmu;
+use calib_worker::service::simulator::describe;
 use std::pin::Pin;
 use std::sync::Arc;
 use tokio_stream::wrappers::ReceiverStream;
@@ -60,6 +63,42 @@ impl CalibrationApi {
         })
     }
 
+    /// The end of `UploadFmu`, once the chunks are joined: check the archive and keep it.
+    /// The web app's upload route, which receives the file whole, calls it too.
+    pub async fn upload_fmu_bytes(
+        &self,
+        file_name: String,
+        bytes: Vec<u8>,
+    ) -> Result<pb::Fmu, Status> {
+        if file_name.is_empty() {
+            return Err(Status::invalid_argument(
+                "file_name: the first chunk must name the file (e.g. Model.fmu)",
+            ));
+        }
+        if bytes.is_empty() {
+            return Err(Status::invalid_argument("data: the file is empty"));
+        }
+        let campaigns = self.campaigns.clone();
+        let info = self
+            .blocking(move || campaigns.fmus()?.put(&file_name, &bytes))
+            .await?;
+        Ok(fmu_message(&info))
+    }
+
+    /// The uploaded FMU `id`, or NOT_FOUND.
+    async fn fmu(&self, id: &str, field: &str) -> Result<FmuInfo, Status> {
+        let campaigns = self.campaigns.clone();
+        let found = {
+            let id = id.to_string();
+            self.blocking(move || campaigns.fmus()?.get(&id)).await?
+        };
+        found.ok_or_else(|| {
+            Status::not_found(format!(
+                "{field}: no FMU `{id}` on this coordinator; upload it with UploadFmu"
+            ))
+        })
+    }
+
     /// The campaign file of a campaign message, its measurement the uploaded dataset it
     /// names.
     async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
@@ -82,7 +121,50 @@ impl CalibrationApi {
         };
         check_against_dataset(campaign, &dataset)?;
         let file = self.campaigns.datasets().file(&dataset);
-        spec::campaign_file(campaign, &file, &dataset.time_column).map_err(Status::invalid_argument)
+        if campaign.fmu_id.is_empty() {
+            if fmu::interface_in_name(&campaign.model).is_some() {
+                return Err(Status::invalid_argument(format!(
+                    "campaign.fmu_id: missing; `{}` is an FMU's model: name the FMU by the \
+                     id UploadFmu answered",
+                    campaign.model
+                )));
+            }
+            return spec::campaign_file(campaign, &file, &dataset.time_column)
+                .map_err(Status::invalid_argument);
+        }
+        let info = self.fmu(&campaign.fmu_id, "campaign.fmu_id").await?;
+        let mut campaign = campaign.clone();
+        if !campaign.model.is_empty() {
+            let names: Vec<&str> = info.models.iter().map(|m| m.info().name.as_str()).collect();
+            if !names.contains(&campaign.model.as_str()) {
+                return Err(Status::invalid_argument(format!(
+                    "campaign.model: `{}` is not a model of FMU `{}` (its models: {}); leave \
+                     it empty for the FMU's default",
+                    campaign.model,
+                    info.id,
+                    names.join(", ")
+                )));
+            }
+            let named = match fmu::interface_in_name(&campaign.model) {
+                Some(fmu::Interface::ModelExchange) => "model-exchange",
+                _ => "co-simulation",
+            };
+            if !campaign.fmu_interface.is_empty() && campaign.fmu_interface != named {
+                return Err(Status::invalid_argument(format!(
+                    "campaign.fmu_interface: `{}`, but campaign.model `{}` runs through {named}",
+                    campaign.fmu_interface, campaign.model
+                )));
+            }
+            campaign.fmu_interface = named.into();
+        }
+        let archive = self
+            .campaigns
+            .fmus()
+            .ok()
+            .and_then(|f| f.file(&info.id))
+            .ok_or_else(|| Status::internal("the FMU's archive has no path"))?;
+        spec::campaign_file_on(&campaign, &file, &dataset.time_column, Some(&archive))
+            .map_err(Status::invalid_argument)
     }
 
     /// [`blocking`], its refusals worded for a client: no path of this server in them.
@@ -203,6 +285,16 @@ fn state(s: &Snapshot) -> pb::CampaignState {
     }
 }
 
+/// The answer of `UploadFmu` and `GetFmu`.
+fn fmu_message(info: &FmuInfo) -> pb::Fmu {
+    pb::Fmu {
+        id: info.id.clone(),
+        file_name: info.file_name.clone(),
+        size: info.size,
+        models: info.models.iter().map(|m| describe(*m)).collect(),
+    }
+}
+
 fn not_found(id: &str) -> Status {
     Status::not_found(format!("id: no campaign `{id}` on this coordinator"))
 }
@@ -320,6 +412,47 @@ impl Calibration for CalibrationApi {
         self.upload(file_name, time_column, bytes)
             .await
             .map(Response::new)
+    }
+
+    async fn upload_fmu(
+        &self,
+        request: Request<Streaming<pb::FmuChunk>>,
+    ) -> Result<Response<pb::Fmu>, Status> {
+        let mut chunks = request.into_inner();
+        let mut bytes = Vec::new();
+        let mut file_name = String::new();
+        let mut first = true;
+        while let Some(chunk) = chunks.message().await? {
+            if first {
+                file_name = chunk.file_name;
+                first = false;
+            }
+            if chunk.data.len() > MAX_CHUNK_BYTES {
+                return Err(Status::invalid_argument(format!(
+                    "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
+                    chunk.data.len()
+                )));
+            }
+            if bytes.len() + chunk.data.len() > MAX_FMU_BYTES {
+                return Err(Status::invalid_argument(format!(
+                    "fmu: the archive is more than the {MAX_FMU_BYTES} bytes accepted (what a \
+                     worker's UploadFmu carries)"
+                )));
+            }
+            bytes.extend_from_slice(&chunk.data);
+        }
+        self.upload_fmu_bytes(file_name, bytes)
+            .await
+            .map(Response::new)
+    }
+
+    async fn get_fmu(
+        &self,
+        request: Request<pb::GetFmuRequest>,
+    ) -> Result<Response<pb::Fmu>, Status> {
+        let id = request.into_inner().id;
+        let info = self.fmu(&id, "id").await?;
+        Ok(Response::new(fmu_message(&info)))
     }
 
     async fn submit_campaign(

@@ -9,12 +9,33 @@ use toml::{Table, Value};
 /// The campaign file of `c`, its measurement the dataset file `file` with its time in
 /// `time_column`; or the field that cannot be written as one.
 pub fn campaign_file(c: &pb::Campaign, file: &Path, time_column: &str) -> Result<String, String> {
+    campaign_file_on(c, file, time_column, None)
+}
+
+/// [`campaign_file`], its model the FMU archive at `fmu` when there is one (run through
+/// `c.fmu_interface`), else the hosted model `c.model`.
+pub fn campaign_file_on(
+    c: &pb::Campaign,
+    file: &Path,
+    time_column: &str,
+    fmu: Option<&Path>,
+) -> Result<String, String> {
     let mut root = Table::new();
     if !c.name.is_empty() {
         root.insert("name".into(), c.name.clone().into());
     }
     let mut model = Table::new();
-    model.insert("name".into(), c.model.clone().into());
+    match fmu {
+        Some(path) => {
+            model.insert("fmu".into(), path.to_string_lossy().into_owned().into());
+            if !c.fmu_interface.is_empty() {
+                model.insert("interface".into(), c.fmu_interface.clone().into());
+            }
+        }
+        None => {
+            model.insert("name".into(), c.model.clone().into());
+        }
+    }
     if c.stop_time != 0.0 {
         model.insert("stop_time".into(), c.stop_time.into());
     }
@@ -141,7 +162,8 @@ fn integer(field: &str, n: u64) -> Result<Value, String> {
 }
 
 /// The Calibration API's campaign message for a campaign file's text, on dataset `dataset`.
-/// The file has been resolved already, so its shape is known to be right.
+/// The file has been resolved already, so its shape is known to be right. A campaign on an
+/// FMU (`fmu = "..."`) gets its interface; its `fmu_id` is left for the caller to set.
 pub fn campaign_message(text: &str, dataset: &str) -> Result<pb::Campaign, String> {
     let root: toml::Table = text.parse().map_err(|e| format!("{e}"))?;
     let table = |v: Option<&toml::Value>| v.and_then(|v| v.as_table()).cloned().unwrap_or_default();
@@ -198,6 +220,9 @@ pub fn campaign_message(text: &str, dataset: &str) -> Result<pb::Campaign, Strin
     Ok(pb::Campaign {
         name: string(&root, "name"),
         model: string(&model, "name"),
+        // The FMU itself is named by the id its upload answers, which the caller sets.
+        fmu_id: String::new(),
+        fmu_interface: string(&model, "interface"),
         stop_time: float(&model, "stop_time").unwrap_or_default(),
         model_parameters: table(model.get("parameters"))
             .iter()

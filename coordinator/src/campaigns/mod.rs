@@ -19,6 +19,7 @@
 pub mod analyses;
 pub mod datasets;
 pub mod diagnoses;
+pub mod fmus;
 
 use crate::calibration::{self, Calibration};
 use crate::campaign::Campaign;
@@ -29,6 +30,7 @@ use crate::optim::problem::Progress;
 use crate::report;
 use crate::store::{hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, Store};
 use datasets::Datasets;
+use fmus::Fmus;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -122,6 +124,8 @@ pub struct Campaigns {
     store: Arc<dyn Store>,
     engine: Arc<dyn Engine>,
     datasets: Datasets,
+    /// Uploaded FMUs, when this coordinator takes them.
+    fmus: Option<Fmus>,
     /// `<results>/<id>/` holds each finished campaign's result.json and plots.
     results: PathBuf,
     live: Mutex<HashMap<CampaignId, Arc<Live>>>,
@@ -141,6 +145,7 @@ impl Campaigns {
             store,
             engine,
             datasets,
+            fmus: None,
             results,
             live: Mutex::new(HashMap::new()),
             keys: Mutex::new(HashMap::new()),
@@ -190,6 +195,19 @@ impl Campaigns {
         &self.datasets
     }
 
+    /// Take uploaded FMUs, kept in `fmus`.
+    pub fn with_fmus(mut self, fmus: Fmus) -> Self {
+        self.fmus = Some(fmus);
+        self
+    }
+
+    /// The uploaded FMUs; an error when this coordinator takes none.
+    pub fn fmus(&self) -> Result<&Fmus> {
+        self.fmus
+            .as_ref()
+            .ok_or_else(|| Error::InvalidRequest("fmu: this server keeps no uploaded FMUs".into()))
+    }
+
     /// Where campaign files written for submitted campaigns are said to be (errors name it).
     pub fn source(&self) -> PathBuf {
         self.datasets.folder().join("submitted-campaign.toml")
@@ -201,11 +219,15 @@ impl Campaigns {
         let source = self.source().display().to_string();
         let folder = format!("{}/", self.datasets.folder().display());
         let results = format!("{}/", self.results.display());
-        message
+        let mut message = message
             .replace(&format!("{source}: "), "")
             .replace(&source, "the campaign")
             .replace(&folder, "dataset ")
-            .replace(&results, "results ")
+            .replace(&results, "results ");
+        if let Some(fmus) = &self.fmus {
+            message = message.replace(&format!("{}/", fmus.folder().display()), "FMU ");
+        }
+        message
     }
 
     /// Start the campaign file `spec` (its measurement a dataset of this coordinator),

@@ -7,6 +7,7 @@ pub mod resume;
 
 use crate::api::CalibrationApi;
 use crate::campaigns::datasets::Datasets;
+use crate::campaigns::fmus::Fmus;
 use crate::campaigns::{self, Campaigns};
 use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};
@@ -208,23 +209,38 @@ pub fn serve_coordinator(
         Some(s) => s.clone(),
         None => Arc::new(MemoryStore::new()),
     };
-    let campaigns = Arc::new(Campaigns::new(
-        api_store,
-        Arc::new(GrpcEvaluator::new(
-            pool.clone(),
-            tokio::runtime::Handle::current(),
-        )),
-        Datasets::open(&api_folder.join("datasets"))?,
-        api_folder.join("results"),
-    ));
+    let campaigns = Arc::new(
+        Campaigns::new(
+            api_store,
+            Arc::new(GrpcEvaluator::new(
+                pool.clone(),
+                tokio::runtime::Handle::current(),
+            )),
+            Datasets::open(&api_folder.join("datasets"))?,
+            api_folder.join("results"),
+        )
+        .with_fmus(Fmus::open(&api_folder.join("fmus"))?),
+    );
+    // The Model tab runs an uploaded FMU's code on this machine only behind the token:
+    // without one, anyone reaching the port could. Campaigns on FMUs run on the workers.
+    let web_fmus = config.security.token.is_some();
     let web = match web_listener {
-        Some(listener) => Some(serve_app(
-            listener,
-            WebApp::new(campaigns.clone(), web::local::simulator()).with_door(DoorConfig {
-                allow_hosts: config.http_allow_hosts.clone(),
-                token: config.security.token.clone(),
-            }),
-        )?),
+        Some(listener) => {
+            let simulator = if web_fmus {
+                web::local::simulator_with_fmus(campaigns.fmus()?)?
+            } else {
+                web::local::simulator()
+            };
+            Some(serve_app(
+                listener,
+                WebApp::new(campaigns.clone(), simulator)
+                    .with_door(DoorConfig {
+                        allow_hosts: config.http_allow_hosts.clone(),
+                        token: config.security.token.clone(),
+                    })
+                    .with_fmu_simulation(web_fmus),
+            )?)
+        }
         None => None,
     };
     let calibration = CalibrationServer::new(CalibrationApi::new(campaigns.clone()))

@@ -82,6 +82,19 @@ fn valid_requests() -> Vec<(&'static str, String)> {
             "/api/v1/UploadDataset?file_name=rig.mat&time_column=time",
             String::new(),
         ),
+        (
+            "/api/v1/UploadFmu?file_name=Model.fmu",
+            "PK\u{3}\u{4}\u{14}\0\0\0\0\0modelDescription.xmlPK\u{5}\u{6}\0\0".to_string(),
+        ),
+        (
+            "/api/v1/GetFmu",
+            json(serde_json::json!({ "id": "0".repeat(64) })),
+        ),
+        (
+            "/api/v1/SubmitCampaign",
+            json(serde_json::json!({ "campaign": { "fmu_id": "0".repeat(64),
+                "model": "Model.me@000000000000", "dataset_id": "0".repeat(64) } })),
+        ),
     ]
 }
 
@@ -155,12 +168,15 @@ struct App {
 impl App {
     fn new() -> Self {
         let dir = tempfile::tempdir().unwrap();
-        let campaigns = Arc::new(Campaigns::new(
-            Arc::new(MemoryStore::new()),
-            Arc::new(LocalEvaluator),
-            Datasets::open(&dir.path().join("datasets")).unwrap(),
-            dir.path().join("results"),
-        ));
+        let campaigns = Arc::new(
+            Campaigns::new(
+                Arc::new(MemoryStore::new()),
+                Arc::new(LocalEvaluator),
+                Datasets::open(&dir.path().join("datasets")).unwrap(),
+                dir.path().join("results"),
+            )
+            .with_fmus(crate::campaigns::fmus::Fmus::open(&dir.path().join("fmus")).unwrap()),
+        );
         let router = WebApp::new(campaigns, super::local::simulator())
             .with_door(DoorConfig::default())
             .router(BOUND.parse().unwrap());
@@ -227,7 +243,7 @@ proptest! {
 
     #[test]
     fn mutated_requests_get_an_answer_never_a_crash(
-        route in 0usize..12,
+        route in 0usize..15,
         mutations in proptest::collection::vec(mutation(), 1..6),
     ) {
         let requests = valid_requests();
@@ -239,7 +255,7 @@ proptest! {
 
     #[test]
     fn arbitrary_bytes_get_an_answer_never_a_crash(
-        route in 0usize..12,
+        route in 0usize..15,
         body in proptest::collection::vec(any::<u8>(), 0..512),
     ) {
         let requests = valid_requests();

@@ -6,12 +6,14 @@
 
 use super::WebApp;
 use crate::campaigns::datasets::Datasets;
+use crate::campaigns::fmus::Fmus;
 use crate::campaigns::{self, Campaigns};
 use crate::error::{Error, Result};
 use crate::evaluator::LocalEvaluator;
 use crate::server::resume;
 use crate::store::SledStore;
 use calib_worker::service::cache::MeasurementCache;
+use calib_worker::service::fmu_cache::FmuCache;
 use calib_worker::service::pool::SimulationPool;
 use calib_worker::service::simulator::SimulatorService;
 use std::net::SocketAddr;
@@ -37,11 +39,26 @@ pub struct UiConfig {
 
 /// A Simulator service of this process, one slot per core: the Model tab's simulations.
 pub fn simulator() -> Arc<SimulatorService> {
+    Arc::new(simulator_service())
+}
+
+fn simulator_service() -> SimulatorService {
     let slots = std::thread::available_parallelism().map_or(1, |n| n.get());
-    Arc::new(SimulatorService::new(
+    SimulatorService::new(
         SimulationPool::new(slots, 64 * slots),
         MeasurementCache::new(16 << 20),
-    ))
+    )
+}
+
+/// [`simulator`], which also simulates the FMUs uploaded to `fmus` (named by their hash,
+/// as a worker's are; their code runs in the host processes of this binary).
+pub fn simulator_with_fmus(fmus: &Fmus) -> Result<Arc<SimulatorService>> {
+    let cache =
+        FmuCache::new(fmus.folder().to_path_buf(), u64::MAX).map_err(|source| Error::Write {
+            path: fmus.folder().to_path_buf(),
+            source,
+        })?;
+    Ok(Arc::new(simulator_service().with_fmus(Some(cache))))
 }
 
 /// The web app serving in this process.
@@ -79,12 +96,16 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
         .api
         .clone()
         .unwrap_or_else(|| campaigns::default_folder(Some(&config.store)));
-    let campaigns = Arc::new(Campaigns::new(
-        store.clone(),
-        Arc::new(LocalEvaluator),
-        Datasets::open(&folder.join("datasets"))?,
-        folder.join("results"),
-    ));
+    let campaigns = Arc::new(
+        Campaigns::new(
+            store.clone(),
+            Arc::new(LocalEvaluator),
+            Datasets::open(&folder.join("datasets"))?,
+            folder.join("results"),
+        )
+        .with_fmus(Fmus::open(&folder.join("fmus"))?),
+    );
+    let simulator = simulator_with_fmus(campaigns.fmus()?)?;
     let listener = TcpListener::bind(config.listen)
         .await
         .map_err(|source| Error::Listen {
@@ -109,7 +130,9 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
     };
     serve_app(
         listener,
-        WebApp::new(campaigns, simulator()).with_door(door),
+        WebApp::new(campaigns, simulator)
+            .with_door(door)
+            .with_fmu_simulation(true),
     )
 }
 

@@ -24,6 +24,7 @@ pub mod plots;
 use crate::api::CalibrationApi;
 use crate::campaigns::datasets::MAX_DATASET_BYTES;
 use crate::campaigns::Campaigns;
+use crate::limits::MAX_FMU_BYTES;
 use axum::body::Bytes;
 use axum::extract::{DefaultBodyLimit, Path, RawQuery, State};
 use axum::http::{header, StatusCode};
@@ -61,6 +62,9 @@ pub struct WebApp {
     simulator: Arc<SimulatorService>,
     campaigns: Arc<Campaigns>,
     door: DoorConfig,
+    /// Whether the Model tab may simulate uploaded FMUs here (their code runs in this
+    /// machine's host processes).
+    simulates_fmus: bool,
 }
 
 impl WebApp {
@@ -70,7 +74,16 @@ impl WebApp {
             simulator,
             campaigns,
             door: DoorConfig::default(),
+            simulates_fmus: false,
         }
+    }
+
+    /// Let the Model tab simulate uploaded FMUs (`simulator` must take them): `calib ui`,
+    /// and a coordinator behind a token. Otherwise such a simulation is refused and FMUs
+    /// run only on workers, in campaigns.
+    pub fn with_fmu_simulation(mut self, yes: bool) -> Self {
+        self.simulates_fmus = yes;
+        self
     }
 
     /// Who may come in besides the bound address's own page, and the token required.
@@ -103,6 +116,11 @@ impl WebApp {
                 "/api/v1/UploadDataset",
                 post(upload_dataset).layer(DefaultBodyLimit::max(MAX_DATASET_BYTES)),
             )
+            .route(
+                "/api/v1/UploadFmu",
+                post(upload_fmu).layer(DefaultBodyLimit::max(MAX_FMU_BYTES)),
+            )
+            .route("/api/v1/GetFmu", post(get_fmu))
             .route("/api/v1/SubmitCampaign", post(submit_campaign))
             .route("/api/v1/GetCampaign", post(get_campaign))
             .route("/api/v1/ListCampaigns", post(list_campaigns))
@@ -231,6 +249,38 @@ async fn upload_dataset(
     Ok(json(&dataset))
 }
 
+/// `POST /api/v1/UploadFmu?file_name=NAME` with the archive as the body: the client stream
+/// of `FmuChunk`s in one piece.
+async fn upload_fmu(
+    State(app): State<WebApp>,
+    RawQuery(query): RawQuery,
+    body: Bytes,
+) -> Result<Response, ApiError> {
+    let file_name = query_value(query.as_deref(), "file_name");
+    let fmu = app
+        .calibration
+        .upload_fmu_bytes(file_name, body.to_vec())
+        .await?;
+    Ok(json(&fmu))
+}
+
+/// The value of `key` in a query string, percent-decoded; empty when absent.
+fn query_value(query: Option<&str>, key: &str) -> String {
+    query
+        .unwrap_or("")
+        .split('&')
+        .filter_map(|pair| {
+            let (k, v) = pair.split_once('=').unwrap_or((pair, ""));
+            (k == key).then(|| {
+                percent_encoding::percent_decode_str(&v.replace('+', " "))
+                    .decode_utf8_lossy()
+                    .into_owned()
+            })
+        })
+        .next_back()
+        .unwrap_or_default()
+}
+
 macro_rules! unary {
     ($name:ident, $service:ident, $method:ident, $request:ty) => {
         async fn $name(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
@@ -265,9 +315,23 @@ unary!(
     cancel_campaign,
     pb::CancelCampaignRequest
 );
+unary!(get_fmu, calibration, get_fmu, pb::GetFmuRequest);
 unary!(list_models, simulator, list_models, pb::ListModelsRequest);
 unary!(describe, simulator, describe, pb::DescribeRequest);
-unary!(simulate, simulator, simulate, pb::SimulateRequest);
+
+/// `POST /api/v1/Simulate`: the Simulator's `Simulate`; an uploaded FMU only where the app
+/// may run FMU code ([`WebApp::with_fmu_simulation`]).
+async fn simulate(State(app): State<WebApp>, body: Bytes) -> Result<Response, ApiError> {
+    let request: pb::SimulateRequest = decode(&body)?;
+    if !request.fmu_hash.is_empty() && !app.simulates_fmus {
+        return Err(ApiError(Status::permission_denied(
+            "fmu_hash: this coordinator runs no FMU code for the web app without a token \
+             (--token-file); campaigns on the FMU run on its workers",
+        )));
+    }
+    let answer = app.simulator.simulate(Request::new(request)).await?;
+    Ok(json(answer.get_ref()))
+}
 
 type EventStream =
     Sse<axum::response::sse::KeepAliveStream<ReceiverStream<Result<Event, Infallible>>>>;

@@ -8,6 +8,7 @@ const BEST_TOLERANCE = 0.01; // a run within 1% of the best objective has reache
 
 const app = {
   model: null,        // ModelDescription of the chosen model
+  fmus: {},           // uploaded FMUs' models by name: {id, model: ModelDescription}
   dataset: null,      // Dataset answered by UploadDataset (with file_name)
   campaignId: null,   // the campaign shown on the Calibration tab
   campaign: null,     // its CampaignState
@@ -223,9 +224,61 @@ async function loadModels() {
   }
 }
 
+// An FMU chosen with the file picker or dropped on the Model tab: uploaded (UploadFmu),
+// its models added to the list, the default one shown.
+async function uploadFmu(file) {
+  showError("model-error", "");
+  if (!file) return;
+  $("fmu-status").textContent = `uploading ${file.name}…`;
+  try {
+    const fmu = await call(`UploadFmu?file_name=${encodeURIComponent(file.name)}`, null, {
+      headers: { "Content-Type": "application/octet-stream" },
+      body: await file.arrayBuffer(),
+    });
+    const select = $("model-select");
+    for (const m of fmu.models) {
+      app.fmus[m.name] = { id: fmu.id, model: m };
+      if (![...select.options].some((o) => o.value === m.name)) {
+        select.append(el("option", { value: m.name, text: `${m.name} (${fmu.file_name})` }));
+      }
+    }
+    const first = fmu.models[0];
+    select.value = first.name;
+    await describe(first.name);
+    $("fmu-status").textContent =
+      `${fmu.file_name}: FMU ${fmu.id.slice(0, 12)}…, ${first.parameters.length} parameters, ` +
+      `${first.outputs.length} outputs; models ${fmu.models.map((m) => m.name).join(", ")}`;
+  } catch (e) {
+    $("fmu-status").textContent = "";
+    showError("model-error", e.message);
+  }
+}
+
+function setUpFmuDrop() {
+  const zone = $("fmu-drop");
+  $("fmu-file").addEventListener("change", (e) => uploadFmu(e.target.files[0]));
+  zone.addEventListener("dragover", (e) => { e.preventDefault(); zone.classList.add("over"); });
+  zone.addEventListener("dragleave", () => zone.classList.remove("over"));
+  zone.addEventListener("drop", (e) => {
+    e.preventDefault();
+    zone.classList.remove("over");
+    uploadFmu(e.dataTransfer.files[0]);
+  });
+}
+
+// The FMU hash of an uploaded FMU's model, as the Simulator's `fmu_hash` bytes.
+function fmuHash(name) {
+  const fmu = app.fmus[name];
+  if (!fmu) return undefined;
+  return fmu.id.match(/../g).map((h) => parseInt(h, 16));
+}
+
+// A bound as a form value: empty when the model gives none (JSON null for ±infinity).
+const bound = (v) => (Number.isFinite(v) ? String(v) : "");
+
 async function describe(name) {
   showError("model-error", "");
-  const { model } = await call("Describe", { model: name });
+  const model = app.fmus[name] ? app.fmus[name].model : (await call("Describe", { model: name })).model;
   app.model = model;
   $("model-description").textContent = `${model.name} (version ${model.version}): ${model.description}`;
   const body = $("model-parameters").tBodies[0];
@@ -234,7 +287,7 @@ async function describe(name) {
     const input = el("input", {
       type: "number", step: "any", value: String(p.default_value),
       id: `value-${p.name}`, "aria-label": `value of ${p.name} [${p.unit}]`,
-      min: String(p.min), max: String(p.max),
+      min: bound(p.min), max: bound(p.max),
     });
     input.addEventListener("change", renderCalibration);
     body.append(el("tr", {},
@@ -278,7 +331,9 @@ async function simulate() {
     .map((p) => ({ name: p.name, value: modelValue(p) }));
   $("model-status").textContent = "simulating…";
   try {
-    const answer = await call("Simulate", { protocol_version: 1, model: model.name, parameters, times, outputs });
+    const answer = await call("Simulate", {
+      protocol_version: 1, model: model.name, parameters, times, outputs, fmu_hash: fmuHash(model.name),
+    });
     if (answer.failure) throw new Error(`simulation failed: ${answer.failure.message}`);
     const plots = $("model-plots");
     plots.replaceChildren();
@@ -393,8 +448,8 @@ function renderCalibration() {
     const free = el("input", { type: "checkbox", id: `free-${p.name}`, "aria-label": `calibrate ${p.name}` });
     const num = (id, value, label) => el("input", { type: "number", step: "any", id, value: String(value), "aria-label": label });
     const nominal = num(`nominal-${p.name}`, modelValue(p), `nominal ${p.name}`);
-    const min = num(`min-${p.name}`, p.min, `min ${p.name}`);
-    const max = num(`max-${p.name}`, p.max, `max ${p.name}`);
+    const min = num(`min-${p.name}`, bound(p.min), `min ${p.name}`);
+    const max = num(`max-${p.name}`, bound(p.max), `max ${p.name}`);
     const scale = el("select", { id: `pscale-${p.name}`, "aria-label": `scale of ${p.name}` },
       el("option", { value: "lin", text: "lin" }), el("option", { value: "log10", text: "log10" }));
     if (old) {
@@ -442,6 +497,7 @@ function campaignMessage() {
   return {
     name: $("campaign-name").value.trim(),
     model: model.name,
+    fmu_id: app.fmus[model.name] ? app.fmus[model.name].id : "",
     stop_time: windowStop,
     model_parameters: fixed,
     dataset_id: dataset.id,
@@ -826,6 +882,7 @@ function showDiagnosis(d) {
 // ---- start ------------------------------------------------------------------------------
 
 setUpTabs();
+setUpFmuDrop();
 $("simulate").addEventListener("click", simulate);
 $("upload").addEventListener("click", upload);
 $("plot-columns").addEventListener("click", plotColumns);
