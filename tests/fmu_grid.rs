@@ -345,3 +345,112 @@ stop = 10.0
         "speedRamp.duration = {speed}, valveRamp.duration = {valve}"
     );
 }
+
+/// A campaign's `[model] start_time`: Dahlquist's `x = exp(-k (t - 2))` from 2 s on is
+/// fitted back to `k = 0.7`; from 0 s the same record would need another `k`.
+#[test]
+fn a_campaign_starts_an_fmu_at_its_start_time() {
+    let Some(path) = reference(2, "Dahlquist") else {
+        return;
+    };
+    let work = tempfile::tempdir().unwrap();
+    let mut csv = String::from("time,x\n");
+    for i in 0..=40 {
+        let t = 2.0 + 0.1 * f64::from(i);
+        csv += &format!("{t},{}\n", (-0.7 * (t - 2.0)).exp());
+    }
+    let record = write(work.path(), "record.csv", &csv);
+    let campaign = write(
+        work.path(),
+        "dahlquist.toml",
+        &format!(
+            r#"
+[model]
+fmu = "{}"
+start_time = 2.0
+[measurement]
+file = "{}"
+[[outputs]]
+model = "x"
+measured = "x"
+[[parameters]]
+name = "k"
+nominal = 1.0
+min = 0.1
+max = 3.0
+[window]
+start = 2.0
+stop = 6.0
+"#,
+            path.display(),
+            record.display()
+        ),
+    );
+    let result = calibrate_json(
+        &campaign,
+        &work.path().join("db"),
+        &work.path().join("out"),
+        &[],
+    );
+    let k = result["best"]["parameters"]["k"].as_f64().unwrap();
+    assert!((k - 0.7).abs() < 1e-4, "k = {k}");
+}
+
+/// A campaign's `[model] step`: gemseo-fmu's Mass_Damper (OpenModelica, Co-Simulation),
+/// recorded by FMPy at a 1e-4 s communication step and sampled every 0.01 s, gives back its
+/// damping of 10 N.s/m when stepped at 1e-4 s (at the record's 0.01 s it blows up).
+#[test]
+fn a_campaign_steps_a_co_simulation_fmu_at_its_communication_step() {
+    let Some(dir) = real_tool_fmus() else {
+        return;
+    };
+    let fmu = dir.join("gemseo-fmu/Mass_Damper.fmu");
+    let Some(truth) = fmpy(
+        &fmu,
+        &["y"],
+        "fmi_type='CoSimulation', stop_time=1, output_interval=1e-4",
+    ) else {
+        return;
+    };
+    let work = tempfile::tempdir().unwrap();
+    let mut csv = String::from("time,y\n");
+    for row in truth.iter().step_by(100) {
+        csv += &format!("{},{}\n", row[0], row[1]);
+    }
+    let record = write(work.path(), "record.csv", &csv);
+    let campaign = write(
+        work.path(),
+        "damper.toml",
+        &format!(
+            r#"
+[model]
+fmu = "{}"
+interface = "co-simulation"
+step = 1e-4
+[measurement]
+file = "{}"
+[[outputs]]
+model = "y"
+measured = "y"
+[[parameters]]
+name = "damper.d"
+nominal = 5.0
+min = 1.0
+max = 20.0
+[window]
+start = 0.0
+stop = 1.0
+"#,
+            fmu.display(),
+            record.display()
+        ),
+    );
+    let result = calibrate_json(
+        &campaign,
+        &work.path().join("db"),
+        &work.path().join("out"),
+        &[],
+    );
+    let d = result["best"]["parameters"]["damper.d"].as_f64().unwrap();
+    assert!((d - 10.0).abs() < 1e-3, "damper.d = {d}");
+}

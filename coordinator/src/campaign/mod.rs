@@ -399,6 +399,30 @@ seed = 7
     }
 
     #[test]
+    fn a_start_time_and_a_communication_step_apply_to_fmus_only() {
+        let c = parse(GOOD).unwrap();
+        assert_eq!(
+            (c.solver.start_time, c.solver.communication_step),
+            (0.0, None)
+        );
+        for (setting, field) in [
+            ("start_time = 1.0", "model.start_time"),
+            ("start_time = -1.0", "model.start_time"),
+            ("step = 0.001", "model.step"),
+        ] {
+            let e = error_for("stop_time = 40.0", &format!("stop_time = 40.0\n{setting}"));
+            assert_eq!(e.field, field, "{setting}: {e}");
+            assert_eq!(e.line, Some(6), "{setting}: {e}");
+        }
+        let e = error_for("stop_time = 40.0", "stop_time = 40.0\nstep = 0.001");
+        assert!(e.message.contains("Co-Simulation FMU"), "{e}");
+        // A start of 0 is every model's.
+        let c = parse(&GOOD.replacen("stop_time = 40.0", "stop_time = 40.0\nstart_time = 0.0", 1))
+            .unwrap();
+        assert_eq!(c.solver.start_time, 0.0);
+    }
+
+    #[test]
     fn numbers_that_size_memory_are_held_to_the_limits_naming_the_field() {
         let search_line = GOOD.lines().position(|l| l == "[search]").unwrap() + 1;
         for (from, to, field, limit) in [
