@@ -609,6 +609,7 @@ fn solver_options_are_taken_field_by_field() {
                 rtol: Some(1e-6),
                 atol: Some(atol),
                 max_steps: Some(max_steps),
+                ..Default::default()
             }))
             .await
             .unwrap()

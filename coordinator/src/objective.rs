@@ -179,6 +179,14 @@ impl Objective {
         h.series(&self.weights)
             .series(&[self.solver.rtol, self.solver.atol])
             .count(self.solver.max_steps);
+        // The start and the communication step, when set, change what is simulated; a
+        // run without them keeps the fingerprint it always had.
+        if self.solver.start_time != 0.0 || self.solver.communication_step.is_some() {
+            h.text("time settings").series(&[
+                self.solver.start_time,
+                self.solver.communication_step.unwrap_or(0.0),
+            ]);
+        }
         h.finish()
     }
 

@@ -14,23 +14,56 @@ pub struct Args {
     interface: Option<super::fmu::InterfaceArg>,
 }
 
+/// The solver settings a simulation of `model` gets unless told otherwise, and where its
+/// tolerance comes from.
+fn default_solver(model: &dyn calib_worker::Model) -> serde_json::Value {
+    let o = model.default_options();
+    serde_json::json!({
+        "rtol": o.rtol,
+        "atol": o.atol,
+        "max_steps": o.max_steps,
+        "tolerance_origin": model.tolerance_origin(),
+        "communication_step": o.communication_step,
+    })
+}
+
 pub fn run(args: Args) -> Outcome {
-    let selected: Vec<_> = match &args.model {
-        Some(name) => vec![super::fmu::model(name, args.interface)?.info()],
-        None => models::all().iter().map(|m| m.info()).collect(),
+    let selected: Vec<&dyn calib_worker::Model> = match &args.model {
+        Some(name) => vec![super::fmu::model(name, args.interface)?],
+        None => models::all().iter().map(|m| m.as_ref()).collect(),
     };
     if args.json {
+        let described: Vec<serde_json::Value> = selected
+            .iter()
+            .map(|m| {
+                let mut v = serde_json::to_value(m.info()).expect("plain data");
+                v["default_solver"] = default_solver(*m);
+                v
+            })
+            .collect();
         println!(
             "{}",
-            serde_json::to_string_pretty(&selected).expect("plain data")
+            serde_json::to_string_pretty(&described).expect("plain data")
         );
         return Ok(());
     }
-    for info in selected {
+    for model in selected {
+        let info = model.info();
         println!(
             "{} (version {}): {}",
             info.name, info.version, info.description
         );
+        let o = model.default_options();
+        print!(
+            "  tolerance: rtol {:e} (atol {:e}), {}",
+            o.rtol,
+            o.atol,
+            model.tolerance_origin()
+        );
+        match o.communication_step {
+            Some(h) => println!("; communication step {h} s (the FMU's default experiment)"),
+            None => println!(),
+        }
         println!("  parameters:");
         for p in &info.parameters {
             println!(

@@ -18,16 +18,27 @@ pub struct Args {
     /// Set a parameter or effect: NAME=VALUE (repeatable). Others keep their defaults.
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
-    /// End of the simulation [s].
+    /// Start of the simulation [s]: an FMU is initialised there (hosted models start at 0).
+    #[arg(long, default_value_t = 0.0)]
+    start: f64,
+    /// End of the simulation [s]: always the last row, after a shorter interval when it is
+    /// not a whole number of steps after the start.
     #[arg(long, default_value_t = 10.0)]
     stop: f64,
     /// Output interval [s].
     #[arg(long, default_value_t = 0.01)]
     step: f64,
+    /// For a Co-Simulation FMU: the communication step [s], the most one `doStep` advances
+    /// (several between two rows when it is smaller than --step; never past a row) [default:
+    /// the FMU's DefaultExperiment stepSize, else --step].
+    #[arg(long)]
+    cs_step: Option<f64>,
     /// Outputs to write, comma separated (default: all).
     #[arg(long, value_delimiter = ',')]
     outputs: Vec<String>,
-    /// Relative tolerance of the ODE solver [default: the model's calibration tolerance].
+    /// Relative tolerance of the ODE solver, or the one a Co-Simulation FMU is told
+    /// [default: the model's calibration tolerance; an FMU's DefaultExperiment tolerance
+    /// when it gives one].
     #[arg(long)]
     rtol: Option<f64>,
     /// Add white Gaussian noise to an output: NAME=SIGMA in the output's unit (repeatable),
@@ -61,15 +72,15 @@ pub fn run(args: Args) -> Outcome {
         validate::parameter_value(info, index, v).map_err(refused)?;
         params[index] = v;
     }
-    if args.stop.is_nan() || args.stop <= 0.0 {
+    if args.stop.is_nan() || args.stop <= args.start {
         return Err(Failure::input(format!(
-            "--stop {}: must be a positive time",
-            args.stop
+            "--stop {}: must be a time after the start ({} s)",
+            args.stop, args.start
         )));
     }
     validate::stop_time(args.stop)
         .map_err(|e| Failure::input(format!("--stop {}: {e}", args.stop)))?;
-    let rows = args.stop / args.step + 1.0;
+    let rows = (args.stop - args.start) / args.step + 2.0;
     if !(args.step > 0.0 && rows <= limits::MAX_TIMES as f64) {
         return Err(Failure::input(format!(
             "--step {}: must be positive and give at most {} rows",
@@ -82,9 +93,16 @@ pub fn run(args: Args) -> Outcome {
         rtol: args.rtol,
         atol: args.rtol.map(|rtol| rtol * 1e-2),
         max_steps: None,
+        start_time: Some(args.start),
+        communication_step: args.cs_step,
     };
-    let options = validate::solver_options(model, overrides).map_err(|(_, e)| {
-        Failure::input(format!("--rtol {}: {e}", args.rtol.unwrap_or(f64::NAN)))
+    let options = validate::solver_options(model, overrides).map_err(|(option, e)| {
+        let (flag, value) = match option {
+            "start_time" => ("--start", Some(args.start)),
+            "communication_step" => ("--cs-step", args.cs_step),
+            _ => ("--rtol", args.rtol),
+        };
+        Failure::input(format!("{flag} {}: {e}", value.unwrap_or(f64::NAN)))
     })?;
     let outputs: Vec<usize> = if args.outputs.is_empty() {
         (0..info.outputs.len()).collect()
@@ -97,8 +115,7 @@ pub fn run(args: Args) -> Outcome {
             })
             .collect::<Result<_, _>>()?
     };
-    let n = (args.stop / args.step + 1e-9).floor() as usize;
-    let grid: Vec<f64> = (0..=n).map(|i| i as f64 * args.step).collect();
+    let grid = output_times(args.start, args.stop, args.step);
     validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
     let mut noise = vec![0.0; outputs.len()];
     for assignment in &args.noise {
@@ -168,4 +185,33 @@ pub fn run(args: Args) -> Outcome {
         );
     }
     Ok(())
+}
+
+/// `start`, `start + step`, … up to `stop`, and `stop` itself: the last interval is shorter
+/// when the span is not a whole number of steps (a last time within a billionth of a step of
+/// the stop is the stop).
+fn output_times(start: f64, stop: f64, step: f64) -> Vec<f64> {
+    let n = ((stop - start) / step + 1e-9).floor() as usize;
+    let mut grid: Vec<f64> = (0..=n).map(|i| start + i as f64 * step).collect();
+    match grid.last_mut() {
+        Some(last) if stop - *last <= 1e-9 * step => *last = stop,
+        _ => grid.push(stop),
+    }
+    grid
+}
+
+#[cfg(test)]
+mod tests {
+    use super::output_times;
+
+    #[test]
+    fn the_stop_time_is_always_the_last_output_time() {
+        assert_eq!(output_times(0.0, 1.0, 0.25), [0.0, 0.25, 0.5, 0.75, 1.0]);
+        assert_eq!(output_times(0.0, 0.9, 0.25), [0.0, 0.25, 0.5, 0.75, 0.9]);
+        assert_eq!(output_times(1.0, 1.5, 0.25), [1.0, 1.25, 1.5]);
+        let g = output_times(0.0, 12.566, 0.1);
+        assert_eq!((g.len(), g[125], g[126]), (127, 12.5, 12.566));
+        let g = output_times(0.0, 20.0, 0.01);
+        assert_eq!((g.len(), g[2000]), (2001, 20.0));
+    }
 }

@@ -144,6 +144,10 @@ impl<M: Model> Model for WithOutputEffects<M> {
         self.inner.default_options()
     }
 
+    fn tolerance_origin(&self) -> &'static str {
+        self.inner.tolerance_origin()
+    }
+
     fn simulate(
         &self,
         params: &[f64],

@@ -19,6 +19,9 @@ pub const MAX_STEPS: RangeInclusive<u64> = 1..=10_000_000;
 pub const RTOL: RangeInclusive<f64> = 1e-14..=0.1;
 /// Absolute tolerances of the ODE solver, in the unit of each state.
 pub const ATOL: RangeInclusive<f64> = 1e-300..=1e300;
+/// Most Co-Simulation communication steps one simulation's communication step asks for
+/// (from the start time to the stop time), as many as [`MAX_STEPS`] allows solver steps.
+pub const MAX_COMMUNICATION_STEPS: f64 = 1e7;
 
 // FMU archives (`.fmu` zip files), checked while they are read and inflated: a header's
 // sizes and counts are never trusted (see `crate::fmu`). An upload is also bounded by

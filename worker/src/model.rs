@@ -141,6 +141,12 @@ pub struct SolverOptions {
     pub atol: f64,
     /// Upper bound on accepted plus rejected steps before the run is abandoned.
     pub max_steps: usize,
+    /// Where the simulation starts [s]: an FMU is initialised there (outputs asked for
+    /// before it hold the initial values). Hosted models start at 0.
+    pub start_time: f64,
+    /// The most a Co-Simulation FMU advances in one `doStep` [s], never past an output time;
+    /// `None`: one `doStep` from each output time to the next.
+    pub communication_step: Option<f64>,
 }
 
 impl Default for SolverOptions {
@@ -151,6 +157,8 @@ impl Default for SolverOptions {
             rtol: 1e-8,
             atol: 1e-10,
             max_steps: 200_000,
+            start_time: 0.0,
+            communication_step: None,
         }
     }
 }
@@ -215,8 +223,15 @@ pub trait Model: Send + Sync {
         SolverOptions::default()
     }
 
+    /// Where the tolerance of [`Model::default_options`] comes from, in words (Describe and
+    /// `calib models` say it).
+    fn tolerance_origin(&self) -> &'static str {
+        "the model's calibration tolerance"
+    }
+
     /// Simulate with the full parameter vector `params` (base parameters then effects,
-    /// see [`ModelInfo::full_len`]) from t = 0 and return the outputs listed in
+    /// see [`ModelInfo::full_len`]) from t = 0 (an FMU: from
+    /// [`SolverOptions::start_time`]) and return the outputs listed in
     /// `outputs` (indices into [`ModelInfo::outputs`]) at the times of `grid`
     /// (non-decreasing, all ≥ 0).
     fn simulate(

@@ -13,6 +13,7 @@ fn options() -> SolverOptions {
         rtol: 1e-10,
         atol: 1e-12,
         max_steps: 1_000_000,
+        ..SolverOptions::default()
     }
 }
 

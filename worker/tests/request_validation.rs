@@ -71,6 +71,7 @@ fn any_solver() -> impl Strategy<Value = Option<proto::SolverOptions>> {
                 rtol,
                 atol,
                 max_steps,
+                ..Default::default()
             }
         }),
     )
@@ -241,6 +242,7 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                         rtol,
                         atol,
                         max_steps,
+                        ..Default::default()
                     },
                 ),
             );
@@ -301,6 +303,7 @@ fn make(mistake: &Mistake, r: &mut proto::SimulateRequest) -> &'static str {
             rtol: Some(1e-8),
             atol: Some(1e-10),
             max_steps: Some(1000),
+            ..Default::default()
         });
     };
     match mistake.clone() {

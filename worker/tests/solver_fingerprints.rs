@@ -599,6 +599,7 @@ fn model_exchange_fmus_are_bit_for_bit_the_recorded_ones() {
                         rtol: 1e-10,
                         atol: 1e-12,
                         max_steps: 1_000_000,
+                        ..SolverOptions::default()
                     },
                 ),
             ] {

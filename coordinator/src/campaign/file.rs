@@ -36,6 +36,10 @@ pub(super) struct ModelSection {
     /// How the FMU is run: `"model-exchange"` (default when it has it) or `"co-simulation"`.
     pub(super) interface: Option<Spanned<String>>,
     pub(super) stop_time: Option<Spanned<f64>>,
+    /// Where an FMU's simulation starts [s] (default 0).
+    pub(super) start_time: Option<Spanned<f64>>,
+    /// A Co-Simulation FMU's communication step [s] (default: its DefaultExperiment's).
+    pub(super) step: Option<Spanned<f64>>,
     #[serde(default)]
     pub(super) parameters: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,
 }

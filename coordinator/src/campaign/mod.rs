@@ -269,6 +269,14 @@ impl Campaign {
         }
         h.series(&[self.solver.rtol, self.solver.atol])
             .count(self.solver.max_steps);
+        // The start and the communication step, when set, change what is simulated; a
+        // run without them keeps the fingerprint it always had.
+        if self.solver.start_time != 0.0 || self.solver.communication_step.is_some() {
+            h.text("time settings").series(&[
+                self.solver.start_time,
+                self.solver.communication_step.unwrap_or(0.0),
+            ]);
+        }
         h.finish()
     }
 }
@@ -388,6 +396,30 @@ seed = 7
                 "{lines}: {e} (the [solver] table is on line {solver_line})"
             );
         }
+    }
+
+    #[test]
+    fn a_start_time_and_a_communication_step_apply_to_fmus_only() {
+        let c = parse(GOOD).unwrap();
+        assert_eq!(
+            (c.solver.start_time, c.solver.communication_step),
+            (0.0, None)
+        );
+        for (setting, field) in [
+            ("start_time = 1.0", "model.start_time"),
+            ("start_time = -1.0", "model.start_time"),
+            ("step = 0.001", "model.step"),
+        ] {
+            let e = error_for("stop_time = 40.0", &format!("stop_time = 40.0\n{setting}"));
+            assert_eq!(e.field, field, "{setting}: {e}");
+            assert_eq!(e.line, Some(6), "{setting}: {e}");
+        }
+        let e = error_for("stop_time = 40.0", "stop_time = 40.0\nstep = 0.001");
+        assert!(e.message.contains("Co-Simulation FMU"), "{e}");
+        // A start of 0 is every model's.
+        let c = parse(&GOOD.replacen("stop_time = 40.0", "stop_time = 40.0\nstart_time = 0.0", 1))
+            .unwrap();
+        assert_eq!(c.solver.start_time, 0.0);
     }
 
     #[test]

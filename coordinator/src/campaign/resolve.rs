@@ -70,7 +70,8 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
     let window = resolve_window(file.window, at)?;
     let stop_time = resolve_stop_time(&model_section, model_span, window.1, at)?;
     let search = resolve_search(file.search, free.len(), at)?;
-    let solver = resolve_solver(file.solver, model, at)?;
+    let mut solver = resolve_solver(file.solver, model, at)?;
+    resolve_time_settings(&model_section, model, window.0, &mut solver, at)?;
     let diagnosis = resolve_diagnosis(file.diagnosis, info, at)?;
 
     let measurement_path = PathBuf::from(file.measurement.file.get_ref());
@@ -541,11 +542,44 @@ fn resolve_solver(
         rtol: s.rtol,
         atol: s.atol,
         max_steps: s.max_steps,
+        ..Default::default()
     };
     match validate::solver_options(model, overrides) {
         Ok(solver) => Ok(solver),
         Err((option, e)) => at.error(span, &format!("solver.{option}"), e.message),
     }
+}
+
+/// The model section's `start_time` and `step` (an FMU's start, a Co-Simulation FMU's
+/// communication step) into the solver options.
+fn resolve_time_settings(
+    section: &ModelSection,
+    model: &dyn Model,
+    window_start: f64,
+    solver: &mut SolverOptions,
+    at: &Locator,
+) -> Result<(), CampaignError> {
+    if let Some(t) = &section.start_time {
+        let v = *t.get_ref();
+        solver.start_time = match validate::start_time(model, v) {
+            Ok(v) => v,
+            Err(e) => return at.error(t.span(), "model.start_time", e.message),
+        };
+        if v > window_start {
+            return at.error(
+                t.span(),
+                "model.start_time",
+                format!("{v} must be ≤ the window's start ({window_start})"),
+            );
+        }
+    }
+    if let Some(h) = &section.step {
+        solver.communication_step = match validate::communication_step(model, *h.get_ref()) {
+            Ok(v) => Some(v),
+            Err(e) => return at.error(h.span(), "model.step", e.message),
+        };
+    }
+    Ok(())
 }
 
 fn resolve_diagnosis(

@@ -73,11 +73,7 @@ impl WireObjective {
                 .to_vec(),
             measurement: None,
             points: Vec::new(),
-            solver: Some(proto::SolverOptions {
-                rtol: Some(objective.solver.rtol),
-                atol: Some(objective.solver.atol),
-                max_steps: Some(objective.solver.max_steps as u64),
-            }),
+            solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
         };
         let measurement = proto::Measurement {
@@ -96,6 +92,17 @@ impl WireObjective {
             outputs: objective.outputs.len(),
             fmu,
         }
+    }
+}
+
+/// The objective's solver options as a request carries them: every field set.
+fn wire_solver(solver: &calib_worker::SolverOptions) -> proto::SolverOptions {
+    proto::SolverOptions {
+        rtol: Some(solver.rtol),
+        atol: Some(solver.atol),
+        max_steps: Some(solver.max_steps as u64),
+        start_time: Some(solver.start_time),
+        communication_step: solver.communication_step,
     }
 }
 
@@ -128,11 +135,7 @@ impl WireSimulation {
                 .iter()
                 .map(|&o| info.outputs[o].name.clone())
                 .collect(),
-            solver: Some(proto::SolverOptions {
-                rtol: Some(objective.solver.rtol),
-                atol: Some(objective.solver.atol),
-                max_steps: Some(objective.solver.max_steps as u64),
-            }),
+            solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
         };
         Self {

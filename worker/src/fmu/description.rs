@@ -74,7 +74,10 @@ pub struct Description {
     pub variables: Vec<Variable>,
     pub continuous_states: usize,
     pub event_indicators: usize,
+    /// The `DefaultExperiment`'s times, step and relative tolerance, as the FMU gives them.
+    pub default_start_time: Option<f64>,
     pub default_stop_time: Option<f64>,
+    pub default_step_size: Option<f64>,
     pub default_tolerance: Option<f64>,
 }
 
@@ -252,8 +255,16 @@ impl Description {
             variables,
             continuous_states,
             event_indicators,
+            default_start_time: match experiment {
+                Some(e) => number(e, "startTime")?,
+                None => None,
+            },
             default_stop_time: match experiment {
                 Some(e) => number(e, "stopTime")?,
+                None => None,
+            },
+            default_step_size: match experiment {
+                Some(e) => number(e, "stepSize")?,
                 None => None,
             },
             default_tolerance: match experiment {

@@ -530,6 +530,7 @@ impl Instance {
     pub fn enter_initialization(
         &mut self,
         tolerance: Option<f64>,
+        start: f64,
         stop: Option<f64>,
     ) -> Result<(), FmuError> {
         let h = self.handle;
@@ -544,7 +545,7 @@ impl Instance {
                         h,
                         tol_defined as c_int,
                         tol,
-                        0.0,
+                        start,
                         stop_defined as c_int,
                         stop,
                     )
@@ -559,7 +560,7 @@ impl Instance {
                 Fmi3EnterInit,
                 "",
                 "fmi3EnterInitializationMode",
-                |f| f(h, tol_defined, tol, 0.0, stop_defined, stop)
+                |f| f(h, tol_defined, tol, start, stop_defined, stop)
             ),
         }
     }

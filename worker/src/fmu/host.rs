@@ -726,7 +726,9 @@ fn encode_request(
     }
     w.f64(options.rtol)
         .f64(options.atol)
-        .u64(options.max_steps as u64);
+        .u64(options.max_steps as u64)
+        .f64(options.start_time)
+        .f64(options.communication_step.unwrap_or(0.0));
     w.0
 }
 
@@ -744,6 +746,9 @@ fn decode_request(frame: &[u8]) -> Option<Request> {
         rtol: r.f64()?,
         atol: r.f64()?,
         max_steps: r.u64()? as usize,
+        start_time: r.f64()?,
+        // 0: none (a communication step is positive).
+        communication_step: Some(r.f64()?).filter(|h| *h != 0.0),
     };
     Some((params, grid, outputs, options))
 }
@@ -877,6 +882,8 @@ mod tests {
             rtol: 1e-7,
             atol: 1e-9,
             max_steps: 1234,
+            start_time: 0.5,
+            communication_step: Some(1e-3),
         };
         let (p, g, o, opts) = decode_request(&encode_request(
             &[0.1, f64::NAN],

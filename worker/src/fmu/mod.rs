@@ -318,9 +318,45 @@ impl FmuModel {
     }
 }
 
+impl FmuModel {
+    /// The relative tolerance of the FMU's `DefaultExperiment`, when it gives a usable one.
+    pub fn own_tolerance(&self) -> Option<f64> {
+        self.description
+            .default_tolerance
+            .filter(|t| crate::limits::RTOL.contains(t))
+    }
+}
+
 impl Model for FmuModel {
     fn info(&self) -> &ModelInfo {
         &self.info
+    }
+
+    /// calib's defaults, except what the FMU's `DefaultExperiment` gives: its tolerance (the
+    /// integrator's rtol for Model Exchange, with atol a hundredth of it as `calib simulate
+    /// --rtol` sets; the tolerance the FMU is told for Co-Simulation) and, for
+    /// Co-Simulation, its step size as the communication step.
+    fn default_options(&self) -> SolverOptions {
+        let mut options = SolverOptions::default();
+        if let Some(rtol) = self.own_tolerance() {
+            options.rtol = rtol;
+            options.atol = rtol / 100.0;
+        }
+        if self.interface == Interface::CoSimulation {
+            options.communication_step = self
+                .description
+                .default_step_size
+                .filter(|h| h.is_finite() && *h > 0.0);
+        }
+        options
+    }
+
+    fn tolerance_origin(&self) -> &'static str {
+        if self.own_tolerance().is_some() {
+            "the FMU's default experiment"
+        } else {
+            "calib's default"
+        }
     }
 
     fn simulate(

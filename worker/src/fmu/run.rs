@@ -1,11 +1,18 @@
 //! One simulation of an FMU instance onto a time grid.
 //!
-//! **Co-Simulation**: initialise, then `doStep` from one output time to the next and read the
-//! outputs after each step (the FMU's own solver sets the accuracy).
+//! Both start at [`SolverOptions::start_time`], where the FMU is initialised (with the stop
+//! time, the last output time); outputs asked for before it hold the values at the start.
+//!
+//! **Co-Simulation**: initialise (telling the FMU the tolerance), then `doStep` from one output
+//! time to the next and read the outputs there. With a communication step `h`
+//! ([`SolverOptions::communication_step`]) the steps end on the regular points `start + n·h`
+//! and on every output time: several steps between two outputs when `h` is smaller than
+//! their interval, and never one past an output time (the last one is shortened to land on
+//! it). The FMU's own solver sets the accuracy.
 //!
 //! **Model Exchange**: initialise, run the event iteration, then integrate the FMU's
-//! derivatives with calib's Dormand–Prince ([`crate::ode`]) at the requested tolerance, in
-//! the order of the standard's simulation algorithm (and of FMPy's):
+//! derivatives with calib's Dormand–Prince ([`crate::ode`]) at the requested tolerance (its
+//! clock counts from the start), in the order of the standard's simulation algorithm (and of FMPy's):
 //! - after setting time and states, the FMU computes its derivatives there
 //!   (`fmi*GetDerivatives`) before anything else is read, and the time and states are set
 //!   again before event indicators or outputs are read: some FMUs compute their other
@@ -35,6 +42,7 @@
 use super::description::{Interface, Kind};
 use super::ffi::Instance;
 use super::FmuError;
+use crate::limits;
 use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
 use crate::ode::{self, HybridSystem};
 use std::cell::{Cell, RefCell};
@@ -121,7 +129,8 @@ fn failed(time: f64, e: FmuError) -> SimulationError {
     }
 }
 
-/// Initialise `instance` (reset first unless `fresh`) and simulate it onto `grid`.
+/// Initialise `instance` (reset first unless `fresh`) at `options.start_time` and simulate
+/// it onto `grid`; outputs asked for before the start hold the values at the start.
 pub fn simulate(
     instance: &mut Instance,
     fresh: bool,
@@ -129,20 +138,79 @@ pub fn simulate(
     grid: &[f64],
     options: &SolverOptions,
 ) -> Result<Trajectory, SimulationError> {
+    let start = options.start_time;
     if !fresh {
-        instance.reset().map_err(|e| failed(0.0, e))?;
+        instance.reset().map_err(|e| failed(start, e))?;
     }
-    let stop = grid.last().copied().unwrap_or(0.0);
+    let stop = grid.last().copied().unwrap_or(start).max(start);
+    if let Some(h) = options.communication_step {
+        if !(h > 0.0 && (stop - start) / h <= limits::MAX_COMMUNICATION_STEPS) {
+            return Err(SimulationError::InvalidInput(format!(
+                "a communication step of {h} s over {} s is more than {:e} steps",
+                stop - start,
+                limits::MAX_COMMUNICATION_STEPS
+            )));
+        }
+    }
     let init = |instance: &mut Instance| -> Result<(), FmuError> {
         instance.set_reals(plan.parameter_vrs, plan.parameters)?;
         let tolerance = (plan.interface == Interface::CoSimulation).then_some(options.rtol);
-        instance.enter_initialization(tolerance, Some(stop))?;
+        instance.enter_initialization(tolerance, start, Some(stop))?;
         instance.exit_initialization()
     };
-    init(instance).map_err(|e| failed(0.0, e))?;
+    init(instance).map_err(|e| failed(start, e))?;
     match plan.interface {
-        Interface::CoSimulation => co_simulate(instance, plan, grid),
-        Interface::ModelExchange => integrate(instance, plan, grid, options),
+        Interface::CoSimulation => co_simulate(instance, plan, grid, start, options),
+        Interface::ModelExchange => {
+            // calib's integrator starts at 0: it sees the FMU's time less the start.
+            let shifted: Vec<f64> = grid.iter().map(|t| (t - start).max(0.0)).collect();
+            let mut trajectory =
+                integrate(instance, plan, &shifted, start, options).map_err(|e| later(e, start))?;
+            trajectory.time = grid.to_vec();
+            Ok(trajectory)
+        }
+    }
+}
+
+/// `e`, which happened `start` earlier by the integrator's clock, at the FMU's time.
+fn later(e: SimulationError, start: f64) -> SimulationError {
+    use SimulationError::*;
+    match e {
+        StepLimit { limit, time } => StepLimit {
+            limit,
+            time: time + start,
+        },
+        StepTooSmall { time } => StepTooSmall { time: time + start },
+        Chattering {
+            time,
+            event,
+            events,
+            span,
+        } => Chattering {
+            time: time + start,
+            event,
+            events,
+            span,
+        },
+        Diverged { time } => Diverged { time: time + start },
+        // Failures carry the FMU's time already.
+        other => other,
+    }
+}
+
+/// The next communication point after `t` towards the output time `target`: the next point
+/// of the regular grid `start + n·h` (none with no `step`), or `target` when that is no
+/// earlier (or within a billionth of a step of it).
+fn next_communication_point(t: f64, target: f64, start: f64, step: Option<f64>) -> f64 {
+    let Some(h) = step else {
+        return target;
+    };
+    let n = ((t - start) / h + 1e-9).floor() + 1.0;
+    let regular = start + n * h;
+    if regular >= target - 1e-9 * h {
+        target
+    } else {
+        regular
     }
 }
 
@@ -150,22 +218,28 @@ fn co_simulate(
     instance: &mut Instance,
     plan: &Plan,
     grid: &[f64],
+    start: f64,
+    options: &SolverOptions,
 ) -> Result<Trajectory, SimulationError> {
     let n_out = plan.outputs.len();
     let mut values = vec![Vec::with_capacity(grid.len()); n_out];
     let mut sample = vec![0.0; n_out];
-    let mut t = 0.0;
+    let mut t = start;
+    plan.outputs
+        .read(instance, &mut sample)
+        .map_err(|e| failed(t, e))?;
     let mut terminated = false;
     let mut stats = SolverStats::default();
     for &target in grid {
-        if target > t && !terminated {
-            terminated = instance.do_step(t, target - t).map_err(|e| failed(t, e))?;
+        let mut stepped = false;
+        while target > t && !terminated {
+            let next = next_communication_point(t, target, start, options.communication_step);
+            terminated = instance.do_step(t, next - t).map_err(|e| failed(t, e))?;
             stats.accepted_steps += 1;
-            t = target;
-            plan.outputs
-                .read(instance, &mut sample)
-                .map_err(|e| failed(t, e))?;
-        } else if stats.accepted_steps == 0 && values.first().is_none_or(|v| v.is_empty()) {
+            t = next;
+            stepped = true;
+        }
+        if stepped {
             plan.outputs
                 .read(instance, &mut sample)
                 .map_err(|e| failed(t, e))?;
@@ -179,6 +253,39 @@ fn co_simulate(
         values,
         stats,
     })
+}
+
+/// A system whose time runs `start` ahead of the integrator's.
+struct Shifted<'a, S> {
+    inner: &'a mut S,
+    start: f64,
+}
+
+impl<S: HybridSystem> HybridSystem for Shifted<'_, S> {
+    fn dim(&self) -> usize {
+        self.inner.dim()
+    }
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        self.inner.rhs(t + self.start, y, dy)
+    }
+    fn event_count(&self) -> usize {
+        self.inner.event_count()
+    }
+    fn events(&self, t: f64, y: &[f64], g: &mut [f64]) {
+        self.inner.events(t + self.start, y, g)
+    }
+    fn on_event(&mut self, t: f64, y: &mut [f64], event: usize) {
+        self.inner.on_event(t + self.start, y, event)
+    }
+    fn event_name(&self, event: usize) -> String {
+        self.inner.event_name(event)
+    }
+    fn on_chattering(&mut self, t: f64, y: &mut [f64], event: usize) -> bool {
+        self.inner.on_chattering(t + self.start, y, event)
+    }
+    fn step_completed(&mut self, t: f64, y: &[f64]) -> bool {
+        self.inner.step_completed(t + self.start, y)
+    }
 }
 
 /// Where the FMU's continuous-time variables stand: the time and states set last, and
@@ -458,15 +565,17 @@ impl HybridSystem for Exchange<'_> {
     }
 }
 
+/// Integrate from `start` onto `grid`, whose times are counted from `start`.
 fn integrate(
     instance: &mut Instance,
     plan: &Plan,
     grid: &[f64],
+    start: f64,
     options: &SolverOptions,
 ) -> Result<Trajectory, SimulationError> {
     let nx = plan.states;
     let n_out = plan.outputs.len();
-    let update = event_iteration(instance).map_err(|e| failed(0.0, e))?;
+    let update = event_iteration(instance).map_err(|e| failed(start, e))?;
     let held = RefCell::new(None);
     let mut y0 = vec![0.0; nx.max(1)];
     if update.terminate {
@@ -474,16 +583,16 @@ fn integrate(
         let mut values = vec![0.0; n_out];
         plan.outputs
             .read(instance, &mut values)
-            .map_err(|e| failed(0.0, e))?;
+            .map_err(|e| failed(start, e))?;
         *held.borrow_mut() = Some(values);
     } else {
         instance
             .enter_continuous_time_mode()
-            .map_err(|e| failed(0.0, e))?;
+            .map_err(|e| failed(start, e))?;
         if nx > 0 {
             instance
                 .get_states(&mut y0[..nx])
-                .map_err(|e| failed(0.0, e))?;
+                .map_err(|e| failed(start, e))?;
         }
     }
     let completed_step = instance.has_completed_integrator_step();
@@ -505,12 +614,17 @@ fn integrate(
     };
     let mut values = vec![vec![0.0; grid.len()]; n_out];
     let mut sample = vec![0.0; n_out];
+    let mut system = Shifted {
+        inner: &mut system,
+        start,
+    };
     let stats = ode::integrate(&mut system, &y0, grid, options, |i, y| {
         if host.failed() {
             return;
         }
-        if let Err(e) = host.read(grid[i], y, &mut sample) {
-            host.fail(grid[i], e);
+        let t = grid[i] + start;
+        if let Err(e) = host.read(t, y, &mut sample) {
+            host.fail(t, e);
             return;
         }
         for (series, v) in values.iter_mut().zip(&sample) {

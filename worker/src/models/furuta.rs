@@ -570,6 +570,7 @@ mod tests {
             rtol: 1e-12,
             atol: 1e-14,
             max_steps: 10_000_000,
+            ..SolverOptions::default()
         };
         let a = model.simulate(&p, &t, &[0, 1], &calib).unwrap();
         let b = model.simulate(&p, &t, &[0, 1], &tight).unwrap();

@@ -341,6 +341,7 @@ mod tests {
             rtol: 1e-10,
             atol: 1e-12,
             max_steps: 100_000,
+            ..SolverOptions::default()
         };
         let mut worst: f64 = 0.0;
         integrate(&mut Harmonic, &[1.0, 0.0], &grid, &opts, |i, y| {
@@ -360,6 +361,7 @@ mod tests {
                 rtol,
                 atol: rtol * 1e-2,
                 max_steps: 100_000,
+                ..SolverOptions::default()
             };
             let mut e = 0.0;
             integrate(&mut Harmonic, &[1.0, 0.0], &grid, &opts, |_, y| {

@@ -84,6 +84,8 @@ fn solver_options(
         rtol: o.rtol,
         atol: o.atol,
         max_steps: o.max_steps,
+        start_time: o.start_time,
+        communication_step: o.communication_step,
     });
     validate::solver_options(model, overrides)
         .map_err(|(option, e)| at(&format!("solver.{option}"), e))
@@ -335,6 +337,7 @@ mod tests {
             rtol: Some(1e-4),
             atol: Some(1e-6),
             max_steps: Some(10),
+            ..Default::default()
         };
         let s = Simulation::try_from(simulate_request("hx_lowfi", Some(given))).unwrap();
         assert_eq!(
@@ -390,6 +393,7 @@ mod tests {
                 rtol: Some(1e-8),
                 atol: Some(1e-10),
                 max_steps: Some(20_000_000),
+                ..Default::default()
             }),
         );
         let e = Simulation::try_from(r).err().unwrap();

@@ -14,7 +14,9 @@ mod values;
 
 pub use grid::{output_grid, stop_time};
 pub use names::{effect, model, output, parameter};
-pub use solver::{atol, max_steps, rtol, solver_options, SolverOverrides};
+pub use solver::{
+    atol, communication_step, max_steps, rtol, solver_options, start_time, SolverOverrides,
+};
 pub use values::{bounds, parameter_value};
 
 /// A value or name refused, with the reason.

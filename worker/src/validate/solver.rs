@@ -40,16 +40,53 @@ pub fn max_steps(value: u64) -> Result<usize> {
     }
 }
 
+/// A start time: finite, in [0, [`limits::MAX_STOP_TIME`]]; other than 0 only for an FMU.
+pub fn start_time(model: &dyn Model, value: f64) -> Result<f64> {
+    if !(0.0..=limits::MAX_STOP_TIME).contains(&value) {
+        return Err(Invalid::new(format!(
+            "{value} s is not a time in [0, {:e}] s",
+            limits::MAX_STOP_TIME
+        )));
+    }
+    if value != 0.0 && crate::fmu::interface_in_name(&model.info().name).is_none() {
+        return Err(Invalid::new(format!(
+            "{value} s: the hosted model `{}` starts at 0 s; a start time applies to an FMU",
+            model.info().name
+        )));
+    }
+    Ok(value)
+}
+
+/// A communication step: positive and finite, and only for a Co-Simulation FMU.
+pub fn communication_step(model: &dyn Model, value: f64) -> Result<f64> {
+    if !(value > 0.0 && value.is_finite()) {
+        return Err(Invalid::new(format!("{value} s is not a positive time")));
+    }
+    if crate::fmu::interface_in_name(&model.info().name)
+        != Some(crate::fmu::Interface::CoSimulation)
+    {
+        return Err(Invalid::new(format!(
+            "`{}` is not run through Co-Simulation: a communication step applies to a \
+             Co-Simulation FMU",
+            model.info().name
+        )));
+    }
+    Ok(value)
+}
+
 /// Options a request sets; those it leaves out keep the model's own.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SolverOverrides {
     pub rtol: Option<f64>,
     pub atol: Option<f64>,
     pub max_steps: Option<u64>,
+    pub start_time: Option<f64>,
+    pub communication_step: Option<f64>,
 }
 
 /// The model's calibration options ([`Model::default_options`]) with `overrides`, each
-/// checked; the error names the option (`rtol`, `atol` or `max_steps`).
+/// checked; the error names the option (`rtol`, `atol`, `max_steps`, `start_time` or
+/// `communication_step`).
 pub fn solver_options(
     model: &dyn Model,
     overrides: SolverOverrides,
@@ -63,6 +100,13 @@ pub fn solver_options(
     }
     if let Some(v) = overrides.max_steps {
         options.max_steps = max_steps(v).map_err(|e| ("max_steps", e))?;
+    }
+    if let Some(v) = overrides.start_time {
+        options.start_time = start_time(model, v).map_err(|e| ("start_time", e))?;
+    }
+    if let Some(v) = overrides.communication_step {
+        options.communication_step =
+            Some(communication_step(model, v).map_err(|e| ("communication_step", e))?);
     }
     Ok(options)
 }
@@ -91,6 +135,7 @@ mod tests {
             rtol,
             atol,
             max_steps,
+            ..Default::default()
         };
         let o = solver_options(m, with(Some(1e-6), None, Some(5))).unwrap();
         assert_eq!((o.rtol, o.atol, o.max_steps), (1e-6, 1e-10, 5));

@@ -423,6 +423,7 @@ fn deviation_from_reference(model: &HxModel, params: &[f64]) -> Vec<f64> {
                 rtol: 1e-9,
                 atol: 1e-11,
                 max_steps: 1_000_000,
+                ..SolverOptions::default()
             },
         )
         .expect("reference simulation");

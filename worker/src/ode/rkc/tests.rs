@@ -65,6 +65,7 @@ fn heat_run(rtol: f64, rkc: bool) -> (f64, usize, SolverStats) {
         rtol,
         atol: rtol,
         max_steps: 100_000,
+        ..SolverOptions::default()
     };
     let mut states = vec![Vec::new(); grid.len()];
     let record = |i: usize, y: &[f64]| states[i] = y.to_vec();
@@ -138,6 +139,7 @@ fn events_are_located_on_the_hermite_interpolant() {
         rtol: 1e-8,
         atol: 1e-10,
         max_steps: 100_000,
+        ..SolverOptions::default()
     };
     let grid = [0.5, 1.0, 2.0];
     let mut out = [f64::NAN; 3];
