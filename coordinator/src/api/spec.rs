@@ -39,6 +39,12 @@ pub fn campaign_file_on(
     if c.stop_time != 0.0 {
         model.insert("stop_time".into(), c.stop_time.into());
     }
+    if c.start_time != 0.0 {
+        model.insert("start_time".into(), c.start_time.into());
+    }
+    if let Some(step) = c.step {
+        model.insert("step".into(), step.into());
+    }
     if !c.model_parameters.is_empty() {
         let fixed: Table = c
             .model_parameters
@@ -224,6 +230,8 @@ pub fn campaign_message(text: &str, dataset: &str) -> Result<pb::Campaign, Strin
         fmu_id: String::new(),
         fmu_interface: string(&model, "interface"),
         stop_time: float(&model, "stop_time").unwrap_or_default(),
+        start_time: float(&model, "start_time").unwrap_or_default(),
+        step: float(&model, "step"),
         model_parameters: table(model.get("parameters"))
             .iter()
             .filter_map(|(k, v)| {
@@ -268,4 +276,41 @@ pub fn campaign_message(text: &str, dataset: &str) -> Result<pb::Campaign, Strin
             }
         }),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An FMU campaign's start time and communication step travel through the message and
+    /// back into the file the coordinator loads.
+    #[test]
+    fn an_fmus_start_time_and_step_survive_the_message() {
+        let text = r#"
+[model]
+fmu = "VanDerPol.fmu"
+interface = "co-simulation"
+stop_time = 5.0
+start_time = 2.0
+step = 0.01
+"#;
+        let message = campaign_message(text, "d").unwrap();
+        assert_eq!((message.start_time, message.step), (2.0, Some(0.01)));
+        let file = campaign_file_on(
+            &message,
+            Path::new("/data/x.csv"),
+            "time",
+            Some(Path::new("/fmus/v.fmu")),
+        )
+        .unwrap();
+        let back: Table = file.parse().unwrap();
+        let model = back["model"].as_table().unwrap();
+        assert_eq!(model["start_time"].as_float(), Some(2.0));
+        assert_eq!(model["step"].as_float(), Some(0.01));
+        let plain = campaign_message("[model]\nname = \"furuta\"\n", "d").unwrap();
+        let file = campaign_file(&plain, Path::new("/data/x.csv"), "time").unwrap();
+        let back: Table = file.parse().unwrap();
+        let model = back["model"].as_table().unwrap();
+        assert!(!model.contains_key("start_time") && !model.contains_key("step"));
+    }
 }
