@@ -38,6 +38,7 @@ fn options() -> SolverOptions {
         rtol: ME_RTOL,
         atol: ME_RTOL * 1e-2,
         max_steps: 2_000_000,
+        ..SolverOptions::default()
     }
 }
 
