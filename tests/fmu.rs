@@ -110,70 +110,15 @@ fn record(
     noise: &[&str],
     outputs: &str,
 ) -> PathBuf {
-    record_to(
+    fmu_record(
         fmu,
         &dir.join("record.csv"),
-        set,
+        &[set],
         stop,
         step,
         noise,
         outputs,
     )
-}
-
-/// [`record`] into `csv`.
-fn record_to(
-    fmu: &Path,
-    csv: &Path,
-    set: &str,
-    stop: &str,
-    step: &str,
-    noise: &[&str],
-    outputs: &str,
-) -> PathBuf {
-    let csv = csv.to_path_buf();
-    let mut args = vec![
-        "simulate",
-        fmu.to_str().unwrap(),
-        "--set",
-        set,
-        "--stop",
-        stop,
-        "--step",
-        step,
-        "--outputs",
-        outputs,
-        "--seed",
-        "7",
-        "--out",
-        csv.to_str().unwrap(),
-    ];
-    for n in noise {
-        args.extend(["--noise", n]);
-    }
-    ok(&calib(&args));
-    csv
-}
-
-/// `examples/vanderpol.toml` in `dir`, with the FMU and the record its comments make.
-fn van_der_pol_example(fmu: &Path, dir: &Path) -> PathBuf {
-    std::fs::create_dir_all(dir.join("fmus/fmi2")).unwrap();
-    std::fs::create_dir_all(dir.join("data")).unwrap();
-    let copy = dir.join("fmus/fmi2/VanDerPol.fmu");
-    std::fs::copy(fmu, &copy).unwrap();
-    let noise = ["x0=0.02", "x1=0.02"];
-    record_to(
-        &copy,
-        &dir.join("data/vanderpol.csv"),
-        "mu=1.7",
-        "20",
-        "0.05",
-        &noise,
-        "x0,x1",
-    );
-    let campaign = dir.join("vanderpol.toml");
-    std::fs::copy(repo().join("examples/vanderpol.toml"), &campaign).unwrap();
-    campaign
 }
 
 #[test]
@@ -520,28 +465,11 @@ fn a_diagnosis_of_the_van_der_pol_fmu_finds_an_offset_on_its_output() {
     let dir = tempfile::tempdir().unwrap();
     let campaign = van_der_pol_example(&path, dir.path());
     // The record again, its x0 read through a sensor 0.3 off.
-    ok(&calib(&[
-        "simulate",
-        path.to_str().unwrap(),
-        "--set",
-        "mu=1.7",
-        "--set",
-        "offset(x0)=0.3",
-        "--stop",
-        "20",
-        "--step",
-        "0.05",
-        "--outputs",
-        "x0,x1",
-        "--noise",
-        "x0=0.02",
-        "--noise",
-        "x1=0.02",
-        "--seed",
-        "7",
-        "--out",
-        dir.path().join("data/vanderpol.csv").to_str().unwrap(),
-    ]));
+    van_der_pol_record(
+        &path,
+        &dir.path().join("data/vanderpol.csv"),
+        &["offset(x0)=0.3"],
+    );
     let mut text = std::fs::read_to_string(&campaign).unwrap();
     text.push_str(
         "\n[diagnosis]\nrefit = 1\ncandidates = [\"offset(x0)\", \"gain(x0)\", \"lag(x0)\"]\n",

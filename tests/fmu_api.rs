@@ -94,43 +94,6 @@ impl Drop for Process {
     }
 }
 
-/// `examples/vanderpol.toml` in `dir`, with the FMU and the noisy record (mu = 1.7) its
-/// comments make.
-fn van_der_pol_example(fmu: &Path, dir: &Path) -> PathBuf {
-    std::fs::create_dir_all(dir.join("fmus/fmi2")).unwrap();
-    std::fs::create_dir_all(dir.join("data")).unwrap();
-    let copy = dir.join("fmus/fmi2/VanDerPol.fmu");
-    std::fs::copy(fmu, &copy).unwrap();
-    let out = calib(&[
-        "simulate",
-        copy.to_str().unwrap(),
-        "--set",
-        "mu=1.7",
-        "--stop",
-        "20",
-        "--step",
-        "0.05",
-        "--outputs",
-        "x0,x1",
-        "--noise",
-        "x0=0.02",
-        "--noise",
-        "x1=0.02",
-        "--seed",
-        "7",
-        "--out",
-        dir.join("data/vanderpol.csv").to_str().unwrap(),
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let campaign = dir.join("vanderpol.toml");
-    std::fs::copy(repo().join("examples/vanderpol.toml"), &campaign).unwrap();
-    campaign
-}
-
 fn submit(campaign: &Path, url: &str, out: &Path) -> (serde_json::Value, String) {
     let run = calib(&[
         "submit",

@@ -485,31 +485,7 @@ fn an_fmu_dropped_or_picked_on_the_model_tab_is_simulated_and_calibrated() {
     // The record: VanDerPol at mu = 1.7, with noise, made by `calib simulate`.
     const TRUE_MU: f64 = 1.7;
     let record = dir.path().join("vanderpol.csv");
-    let made = common::calib(&[
-        "simulate",
-        fmu.to_str().unwrap(),
-        "--set",
-        &format!("mu={TRUE_MU}"),
-        "--stop",
-        "20",
-        "--step",
-        "0.05",
-        "--outputs",
-        "x0,x1",
-        "--noise",
-        "x0=0.02",
-        "--noise",
-        "x1=0.02",
-        "--seed",
-        "7",
-        "--out",
-        record.to_str().unwrap(),
-    ]);
-    assert!(
-        made.status.success(),
-        "{}",
-        String::from_utf8_lossy(&made.stderr)
-    );
+    common::van_der_pol_record(&fmu, &record, &[]);
     let ui = Ui::start(&dir.path().join("db"));
     let dropped = fmus.join("fmi2/BouncingBall.fmu");
     let page = drive(

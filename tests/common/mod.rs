@@ -222,3 +222,71 @@ pub fn watch_progress(
     });
     (reported, reader)
 }
+
+/// A record of `fmu` made by `calib simulate`: `set` (each `name=value`), from 0 to `stop`
+/// every `step`, the `outputs`, Gaussian noise `noise` (each `output=sigma`, seed 7), written
+/// to `csv`.
+pub fn fmu_record(
+    fmu: &Path,
+    csv: &Path,
+    set: &[&str],
+    stop: &str,
+    step: &str,
+    noise: &[&str],
+    outputs: &str,
+) -> PathBuf {
+    let mut args = vec!["simulate", fmu.to_str().unwrap()];
+    for s in set {
+        args.extend(["--set", s]);
+    }
+    args.extend([
+        "--stop",
+        stop,
+        "--step",
+        step,
+        "--outputs",
+        outputs,
+        "--seed",
+        "7",
+    ]);
+    for n in noise {
+        args.extend(["--noise", n]);
+    }
+    args.extend(["--out", csv.to_str().unwrap()]);
+    let out = calib(&args);
+    assert!(
+        out.status.success(),
+        "calib {}: {}",
+        args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    csv.to_path_buf()
+}
+
+/// The Reference FMU VanDerPol's record of `examples/vanderpol.toml`: mu = 1.7 and `set`,
+/// 20 s every 0.05 s, x0 and x1 with 0.02 of noise, written to `csv`.
+pub fn van_der_pol_record(fmu: &Path, csv: &Path, set: &[&str]) -> PathBuf {
+    let set: Vec<&str> = ["mu=1.7"].into_iter().chain(set.iter().copied()).collect();
+    fmu_record(
+        fmu,
+        csv,
+        &set,
+        "20",
+        "0.05",
+        &["x0=0.02", "x1=0.02"],
+        "x0,x1",
+    )
+}
+
+/// `examples/vanderpol.toml` in `dir`, with the FMU `fmu` (VanDerPol) and the noisy record
+/// (mu = 1.7) its comments make.
+pub fn van_der_pol_example(fmu: &Path, dir: &Path) -> PathBuf {
+    std::fs::create_dir_all(dir.join("fmus/fmi2")).unwrap();
+    std::fs::create_dir_all(dir.join("data")).unwrap();
+    let copy = dir.join("fmus/fmi2/VanDerPol.fmu");
+    std::fs::copy(fmu, &copy).unwrap();
+    van_der_pol_record(&copy, &dir.join("data/vanderpol.csv"), &[]);
+    let campaign = dir.join("vanderpol.toml");
+    std::fs::copy(repo().join("examples/vanderpol.toml"), &campaign).unwrap();
+    campaign
+}
