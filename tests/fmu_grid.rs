@@ -340,6 +340,11 @@ stop = 10.0
     let fit = &result["best"]["parameters"];
     let speed = fit["speedRamp.duration"].as_f64().unwrap();
     let valve = fit["valveRamp.duration"].as_f64().unwrap();
+    println!(
+        "PumpAndValve at its own tolerance: speedRamp.duration {speed:.7} (0.432), \
+         valveRamp.duration {valve:.7} (2.5423), {} evaluations",
+        result["evaluations"]
+    );
     assert!(
         (speed - 0.432).abs() < 1e-4 && (valve - 2.5423).abs() < 1e-4,
         "speedRamp.duration = {speed}, valveRamp.duration = {valve}"
