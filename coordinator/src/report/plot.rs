@@ -140,10 +140,17 @@ pub fn line_plot_svg(
     Ok(text)
 }
 
-/// A uniform grid over `[0, stop]`.
-pub fn uniform_grid(stop: f64, points: usize) -> Vec<f64> {
+/// `points` evenly spaced times over `[start, stop]`.
+pub fn uniform_grid(start: f64, stop: f64, points: usize) -> Vec<f64> {
     (0..points)
-        .map(|i| stop * i as f64 / (points - 1) as f64)
+        .map(|i| start + (stop - start) * i as f64 / (points - 1) as f64)
+        .collect()
+}
+
+/// The indices of the samples of `time` within `[start, stop]`, the span a simulation covers.
+fn simulated_span(time: &[f64], start: f64, stop: f64) -> Vec<usize> {
+    (0..time.len())
+        .filter(|&i| (start..=stop).contains(&time[i]))
         .collect()
 }
 
@@ -151,7 +158,9 @@ pub fn uniform_grid(stop: f64, points: usize) -> Vec<f64> {
 pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     let campaign = &c.campaign;
     let info = campaign.model.info();
-    let grid = uniform_grid(campaign.stop_time, CURVE_POINTS);
+    // The curves cover what is simulated: from the start time (an FMU's may be past 0).
+    let start = campaign.solver.start_time;
+    let grid = uniform_grid(start, campaign.stop_time, CURVE_POINTS);
     let outputs: Vec<usize> = campaign.outputs.iter().map(|o| o.model_index).collect();
     let simulate = |free: &[f64]| {
         campaign
@@ -167,16 +176,15 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     };
     let nominal = simulate(&campaign.nominal());
     let calibrated = simulate(&c.best_run().point);
-    let measured_time: Vec<f64> = c
-        .measurement
-        .time
-        .iter()
-        .copied()
-        .filter(|t| *t <= campaign.stop_time)
-        .collect();
+    let shown = simulated_span(&c.measurement.time, start, campaign.stop_time);
+    let measured_time: Vec<f64> = shown.iter().map(|&i| c.measurement.time[i]).collect();
     let mut written = Vec::new();
     for (k, o) in campaign.outputs.iter().enumerate() {
-        let measured = &c.measurement.column(&o.measured).unwrap_or(&[])[..measured_time.len()];
+        let column = c.measurement.column(&o.measured).unwrap_or(&[]);
+        let measured: Vec<f64> = shown
+            .iter()
+            .filter_map(|&i| column.get(i).copied())
+            .collect();
         let unit = &info.outputs[o.model_index].unit;
         let path = dir.join(format!("{}.svg", sanitize(&o.model)));
         time_plot(
@@ -187,7 +195,7 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
                 Series {
                     label: "measured",
                     time: &measured_time,
-                    values: measured,
+                    values: &measured,
                     color: RGBColor(120, 120, 120),
                     width: 1,
                 },
@@ -343,6 +351,15 @@ pub fn sanitize(name: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn fit_curves_cover_the_simulated_span_from_its_start() {
+        assert_eq!(uniform_grid(2.0, 6.0, 5), [2.0, 3.0, 4.0, 5.0, 6.0]);
+        assert_eq!(uniform_grid(0.0, 1.0, 3), [0.0, 0.5, 1.0]);
+        let time = [0.0, 1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(simulated_span(&time, 2.0, 4.0), [2, 3, 4]);
+        assert_eq!(simulated_span(&time, 0.0, 10.0), [0, 1, 2, 3, 4, 5]);
+    }
 
     #[test]
     fn waterfall_values_are_sorted_and_positive() {
