@@ -188,31 +188,7 @@ max_evaluations = 200
 
 /// The misbehaving FMU of `tests/crash_fmu/`, built with the C compiler.
 fn crash_fmu(dir: &Path) -> Option<PathBuf> {
-    let src = repo().join("tests/crash_fmu");
-    let root = dir.join("crash");
-    std::fs::create_dir_all(root.join("binaries/linux64")).unwrap();
-    std::fs::copy(src.join("crash.xml"), root.join("modelDescription.xml")).unwrap();
-    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-    let built = std::process::Command::new(&cc)
-        .args(["-shared", "-fPIC", "-O1", "-o"])
-        .arg(root.join("binaries/linux64/Crash.so"))
-        .arg(src.join("crash.c"))
-        .status();
-    if !built.is_ok_and(|s| s.success()) {
-        skip(&format!("no C compiler (`{cc}`) to build the crashing FMU"));
-        return None;
-    }
-    let fmu = dir.join("Crash.fmu");
-    let zipped = std::process::Command::new("python3")
-        .args(["-c", "import os,sys,zipfile\nz=zipfile.ZipFile(sys.argv[2],'w')\nfor d,_,fs in os.walk(sys.argv[1]):\n  for f in fs:\n    p=os.path.join(d,f); z.write(p, os.path.relpath(p, sys.argv[1]))\nz.close()"])
-        .arg(&root)
-        .arg(&fmu)
-        .status();
-    if !zipped.is_ok_and(|s| s.success()) {
-        skip("no python3 to zip the crashing FMU");
-        return None;
-    }
-    Some(fmu)
+    c_test_fmu("crash_fmu", "crash", "Crash", &[], dir)
 }
 
 #[test]

@@ -44,33 +44,12 @@ fn escape_fmu() -> Option<&'static Escape> {
             let outside = dir.path().join("outside.txt");
             let secret = dir.path().join("secret.txt");
             std::fs::write(&secret, "not for FMUs\n").unwrap();
-            let src = repo().join("tests/escaping_fmu");
-            let root = dir.path().join("escape");
-            std::fs::create_dir_all(root.join("binaries/linux64")).unwrap();
-            std::fs::copy(src.join("escape.xml"), root.join("modelDescription.xml")).unwrap();
-            let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-            let built = std::process::Command::new(&cc)
-                .args(["-shared", "-fPIC", "-O1", "-o"])
-                .arg(root.join("binaries/linux64/Escape.so"))
-                .arg(format!("-DMARKER=\"{marker}\""))
-                .arg(format!("-DOUTSIDE=\"{}\"", outside.display()))
-                .arg(format!("-DSECRET=\"{}\"", secret.display()))
-                .arg(src.join("escape.c"))
-                .status();
-            if !built.is_ok_and(|s| s.success()) {
-                skip(&format!("no C compiler (`{cc}`) to build the escaping FMU"));
-                return None;
-            }
-            let path = dir.path().join("Escape.fmu");
-            let zipped = std::process::Command::new("python3")
-                .args(["-c", "import os,sys,zipfile\nz=zipfile.ZipFile(sys.argv[2],'w')\nfor d,_,fs in os.walk(sys.argv[1]):\n  for f in fs:\n    p=os.path.join(d,f); z.write(p, os.path.relpath(p, sys.argv[1]))\nz.close()"])
-                .arg(&root)
-                .arg(&path)
-                .status();
-            if !zipped.is_ok_and(|s| s.success()) {
-                skip("no python3 to zip the escaping FMU");
-                return None;
-            }
+            let defines = [
+                format!("-DMARKER=\"{marker}\""),
+                format!("-DOUTSIDE=\"{}\"", outside.display()),
+                format!("-DSECRET=\"{}\"", secret.display()),
+            ];
+            let path = c_test_fmu("escaping_fmu", "escape", "Escape", &defines, dir.path())?;
             Some(Escape {
                 path,
                 marker,

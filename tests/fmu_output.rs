@@ -18,31 +18,13 @@ fn chatty_fmu() -> Option<&'static Path> {
     BUILT
         .get_or_init(|| {
             let dir = tempfile::tempdir().unwrap();
-            let src = repo().join("tests/chatty_fmu");
-            let root = dir.path().join("chatty");
-            std::fs::create_dir_all(root.join("binaries/linux64")).unwrap();
-            std::fs::copy(src.join("chatty.xml"), root.join("modelDescription.xml")).unwrap();
-            let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
-            let built = std::process::Command::new(&cc)
-                .args(["-shared", "-fPIC", "-O1", "-o"])
-                .arg(root.join("binaries/linux64/Chatty.so"))
-                .arg(src.join("chatty.c"))
-                .arg("-lm")
-                .status();
-            if !built.is_ok_and(|s| s.success()) {
-                skip(&format!("no C compiler (`{cc}`) to build the chatty FMU"));
-                return None;
-            }
-            let path = dir.path().join("Chatty.fmu");
-            let zipped = std::process::Command::new("python3")
-                .args(["-c", "import os,sys,zipfile\nz=zipfile.ZipFile(sys.argv[2],'w')\nfor d,_,fs in os.walk(sys.argv[1]):\n  for f in fs:\n    p=os.path.join(d,f); z.write(p, os.path.relpath(p, sys.argv[1]))\nz.close()"])
-                .arg(&root)
-                .arg(&path)
-                .status();
-            if !zipped.is_ok_and(|s| s.success()) {
-                skip("no python3 to zip the chatty FMU");
-                return None;
-            }
+            let path = c_test_fmu(
+                "chatty_fmu",
+                "chatty",
+                "Chatty",
+                &["-lm".into()],
+                dir.path(),
+            )?;
             Some((path, dir))
         })
         .as_ref()

@@ -290,3 +290,46 @@ pub fn van_der_pol_example(fmu: &Path, dir: &Path) -> PathBuf {
     std::fs::copy(repo().join("examples/vanderpol.toml"), &campaign).unwrap();
     campaign
 }
+
+/// The test FMU of `tests/<folder>/` (`<stem>.c` and `<stem>.xml`), compiled by the C
+/// compiler (`$CC`, else `cc`) into `binaries/linux64/<identifier>.so` with `cc_args` after
+/// the source, and zipped with python3 into `dir/<identifier>.fmu`. Without a compiler or
+/// python3 the test skips (fails under continuous integration) and gets `None`.
+pub fn c_test_fmu(
+    folder: &str,
+    stem: &str,
+    identifier: &str,
+    cc_args: &[String],
+    dir: &Path,
+) -> Option<PathBuf> {
+    let src = repo().join("tests").join(folder);
+    let root = dir.join(stem);
+    std::fs::create_dir_all(root.join("binaries/linux64")).unwrap();
+    std::fs::copy(
+        src.join(format!("{stem}.xml")),
+        root.join("modelDescription.xml"),
+    )
+    .unwrap();
+    let cc = std::env::var("CC").unwrap_or_else(|_| "cc".into());
+    let built = std::process::Command::new(&cc)
+        .args(["-shared", "-fPIC", "-O1", "-o"])
+        .arg(root.join(format!("binaries/linux64/{identifier}.so")))
+        .arg(src.join(format!("{stem}.c")))
+        .args(cc_args)
+        .status();
+    if !built.is_ok_and(|s| s.success()) {
+        skip(&format!("no C compiler (`{cc}`) to build tests/{folder}"));
+        return None;
+    }
+    let fmu = dir.join(format!("{identifier}.fmu"));
+    let zipped = std::process::Command::new("python3")
+        .args(["-c", "import os,sys,zipfile\nz=zipfile.ZipFile(sys.argv[2],'w')\nfor d,_,fs in os.walk(sys.argv[1]):\n  for f in fs:\n    p=os.path.join(d,f); z.write(p, os.path.relpath(p, sys.argv[1]))\nz.close()"])
+        .arg(&root)
+        .arg(&fmu)
+        .status();
+    if !zipped.is_ok_and(|s| s.success()) {
+        skip(&format!("no python3 to zip tests/{folder}"));
+        return None;
+    }
+    Some(fmu)
+}
