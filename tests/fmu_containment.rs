@@ -352,6 +352,7 @@ fn a_process_an_fmu_sends_away_ends_with_a_killed_worker() {
                     outputs: vec!["y".into()],
                     solver: None,
                     fmu_hash: uploaded.fmu_hash,
+                    inputs: vec![],
                 })
                 .await
                 .unwrap()

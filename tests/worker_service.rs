@@ -43,6 +43,7 @@ fn simulate_request() -> proto::SimulateRequest {
         outputs: vec!["armJoint.phi".into()],
         solver: None,
         fmu_hash: Vec::new(),
+        inputs: vec![],
     }
 }
 
@@ -50,11 +51,12 @@ fn simulate_request() -> proto::SimulateRequest {
 fn measurement() -> (proto::Measurement, Vec<u8>) {
     let times = grid(1.0, 0.1);
     let values = vec![0.0; times.len()];
-    let hash = calib_worker::scoring::measurement_hash(&times, std::slice::from_ref(&values));
+    let hash = calib_worker::scoring::measurement_hash(&times, std::slice::from_ref(&values), &[]);
     (
         proto::Measurement {
             times,
             columns: vec![proto::Column { values }],
+            inputs: vec![],
         },
         hash.to_vec(),
     )
@@ -414,6 +416,7 @@ fn a_flood_beyond_the_queue_is_refused() {
             outputs: Vec::new(),
             solver: None,
             fmu_hash: Vec::new(),
+            inputs: vec![],
         };
         // Requests the worker has taken in: done, running or waiting.
         let taken_in = |c: &SimulatorClient<Channel>| {
@@ -534,6 +537,7 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 outputs: Vec::new(),
                 solver: None,
                 fmu_hash: Vec::new(),
+                inputs: vec![],
             };
             let untouched = c
                 .simulate(described(Vec::new()))

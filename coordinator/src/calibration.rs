@@ -49,13 +49,19 @@ impl Calibration {
     }
 }
 
-/// Load the measured columns a campaign maps.
+/// Load the measured columns a campaign maps: those compared with outputs, then those
+/// driving inputs.
 pub fn load_measurement(campaign: &Campaign) -> Result<Measurement> {
-    let columns: Vec<&str> = campaign
+    let mut columns: Vec<&str> = campaign
         .outputs
         .iter()
         .map(|o| o.measured.as_str())
         .collect();
+    for i in &campaign.inputs {
+        if !columns.contains(&i.measured.as_str()) {
+            columns.push(&i.measured);
+        }
+    }
     Ok(Measurement::load(
         &campaign.measurement_file,
         &campaign.time_column,

@@ -12,6 +12,7 @@
 use crate::campaign::{Campaign, CampaignError, OutputScale};
 use crate::measurement::Measurement;
 use calib_worker::content_hash::ContentHasher;
+use calib_worker::inputs::{InputSignal, Inputs};
 use calib_worker::limits::MAX_TIMES;
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
@@ -35,6 +36,8 @@ pub struct Objective {
     /// Measured series on `grid`, one per output.
     pub measured: Vec<Vec<f64>>,
     pub solver: SolverOptions,
+    /// Measured signals driving the model's inputs, over the simulated span.
+    pub inputs: Inputs,
     measurement_hash: [u8; 32],
     fingerprint: [u8; 32],
 }
@@ -124,6 +127,7 @@ impl Objective {
                 }
             });
         }
+        let inputs = driving_inputs(campaign, measurement, campaign.solver.start_time, stop)?;
         let mut objective = Self {
             model: campaign.model,
             base: campaign.base.clone(),
@@ -133,6 +137,7 @@ impl Objective {
             weights,
             measured,
             solver: campaign.solver,
+            inputs,
             measurement_hash: measurement.content_hash(),
             fingerprint: [0; 32],
         };
@@ -187,7 +192,14 @@ impl Objective {
                 self.solver.communication_step.unwrap_or(0.0),
             ]);
         }
+        // Inputs likewise: an undriven objective keeps its fingerprint.
+        calib_worker::inputs::hash_into(&mut h, &self.named_inputs());
         h.finish()
+    }
+
+    /// The driving signals under their inputs' names, as the wire carries them.
+    pub fn named_inputs(&self) -> Vec<calib_worker::inputs::NamedSignal> {
+        self.inputs.named(self.model.info())
     }
 
     /// The full parameter vector with the free parameters set to `free_values`.
@@ -207,6 +219,7 @@ impl Objective {
             measured: &self.measured,
             weights: &self.weights,
             solver: &self.solver,
+            inputs: &self.inputs,
         }
     }
 
@@ -224,7 +237,13 @@ impl Objective {
     pub fn simulate(&self, free_values: &[f64]) -> Result<Vec<Vec<f64>>, SimulationError> {
         let params = self.full_parameters(free_values);
         self.model
-            .simulate(&params, &self.grid, &self.outputs, &self.solver)
+            .simulate_driven(
+                &params,
+                &self.grid,
+                &self.outputs,
+                &self.solver,
+                &self.inputs,
+            )
             .map(|t| t.values)
     }
 
@@ -232,6 +251,50 @@ impl Objective {
     pub fn score(&self, simulated: &[Vec<f64>]) -> Evaluation {
         scoring::score(simulated, &self.measured, &self.weights)
     }
+}
+
+/// The measured columns mapped to the campaign's inputs, as signals: the whole column (plots
+/// may simulate past the window). A column that does not cover the fitted span
+/// `[start, stop]` is refused naming file, column and times.
+fn driving_inputs(
+    campaign: &Campaign,
+    measurement: &Measurement,
+    start: f64,
+    stop: f64,
+) -> Result<Inputs, CampaignError> {
+    let time = &measurement.time;
+    let (first, last) = (time[0], time[time.len() - 1]);
+    let slack = 1e-9 * stop.abs().max(1.0);
+    let mut signals = Vec::with_capacity(campaign.inputs.len());
+    for (i, input) in campaign.inputs.iter().enumerate() {
+        let error = |message: String| CampaignError {
+            file: campaign.source.clone().unwrap_or_default(),
+            line: None,
+            field: format!("inputs[{i}] ({})", input.model),
+            message,
+        };
+        let column = measurement.column(&input.measured).ok_or_else(|| {
+            error(format!(
+                "column `{}` was not loaded from {}",
+                input.measured,
+                measurement.source.display()
+            ))
+        })?;
+        if first > start + slack || last < stop - slack {
+            return Err(error(format!(
+                "column `{}` of {} runs from {first} to {last} s and does not cover the                  simulation from {start} to {stop} s",
+                input.measured,
+                measurement.source.display()
+            )));
+        }
+        signals.push(InputSignal {
+            input: input.model_index,
+            times: time.as_slice().into(),
+            values: column.into(),
+            interpolation: input.interpolation,
+        });
+    }
+    Ok(Inputs { signals })
 }
 
 /// Population variance of a series.
@@ -332,9 +395,40 @@ stop = 3.0
         assert_eq!(
             hex(&calib_worker::scoring::measurement_hash(
                 &o.grid,
-                &o.measured
+                &o.measured,
+                &[]
             )),
             "1295954f5261deafcbefb6c8019cd73c9867b9b806a12b4fbfcb4281e56fe992"
+        );
+    }
+
+    #[test]
+    fn an_input_column_must_cover_the_window() {
+        let with_input = |stop: f64| {
+            let c = campaign("");
+            let spec = c.spec.replace(
+                "[window]",
+                "[[inputs]]\nmodel = \"armTorque\"\nmeasured = \"u\"\n[window]",
+            );
+            let spec = spec.replace("stop = 3.0", &format!("stop = {stop}"));
+            Campaign::parse(&spec, Path::new("/c/c.toml")).unwrap()
+        };
+        let mut m = measurement(vec![100.0, 2.0, 4.0, 9.0, -50.0]);
+        m.columns.push(("u".into(), vec![0.0, 0.1, 0.2, 0.3, 0.4]));
+        let o = Objective::new(&with_input(3.0), &m).unwrap();
+        assert_eq!(o.inputs.signals[0].values.len(), 5);
+        assert_ne!(
+            o.fingerprint(),
+            Objective::new(&campaign(""), &m).unwrap().fingerprint()
+        );
+        m.time = vec![0.5, 1.0, 2.0, 3.0, 4.0];
+        let Err(e) = Objective::new(&with_input(3.0), &m) else {
+            panic!("an input that starts after the simulation was accepted");
+        };
+        assert_eq!(e.field, "inputs[0] (armTorque)");
+        assert!(
+            e.message.contains("column `u`") && e.message.contains("from 0.5 to 4 s"),
+            "{e}"
         );
     }
 

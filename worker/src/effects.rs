@@ -12,6 +12,7 @@
 //! - `gain(o)` = g: `(1 + g)·y`;
 //! - `offset(o)` = c [output unit]: `y + c`.
 
+use crate::inputs::Inputs;
 use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, SimulationError, SolverOptions, Trajectory,
 };
@@ -155,6 +156,17 @@ impl<M: Model> Model for WithOutputEffects<M> {
         outputs: &[usize],
         options: &SolverOptions,
     ) -> Result<Trajectory, SimulationError> {
+        self.simulate_driven(params, grid, outputs, options, Inputs::none())
+    }
+
+    fn simulate_driven(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+    ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
         let (inner_params, effects) = params.split_at(self.inner_len);
         let effect = |output: usize, kind: OutputEffect| effects[output * PER_OUTPUT + kind.slot()];
@@ -171,7 +183,8 @@ impl<M: Model> Model for WithOutputEffects<M> {
         }
 
         let mut trajectory = if delays.iter().all(|d| *d == 0.0) {
-            self.inner.simulate(inner_params, grid, outputs, options)?
+            self.inner
+                .simulate_driven(inner_params, grid, outputs, options, inputs)?
         } else {
             // Simulate on the grid and every delayed copy of it, then pick.
             let mut times: Vec<f64> = grid.to_vec();
@@ -180,9 +193,9 @@ impl<M: Model> Model for WithOutputEffects<M> {
             }
             times.sort_by(f64::total_cmp);
             times.dedup();
-            let full = self
-                .inner
-                .simulate(inner_params, &times, outputs, options)?;
+            let full =
+                self.inner
+                    .simulate_driven(inner_params, &times, outputs, options, inputs)?;
             let at = |k: usize, t: f64| {
                 let i = times.partition_point(|x| *x < t);
                 full.values[k][i]
@@ -286,6 +299,7 @@ mod tests {
                         description: String::new(),
                     }],
                     effects: vec![],
+                    inputs: vec![],
                 },
             }
         }

@@ -7,6 +7,7 @@
 pub mod content_hash;
 pub mod effects;
 pub mod fmu;
+pub mod inputs;
 pub mod limits;
 pub mod model;
 pub mod models;
@@ -17,6 +18,6 @@ pub mod testing;
 pub mod validate;
 
 pub use model::{
-    EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
-    SolverStats, Trajectory,
+    EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
+    SolverOptions, SolverStats, Trajectory,
 };

@@ -11,6 +11,7 @@
 //! The optimisers, the objective and the dispatcher only ever see this trait, so new
 //! models slot in without touching them.
 
+use crate::inputs::Inputs;
 use serde::Serialize;
 
 /// A scalar the model takes as input.
@@ -30,6 +31,16 @@ pub struct ParameterSpec {
 pub struct OutputSpec {
     pub name: String,
     pub unit: String,
+    pub description: String,
+}
+
+/// A signal the model can be driven by (see [`crate::inputs`]).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct InputSpec {
+    /// Name as campaigns map it, e.g. `armTorque`.
+    pub name: String,
+    pub unit: String,
+    /// What it is and what it is when no signal drives it.
     pub description: String,
 }
 
@@ -58,6 +69,8 @@ pub struct ModelInfo {
     pub parameters: Vec<ParameterSpec>,
     pub outputs: Vec<OutputSpec>,
     pub effects: Vec<EffectSpec>,
+    /// Signals that may drive the model; each keeps the model's own value when undriven.
+    pub inputs: Vec<InputSpec>,
 }
 
 impl ModelInfo {
@@ -87,6 +100,10 @@ impl ModelInfo {
     /// The effect called `name`, if the model has one.
     pub fn effect(&self, name: &str) -> Option<&EffectSpec> {
         self.effects.iter().find(|e| e.name == name)
+    }
+
+    pub fn input_index(&self, name: &str) -> Option<usize> {
+        self.inputs.iter().position(|i| i.name == name)
     }
 
     pub fn output_index(&self, name: &str) -> Option<usize> {
@@ -241,6 +258,27 @@ pub trait Model: Send + Sync {
         outputs: &[usize],
         options: &SolverOptions,
     ) -> Result<Trajectory, SimulationError>;
+
+    /// [`Model::simulate`] driven by `inputs` (signals of [`ModelInfo::inputs`]); inputs
+    /// without a signal keep the model's own values. Models that take inputs override it;
+    /// the default refuses any signal.
+    fn simulate_driven(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+    ) -> Result<Trajectory, SimulationError> {
+        if let Some(s) = inputs.signals.first() {
+            return Err(SimulationError::InvalidInput(format!(
+                "model `{}` takes no input (input #{} was given)",
+                self.info().name,
+                s.input
+            )));
+        }
+        self.simulate(params, grid, outputs, options)
+    }
 }
 
 /// Checks shared by every model before it simulates.

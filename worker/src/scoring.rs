@@ -7,6 +7,7 @@
 //! [`FAILURE_PENALTY`]: finite, so optimisers that compare or average costs keep working.
 
 use crate::content_hash::ContentHasher;
+use crate::inputs::{Inputs, NamedSignal};
 use crate::{Model, SimulationError, SolverOptions};
 
 /// Objective value given to parameter sets whose simulation failed: far above any real fit.
@@ -63,6 +64,8 @@ pub struct Target<'a> {
     pub measured: &'a [Vec<f64>],
     pub weights: &'a [f64],
     pub solver: &'a SolverOptions,
+    /// The signals driving the model (none for a free response).
+    pub inputs: &'a Inputs,
 }
 
 /// Simulate `model` with the full parameter vector `params` and score it. A failed
@@ -73,7 +76,13 @@ pub fn simulate_and_score(
     params: &[f64],
     target: &Target,
 ) -> Result<Evaluation, SimulationError> {
-    let trajectory = model.simulate(params, target.grid, target.outputs, target.solver)?;
+    let trajectory = model.simulate_driven(
+        params,
+        target.grid,
+        target.outputs,
+        target.solver,
+        target.inputs,
+    )?;
     Ok(score(&trajectory.values, target.measured, target.weights))
 }
 
@@ -85,13 +94,18 @@ pub fn evaluate(model: &dyn Model, params: &[f64], target: &Target) -> Evaluatio
 
 /// Content hash of a measurement on its grid, as the Simulator protocol defines it: BLAKE3
 /// over "calib-measurement-v1", the count and bits of the times, then the count of columns
-/// and each column's length and bits, integers as little-endian `u64`.
-pub fn measurement_hash(times: &[f64], columns: &[Vec<f64>]) -> [u8; 32] {
+/// and each column's length and bits, integers as little-endian `u64`. When inputs drive
+/// the model, they follow: the text "inputs" (its length, then its bytes), their count, and
+/// for each, in the order given, its input's name (length, bytes), its interpolation
+/// (0 linear, 1 hold), then its times and its values, each after its count. A measurement
+/// without inputs hashes as it always did.
+pub fn measurement_hash(times: &[f64], columns: &[Vec<f64>], inputs: &[NamedSignal]) -> [u8; 32] {
     let mut h = ContentHasher::new(b"calib-measurement-v1");
     h.series(times).count(columns.len());
     for column in columns {
         h.series(column);
     }
+    crate::inputs::hash_into(&mut h, inputs);
     h.finish()
 }
 
@@ -120,10 +134,36 @@ mod tests {
 
     #[test]
     fn measurement_hash_sees_every_bit_and_the_layout() {
-        let a = measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0]]);
-        assert_eq!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0]]));
-        assert_ne!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0, 2.0 + 1e-15]]));
-        assert_ne!(a, measurement_hash(&[0.0, 1.0], &[vec![1.0], vec![2.0]]));
-        assert_ne!(a, measurement_hash(&[0.0, -0.0], &[vec![1.0, 2.0]]));
+        let hash = |t: &[f64], c: &[Vec<f64>]| measurement_hash(t, c, &[]);
+        let a = hash(&[0.0, 1.0], &[vec![1.0, 2.0]]);
+        assert_eq!(a, hash(&[0.0, 1.0], &[vec![1.0, 2.0]]));
+        assert_ne!(a, hash(&[0.0, 1.0], &[vec![1.0, 2.0 + 1e-15]]));
+        assert_ne!(a, hash(&[0.0, 1.0], &[vec![1.0], vec![2.0]]));
+        assert_ne!(a, hash(&[0.0, -0.0], &[vec![1.0, 2.0]]));
+    }
+
+    #[test]
+    fn measurement_hash_sees_the_inputs_and_how_they_are_read() {
+        use crate::inputs::Interpolation;
+        let driven = |name: &str, values: Vec<f64>, interpolation| {
+            vec![NamedSignal {
+                name: name.into(),
+                times: vec![0.0, 1.0].into(),
+                values: values.into(),
+                interpolation,
+            }]
+        };
+        let (t, c) = ([0.0, 1.0], [vec![1.0, 2.0]]);
+        let linear = Interpolation::Linear;
+        let free = measurement_hash(&t, &c, &[]);
+        let a = measurement_hash(&t, &c, &driven("u", vec![0.0, 1.0], linear));
+        assert_ne!(free, a);
+        for other in [
+            driven("u", vec![0.0, 1.5], linear),
+            driven("v", vec![0.0, 1.0], linear),
+            driven("u", vec![0.0, 1.0], Interpolation::Hold),
+        ] {
+            assert_ne!(a, measurement_hash(&t, &c, &other));
+        }
     }
 }

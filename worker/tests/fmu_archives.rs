@@ -307,6 +307,7 @@ fn a_worker_refuses_lying_and_inflating_fmus_and_keeps_serving() {
                 outputs: vec!["armJoint.phi".into()],
                 solver: None,
                 fmu_hash: Vec::new(),
+                inputs: vec![],
             })
             .await
             .unwrap()

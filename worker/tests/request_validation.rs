@@ -107,6 +107,7 @@ fn any_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                     outputs,
                     solver,
                     fmu_hash: Vec::new(),
+                    inputs: vec![],
                 }
             },
         )
@@ -123,6 +124,7 @@ fn any_evaluate_request() -> impl Strategy<Value = proto::EvaluateRequest> {
                 .into_iter()
                 .map(|values| proto::Column { values })
                 .collect(),
+            inputs: vec![],
         });
     (
         (
@@ -257,6 +259,7 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 outputs,
                 solver,
                 fmu_hash: Vec::new(),
+                inputs: vec![],
             },
         )
 }

@@ -14,6 +14,8 @@ pub(super) struct CampaignFile {
     #[serde(default)]
     pub(super) outputs: Vec<Spanned<OutputEntry>>,
     #[serde(default)]
+    pub(super) inputs: Vec<Spanned<InputEntry>>,
+    #[serde(default)]
     pub(super) parameters: Vec<Spanned<ParameterEntry>>,
     #[serde(default)]
     pub(super) effects: Vec<Spanned<ParameterEntry>>,
@@ -68,6 +70,16 @@ pub(super) struct OutputEntry {
     /// `"none"` (default) or `"variance"`: `k_i` divided by the measured signal's variance
     /// over the window.
     pub(super) scale: Option<Spanned<String>>,
+}
+
+/// A model input driven by a measured column.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct InputEntry {
+    pub(super) model: Spanned<String>,
+    pub(super) measured: String,
+    /// `"linear"` (default) or `"hold"`.
+    pub(super) interpolation: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -8,6 +8,7 @@ mod file;
 mod resolve;
 
 use calib_worker::content_hash::ContentHasher;
+pub use calib_worker::inputs::Interpolation;
 use calib_worker::{Model, SolverOptions};
 use resolve::{resolve, Locator};
 use serde::Deserialize;
@@ -101,6 +102,15 @@ pub struct OutputMapping {
     pub scale: OutputScale,
 }
 
+/// A model input driven by a measured column (linear between samples, or held).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct InputMapping {
+    pub model: String,
+    pub model_index: usize,
+    pub measured: String,
+    pub interpolation: Interpolation,
+}
+
 /// Scaling of an output's weight by its measured data, so that outputs in different units
 /// weigh alike (an NRMSE-type objective).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
@@ -163,6 +173,8 @@ pub struct Campaign {
     pub measurement_file: PathBuf,
     pub time_column: String,
     pub outputs: Vec<OutputMapping>,
+    /// Model inputs driven by measured columns of the same file.
+    pub inputs: Vec<InputMapping>,
     pub window: (f64, f64),
     pub search: Search,
     pub solver: SolverOptions,
@@ -188,6 +200,7 @@ impl fmt::Debug for Campaign {
             .field("model", &self.model.info().name)
             .field("free", &self.free)
             .field("outputs", &self.outputs)
+            .field("inputs", &self.inputs)
             .field("window", &self.window)
             .field("search", &self.search)
             .finish()
@@ -255,6 +268,16 @@ impl Campaign {
                 .text(&o.measured)
                 .series(&[o.weight])
                 .text(o.scale.name());
+        }
+        // Inputs, when mapped, change what is simulated; a campaign without them keeps the
+        // identity it always had.
+        if !self.inputs.is_empty() {
+            h.text("inputs").count(self.inputs.len());
+            for i in &self.inputs {
+                h.count(i.model_index)
+                    .text(&i.measured)
+                    .text(i.interpolation.as_str());
+            }
         }
         h.count(self.search.methods.len());
         for m in &self.search.methods {
@@ -489,6 +512,31 @@ seed = 7
         let e = error_for("name = \"furuta\"", "name = \"furtua\"");
         assert!(e.message.ends_with("did you mean `furuta`?"), "{e}");
         assert_eq!(e.line, Some(4));
+    }
+
+    #[test]
+    fn inputs_are_resolved_against_the_model() {
+        let input = "[[inputs]]\nmodel = \"armTorque\"\nmeasured = \"u\"\n";
+        let c = parse(&format!("{GOOD}{input}")).unwrap();
+        assert_eq!(c.inputs[0].model_index, 0);
+        assert_eq!(c.inputs[0].interpolation, Interpolation::Linear);
+        assert_ne!(
+            c.identity(&[0; 32]),
+            parse(GOOD).unwrap().identity(&[0; 32])
+        );
+        let held = parse(&format!("{GOOD}{input}interpolation = \"hold\"\n")).unwrap();
+        assert_eq!(held.inputs[0].interpolation, Interpolation::Hold);
+        assert_ne!(held.identity(&[0; 32]), c.identity(&[0; 32]));
+
+        let line = GOOD.lines().count() + 2;
+        let e = parse(&format!("{GOOD}{}", input.replace("armTorque", "armTorqe"))).unwrap_err();
+        assert_eq!(e.field, "inputs[0] (armTorqe)");
+        assert_eq!(e.line, Some(line), "{e}");
+        assert!(e.message.ends_with("did you mean `armTorque`?"), "{e}");
+        let e = parse(&format!("{GOOD}{input}interpolation = \"cubic\"\n")).unwrap_err();
+        assert!(e.message.contains("unknown interpolation `cubic`"), "{e}");
+        let e = parse(&format!("{GOOD}{input}{input}")).unwrap_err();
+        assert!(e.message.contains("driven twice"), "{e}");
     }
 
     #[test]

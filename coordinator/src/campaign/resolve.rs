@@ -3,11 +3,12 @@
 
 use super::file::{
     default_max_evaluations, default_methods, default_starts, CampaignFile, DiagnosisSection,
-    ModelSection, OutputEntry, ParameterEntry, SearchSection, SolverSection, WindowSection,
+    InputEntry, ModelSection, OutputEntry, ParameterEntry, SearchSection, SolverSection,
+    WindowSection,
 };
 use super::{
-    Campaign, CampaignError, DiagnosisSettings, FreeParameter, OutputMapping, OutputScale, Scale,
-    Search,
+    Campaign, CampaignError, DiagnosisSettings, FreeParameter, InputMapping, Interpolation,
+    OutputMapping, OutputScale, Scale, Search,
 };
 use crate::limits;
 use calib_worker::fmu::{self, Interface};
@@ -67,6 +68,7 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
     let (mut base, fixed) = resolve_fixed(&model_section, info, at)?;
     let free = resolve_free(&file.parameters, &file.effects, &fixed, &mut base, info, at)?;
     let outputs = resolve_outputs(&file.outputs, info, at)?;
+    let inputs = resolve_inputs(&file.inputs, info, at)?;
     let window = resolve_window(file.window, at)?;
     let stop_time = resolve_stop_time(&model_section, model_span, window.1, at)?;
     let search = resolve_search(file.search, free.len(), at)?;
@@ -96,6 +98,7 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
         measurement_file,
         time_column: file.measurement.time_column,
         outputs,
+        inputs,
         window,
         search,
         solver,
@@ -409,6 +412,47 @@ fn resolve_outputs(
         });
     }
     Ok(outputs)
+}
+
+fn resolve_inputs(
+    entries: &[Spanned<InputEntry>],
+    info: &ModelInfo,
+    at: &Locator,
+) -> Result<Vec<InputMapping>, CampaignError> {
+    let mut inputs: Vec<InputMapping> = Vec::new();
+    for (i, entry) in entries.iter().enumerate() {
+        let e = entry.get_ref();
+        let input = e.model.get_ref();
+        let field = format!("inputs[{i}] ({input})");
+        let model_index = match validate::input(info, input) {
+            Ok(index) => index,
+            Err(err) => return at.error(e.model.span(), &field, err.message),
+        };
+        if inputs.iter().any(|m| m.model_index == model_index) {
+            return at.error(entry.span(), &field, "is driven twice".into());
+        }
+        let interpolation = match &e.interpolation {
+            None => Interpolation::Linear,
+            Some(s) => match s.get_ref().as_str() {
+                "linear" => Interpolation::Linear,
+                "hold" => Interpolation::Hold,
+                other => {
+                    return at.error(
+                        s.span(),
+                        &field,
+                        format!("unknown interpolation `{other}` (known: linear, hold)"),
+                    )
+                }
+            },
+        };
+        inputs.push(InputMapping {
+            model: input.clone(),
+            model_index,
+            measured: e.measured.clone(),
+            interpolation,
+        });
+    }
+    Ok(inputs)
 }
 
 fn resolve_window(

@@ -6,6 +6,7 @@ use crate::objective::{Evaluation, Objective};
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
 use calib_security::{ClientSecurity, SecureChannel};
+use calib_worker::inputs::Interpolation;
 use calib_worker::scoring;
 use calib_worker::service::limits::MAX_MESSAGE_BYTES;
 use std::sync::Arc;
@@ -36,6 +37,24 @@ fn fmu_of(model: &str) -> (Vec<u8>, Option<Arc<Vec<u8>>>) {
         Some((hash, archive)) => (hash.to_vec(), Some(archive)),
         None => (Vec::new(), None),
     }
+}
+
+/// Driving signals as the wire carries them.
+pub fn wire_inputs(objective: &Objective) -> Vec<proto::InputSeries> {
+    objective
+        .named_inputs()
+        .into_iter()
+        .map(|s| proto::InputSeries {
+            input: s.name,
+            times: s.times.to_vec(),
+            values: s.values.to_vec(),
+            interpolation: match s.interpolation {
+                Interpolation::Linear => proto::Interpolation::Linear,
+                Interpolation::Hold => proto::Interpolation::Hold,
+            }
+            .into(),
+        })
+        .collect()
 }
 
 impl WireObjective {
@@ -69,8 +88,12 @@ impl WireObjective {
                     weight,
                 })
                 .collect(),
-            measurement_hash: scoring::measurement_hash(&objective.grid, &objective.measured)
-                .to_vec(),
+            measurement_hash: scoring::measurement_hash(
+                &objective.grid,
+                &objective.measured,
+                &objective.named_inputs(),
+            )
+            .to_vec(),
             measurement: None,
             points: Vec::new(),
             solver: Some(wire_solver(&objective.solver)),
@@ -85,6 +108,7 @@ impl WireObjective {
                     values: values.clone(),
                 })
                 .collect(),
+            inputs: wire_inputs(objective),
         };
         Self {
             template,
@@ -137,6 +161,7 @@ impl WireSimulation {
                 .collect(),
             solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
+            inputs: wire_inputs(objective),
         };
         Self {
             template,

@@ -196,6 +196,7 @@ impl FmuModel {
             parameters,
             outputs,
             effects: Vec::new(),
+            inputs: Vec::new(),
         };
         let runner = if isolated {
             Runner::Isolated(host::Hosts::new(dir.clone(), interface, identifier.clone()))

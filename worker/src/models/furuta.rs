@@ -41,9 +41,10 @@
 //! k·q, `torque_bias.<joint>` t0. Viscous friction and drag vanish while a joint is stuck;
 //! stiffness and bias act as driving torques the friction must hold.
 
+use crate::inputs::{InputSignal, Inputs};
 use crate::model::{
-    check_request, EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
-    SolverOptions, Trajectory,
+    check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec,
+    SimulationError, SolverOptions, Trajectory,
 };
 use crate::ode::{integrate, HybridSystem};
 use std::f64::consts::PI;
@@ -259,6 +260,13 @@ impl Furuta {
                 parameters,
                 outputs,
                 effects,
+                inputs: vec![InputSpec {
+                    name: "armTorque".into(),
+                    unit: "N.m".into(),
+                    description: "motor torque on the arm joint, positive in the direction of \
+                                  armJoint.phi (0 when undriven: a free swing)"
+                        .into(),
+                }],
             },
         }
     }
@@ -276,15 +284,30 @@ impl Model for Furuta {
         outputs: &[usize],
         options: &SolverOptions,
     ) -> Result<Trajectory, SimulationError> {
+        self.simulate_driven(params, grid, outputs, options, Inputs::none())
+    }
+
+    fn simulate_driven(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+    ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
+        inputs
+            .check(&self.info, 0.0, grid[grid.len() - 1])
+            .map_err(SimulationError::InvalidInput)?;
         let mut system = FurutaSystem::new(params)?;
+        system.motor = inputs.signal(0).cloned();
         let y0 = [
             params[idx::PHI0],
             params[idx::THETA0],
             params[idx::DPHI0],
             params[idx::DTHETA0],
         ];
-        system.settle_modes(&y0);
+        system.settle_modes(0.0, &y0);
         let mut values = vec![vec![0.0; grid.len()]; outputs.len()];
         let stats = integrate(&mut system, &y0, grid, options, |i, y| {
             for (series, &o) in values.iter_mut().zip(outputs) {
@@ -321,6 +344,8 @@ pub(crate) struct FurutaSystem {
     c: f64,
     mgl: f64,
     modes: [Mode; 2],
+    /// The arm's motor torque, when a signal drives it.
+    motor: Option<InputSignal>,
 }
 
 /// Accelerations and bearing friction torques in one mode configuration.
@@ -351,6 +376,7 @@ impl FurutaSystem {
             c: m * l1 * l,
             mgl: m * p[idx::G] * l,
             modes: [Mode::Forward; 2],
+            motor: None,
         };
         if system.friction.iter().any(|f| *f < 0.0) {
             return Err(SimulationError::InvalidInput(
@@ -367,9 +393,9 @@ impl FurutaSystem {
         Ok(system)
     }
 
-    /// Right-hand side of the equations of motion without bearing friction, and the
-    /// mass matrix entries `(A, C·c)`.
-    fn free_forces(&self, y: &[f64]) -> ([f64; 2], f64, f64) {
+    /// Right-hand side of the equations of motion at time `t` without bearing friction,
+    /// and the mass matrix entries `(A, C·c)`.
+    fn free_forces(&self, t: f64, y: &[f64]) -> ([f64; 2], f64, f64) {
         let (s, c) = y[1].sin_cos();
         let (w1, w2) = (y[2], y[3]);
         let a = self.a0 + self.a1 * s * s;
@@ -385,12 +411,15 @@ impl FurutaSystem {
                 + self.stiffness[joint] * q
                 + self.bias[joint];
         }
+        if let Some(motor) = &self.motor {
+            r[0] += motor.at(t);
+        }
         (r, a, self.c * c)
     }
 
-    /// Accelerations and friction torques with the joints in `modes`.
-    fn dynamics(&self, y: &[f64], modes: [Mode; 2]) -> Dynamics {
-        let (r, a, cc) = self.free_forces(y);
+    /// Accelerations and friction torques at time `t` with the joints in `modes`.
+    fn dynamics(&self, t: f64, y: &[f64], modes: [Mode; 2]) -> Dynamics {
+        let (r, a, cc) = self.free_forces(t, y);
         let sliding = |joint: usize| match modes[joint] {
             Mode::Forward => -self.friction[joint],
             Mode::Backward => self.friction[joint],
@@ -431,7 +460,7 @@ impl FurutaSystem {
 
     /// Bring the modes in line with the state: joints at rest stick if their friction can
     /// hold them and slide the way they are driven otherwise; moving joints slide.
-    fn settle_modes(&mut self, y: &[f64]) {
+    fn settle_modes(&mut self, t: f64, y: &[f64]) {
         for joint in 0..2 {
             let w = y[joint + 2];
             if w != 0.0 || self.friction[joint] == 0.0 {
@@ -447,7 +476,7 @@ impl FurutaSystem {
         // Release stuck joints that cannot be held, one at a time (releasing one changes what
         // holds the other), until the configuration is consistent.
         for _ in 0..3 {
-            let d = self.dynamics(y, self.modes);
+            let d = self.dynamics(t, y, self.modes);
             let overloaded = (0..2)
                 .filter(|&j| self.modes[j] == Mode::Stuck)
                 .map(|j| (j, d.friction[j].abs() - self.friction[j]))
@@ -470,8 +499,8 @@ impl HybridSystem for FurutaSystem {
         4
     }
 
-    fn rhs(&self, _t: f64, y: &[f64], dy: &mut [f64]) {
-        let d = self.dynamics(y, self.modes);
+    fn rhs(&self, t: f64, y: &[f64], dy: &mut [f64]) {
+        let d = self.dynamics(t, y, self.modes);
         dy[0] = y[2];
         dy[1] = y[3];
         dy[2] = d.acc[0];
@@ -482,7 +511,7 @@ impl HybridSystem for FurutaSystem {
         2
     }
 
-    fn events(&self, _t: f64, y: &[f64], g: &mut [f64]) {
+    fn events(&self, t: f64, y: &[f64], g: &mut [f64]) {
         let mut holding = None;
         for joint in 0..2 {
             g[joint] = match self.modes[joint] {
@@ -490,7 +519,7 @@ impl HybridSystem for FurutaSystem {
                 Mode::Forward => y[joint + 2],
                 Mode::Backward => -y[joint + 2],
                 Mode::Stuck => {
-                    let d = holding.get_or_insert_with(|| self.dynamics(y, self.modes));
+                    let d = holding.get_or_insert_with(|| self.dynamics(t, y, self.modes));
                     self.friction[joint] - d.friction[joint].abs()
                 }
             };
@@ -505,7 +534,7 @@ impl HybridSystem for FurutaSystem {
     // can hold, so switching that still accumulates has no mode to settle in and ends the
     // simulation with a typed error.
 
-    fn on_event(&mut self, _t: f64, y: &mut [f64], event: usize) {
+    fn on_event(&mut self, t: f64, y: &mut [f64], event: usize) {
         if self.modes[event] != Mode::Stuck {
             // The joint came to rest.
             y[event + 2] = 0.0;
@@ -515,7 +544,7 @@ impl HybridSystem for FurutaSystem {
                 y[joint + 2] = 0.0;
             }
         }
-        self.settle_modes(y);
+        self.settle_modes(t, y);
     }
 }
 
@@ -621,6 +650,57 @@ mod tests {
         // Coulomb friction stops the motion in finite time: exactly zero speed at the end.
         assert_eq!(*traj.values[1].last().unwrap(), 0.0);
         assert_eq!(*traj.values[2].last().unwrap(), 0.0);
+    }
+
+    fn constant(input: usize, value: f64, stop: f64) -> Inputs {
+        Inputs {
+            signals: vec![InputSignal {
+                input,
+                times: vec![0.0, stop].into(),
+                values: vec![value, value].into(),
+                interpolation: crate::inputs::Interpolation::Linear,
+            }],
+        }
+    }
+
+    #[test]
+    fn a_constant_arm_torque_is_a_negative_torque_bias() {
+        // The motor torque drives the arm as the bias effect would, with the opposite
+        // sign: the same sum, so the same bits.
+        let model = Furuta::new();
+        let t = grid(10.0, 0.01);
+        let options = SolverOptions::default();
+        let driven = model
+            .simulate_driven(&defaults(), &t, &[0, 1], &options, &constant(0, 0.02, 10.0))
+            .unwrap();
+        let mut biased = defaults();
+        biased[idx::BIAS] = -0.02;
+        let reference = model.simulate(&biased, &t, &[0, 1], &options).unwrap();
+        assert_eq!(driven.values, reference.values);
+        assert!(
+            driven.values[0].last().unwrap() > &1.0,
+            "the arm was driven"
+        );
+    }
+
+    #[test]
+    fn an_input_must_cover_the_simulation() {
+        let model = Furuta::new();
+        let t = grid(10.0, 0.1);
+        let r = model.simulate_driven(
+            &defaults(),
+            &t,
+            &[0],
+            &SolverOptions::default(),
+            &constant(0, 0.02, 5.0),
+        );
+        let Err(SimulationError::InvalidInput(message)) = r else {
+            panic!("{r:?}");
+        };
+        assert!(
+            message.contains("armTorque") && message.contains("cover"),
+            "{message}"
+        );
     }
 
     #[test]

@@ -95,6 +95,7 @@ mod tests {
         MeasuredData {
             times: vec![0.0; n],
             columns: vec![vec![1.0; n]],
+            inputs: vec![],
         }
     }
 

@@ -5,6 +5,7 @@
 //! learns exactly what to fix.
 
 use super::error::{Error, Result};
+use crate::inputs::{Inputs, Interpolation, NamedSignal};
 use crate::{limits, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
@@ -91,6 +92,88 @@ fn solver_options(
         .map_err(|(option, e)| at(&format!("solver.{option}"), e))
 }
 
+/// Input signals as a request names them, each checked on its own (`field` is where the
+/// list sits in the request): as many values as times, finite, times non-decreasing.
+fn named_signals(series: Vec<proto::InputSeries>, field: &str) -> Result<Vec<NamedSignal>> {
+    let mut named = Vec::with_capacity(series.len());
+    for (k, s) in series.into_iter().enumerate() {
+        let at = |what: &str| format!("{field}[{k}].{what}");
+        let interpolation = match proto::Interpolation::try_from(s.interpolation) {
+            Ok(proto::Interpolation::Linear) => Interpolation::Linear,
+            Ok(proto::Interpolation::Hold) => Interpolation::Hold,
+            Err(_) => {
+                return Err(Error::invalid(
+                    at("interpolation"),
+                    format!("{} is not an Interpolation", s.interpolation),
+                ))
+            }
+        };
+        if s.times.is_empty() {
+            return Err(Error::invalid(at("times"), "no sample"));
+        }
+        if s.values.len() != s.times.len() {
+            return Err(Error::invalid(
+                at("values"),
+                format!("{} values for {} times", s.values.len(), s.times.len()),
+            ));
+        }
+        if let Some(j) = s.times.iter().position(|t| !t.is_finite()) {
+            return Err(Error::invalid(
+                format!("{}[{j}]", at("times")),
+                format!("{} is not a finite number", s.times[j]),
+            ));
+        }
+        if let Some(j) = s.times.windows(2).position(|w| w[1] < w[0]) {
+            return Err(Error::invalid(
+                format!("{}[{}]", at("times"), j + 1),
+                format!("{} s comes before {} s", s.times[j + 1], s.times[j]),
+            ));
+        }
+        if let Some(j) = s.values.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                format!("{}[{j}]", at("values")),
+                format!("{} is not a finite number", s.values[j]),
+            ));
+        }
+        if named.iter().any(|n: &NamedSignal| n.name == s.input) {
+            return Err(Error::invalid(
+                at("input"),
+                format!("`{}` is driven twice", s.input),
+            ));
+        }
+        named.push(NamedSignal {
+            name: s.input,
+            times: s.times.into(),
+            values: s.values.into(),
+            interpolation,
+        });
+    }
+    Ok(named)
+}
+
+/// Named signals resolved against `model` and checked to cover the simulation from
+/// `start` to `stop` (`field` is where they sit in the request).
+pub fn driving_inputs(
+    model: &dyn Model,
+    named: &[NamedSignal],
+    start: f64,
+    stop: f64,
+    field: &str,
+) -> Result<Inputs> {
+    let info = model.info();
+    let inputs = Inputs::resolve(info, named)
+        .map_err(|(k, message)| Error::invalid(format!("{field}[{k}].input"), message))?;
+    inputs.check(info, start, stop).map_err(|message| {
+        let k = inputs
+            .signals
+            .iter()
+            .position(|s| message.contains(&format!("`{}`", info.inputs[s.input].name)))
+            .unwrap_or(0);
+        Error::invalid(format!("{field}[{k}]"), message)
+    })?;
+    Ok(inputs)
+}
+
 /// One simulation, checked.
 pub struct Simulation {
     pub model: &'static dyn Model,
@@ -98,6 +181,7 @@ pub struct Simulation {
     pub times: Vec<f64>,
     pub outputs: Vec<usize>,
     pub solver: SolverOptions,
+    pub inputs: Inputs,
 }
 
 impl TryFrom<proto::SimulateRequest> for Simulation {
@@ -118,12 +202,17 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
                 .map(|(i, name)| output_index(info, name, &format!("outputs[{i}]")))
                 .collect::<Result<_>>()?
         };
+        let solver = solver_options(model, r.solver)?;
+        let named = named_signals(r.inputs, "inputs")?;
+        let stop = r.times[r.times.len() - 1];
+        let inputs = driving_inputs(model, &named, solver.start_time, stop, "inputs")?;
         Ok(Self {
             model,
             params,
             times: r.times,
             outputs,
-            solver: solver_options(model, r.solver)?,
+            solver,
+            inputs,
         })
     }
 }
@@ -133,16 +222,19 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
 pub struct MeasuredData {
     pub times: Vec<f64>,
     pub columns: Vec<Vec<f64>>,
+    /// Signals driving the model while it is simulated for this measurement.
+    pub inputs: Vec<NamedSignal>,
 }
 
 impl MeasuredData {
     /// Memory the data occupies [bytes], for the cache's bound.
     pub fn bytes(&self) -> usize {
-        8 * (self.times.len() + self.columns.iter().map(Vec::len).sum::<usize>())
+        let inputs: usize = self.inputs.iter().map(|s| 2 * s.times.len()).sum();
+        8 * (self.times.len() + self.columns.iter().map(Vec::len).sum::<usize>() + inputs)
     }
 
     pub fn hash(&self) -> [u8; 32] {
-        crate::scoring::measurement_hash(&self.times, &self.columns)
+        crate::scoring::measurement_hash(&self.times, &self.columns, &self.inputs)
     }
 }
 
@@ -170,6 +262,7 @@ impl TryFrom<proto::Measurement> for MeasuredData {
         Ok(Self {
             times: m.times,
             columns,
+            inputs: named_signals(m.inputs, "measurement.inputs")?,
         })
     }
 }
@@ -323,6 +416,7 @@ mod tests {
             outputs: vec![],
             solver,
             fmu_hash: Vec::new(),
+            inputs: vec![],
         }
     }
 

@@ -5,7 +5,7 @@ use super::cache::MeasurementCache;
 use super::error::{Error, Result};
 use super::fmu_cache::FmuCache;
 use super::pool::{PoolLoad, SimulationPool};
-use super::request::{self, Evaluation, Simulation};
+use super::request::{self, driving_inputs, Evaluation, Simulation};
 use crate::fmu::{self, archive};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
 use crate::{models, Model, SimulationError};
@@ -118,6 +118,7 @@ impl SimulatorService {
             times,
             outputs,
             solver,
+            inputs,
         } = Simulation::try_from(request)?;
         let admission = self.pool.admit(1)?;
         let times = Arc::new(times);
@@ -126,7 +127,7 @@ impl SimulatorService {
         let outcome = self
             .pool
             .run(&admission, 1, move |_| {
-                model.simulate(&params, &grid, &wanted, &solver)
+                model.simulate_driven(&params, &grid, &wanted, &solver, &inputs)
             })
             .await?
             .pop()
@@ -183,6 +184,14 @@ impl SimulatorService {
                 ),
             ));
         }
+        let stop = measured.times[measured.times.len() - 1];
+        let inputs = Arc::new(driving_inputs(
+            evaluation.model,
+            &measured.inputs,
+            evaluation.solver.start_time,
+            stop,
+            "measurement.inputs",
+        )?);
         let count = evaluation.points.len();
         let admission = self.pool.admit(count)?;
         let evaluation = Arc::new(evaluation);
@@ -196,6 +205,7 @@ impl SimulatorService {
                         measured: &measured.columns,
                         weights: &evaluation.weights,
                         solver: &evaluation.solver,
+                        inputs: &inputs,
                     };
                     scoring::simulate_and_score(
                         evaluation.model,
@@ -283,6 +293,15 @@ pub fn describe(model: &dyn Model) -> proto::ModelDescription {
             communication_step: solver.communication_step,
         }),
         tolerance_origin: model.tolerance_origin().to_string(),
+        inputs: info
+            .inputs
+            .iter()
+            .map(|i| proto::InputDescription {
+                name: i.name.clone(),
+                unit: i.unit.clone(),
+                description: i.description.clone(),
+            })
+            .collect(),
         name: info.name.clone(),
         version: info.version,
         description: info.description.clone(),

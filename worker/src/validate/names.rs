@@ -69,6 +69,24 @@ pub fn effect<'a>(info: &'a ModelInfo, name: &str) -> Result<&'a EffectSpec> {
     })
 }
 
+/// Index of the input `name`.
+pub fn input(info: &ModelInfo, name: &str) -> Result<usize> {
+    info.input_index(name).ok_or_else(|| {
+        if info.inputs.is_empty() {
+            return Invalid::new(format!(
+                "model `{}` takes no input, so none can be `{name}`",
+                info.name
+            ));
+        }
+        let known = info.inputs.iter().map(|i| i.name.as_str());
+        Invalid::new(format!(
+            "model `{}` has no input `{name}`{}",
+            info.name,
+            hint(name, known, &listing(info, "inputs"))
+        ))
+    })
+}
+
 /// Index of the output `name`.
 pub fn output(info: &ModelInfo, name: &str) -> Result<usize> {
     info.output_index(name).ok_or_else(|| {

@@ -474,6 +474,7 @@ impl HxModel {
                 parameters,
                 outputs,
                 effects,
+                inputs: Vec::new(),
             },
             fidelity,
             segments,
