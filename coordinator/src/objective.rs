@@ -9,7 +9,7 @@
 //! A simulation that fails (diverged, step limit) is not an error here: it evaluates to a
 //! large finite penalty, so optimisers move away from it and never stop on it.
 
-use crate::campaign::{Campaign, CampaignError, OutputScale};
+use crate::campaign::{Campaign, CampaignError, Experiment, OutputScale};
 use crate::measurement::Measurement;
 use calib_worker::content_hash::ContentHasher;
 use calib_worker::inputs::{InputSignal, Inputs};
@@ -20,15 +20,20 @@ use calib_worker::{Model, SimulationError, SolverOptions};
 pub use calib_worker::scoring::{Evaluation, FAILURE_PENALTY};
 
 /// Everything needed to score a parameter vector: the model, the fixed parameters, the
-/// measured series on the window's grid and the weights.
+/// measured series on the window's grid and the weights. A campaign that fits several
+/// experiments is one objective per experiment, the first holding the others in
+/// [`Objective::more`]: the value is the sum over all, the series those of each in turn.
 #[derive(Clone)]
 pub struct Objective {
     pub model: &'static dyn Model,
+    /// The experiment's name (empty for a campaign with one record).
+    pub name: String,
     /// Full parameter vector with the free entries at their nominal values.
     pub base: Vec<f64>,
-    /// Positions of the free parameters in the full vector.
-    pub free: Vec<usize>,
-    /// Measurement times inside the window.
+    /// Positions of the free parameters in the full vector; `None` for a parameter that
+    /// belongs to another experiment (its value does not reach this one).
+    pub free: Vec<Option<usize>>,
+    /// Measurement times inside the window(s).
     pub grid: Vec<f64>,
     /// Model output indices, in campaign order.
     pub outputs: Vec<usize>,
@@ -38,19 +43,49 @@ pub struct Objective {
     pub solver: SolverOptions,
     /// Measured signals driving the model's inputs, over the simulated span.
     pub inputs: Inputs,
+    /// The further experiments, each an objective of its own over the same free
+    /// parameters (their own `more` empty).
+    pub more: Vec<Objective>,
     measurement_hash: [u8; 32],
     fingerprint: [u8; 32],
 }
 
 impl Objective {
-    /// Build the objective of `campaign` on `measurement` (which must hold every mapped column).
+    /// Build the objective of `campaign` on `measurement` (which must hold every mapped
+    /// column of the first experiment); the records of further experiments are read from
+    /// their files.
     pub fn new(campaign: &Campaign, measurement: &Measurement) -> Result<Self, CampaignError> {
-        let (start, stop) = campaign.window;
+        let experiments = campaign.experiments();
+        let mut first = Self::part(campaign, &experiments[0], measurement, "")?;
+        for (k, experiment) in experiments.iter().enumerate().skip(1) {
+            let place = format!("experiments[{k}] ({})", experiment.name);
+            let measurement = load_experiment(campaign, experiment, &place)?;
+            first.more.push(Self::part(
+                campaign,
+                experiment,
+                &measurement,
+                &format!("{place}."),
+            )?);
+        }
+        if !first.more.is_empty() {
+            first.fingerprint = first.compute_fingerprint();
+        }
+        Ok(first)
+    }
+
+    /// The objective of one experiment; `place` prefixes the fields errors name.
+    fn part(
+        campaign: &Campaign,
+        experiment: &Experiment,
+        measurement: &Measurement,
+        place: &str,
+    ) -> Result<Self, CampaignError> {
+        let (start, stop) = experiment.window;
         let time = &measurement.time;
         let field_error = |field: &str, message: String| CampaignError {
             file: campaign.source.clone().unwrap_or_default(),
             line: None,
-            field: field.into(),
+            field: format!("{place}{field}"),
             message,
         };
         let window_error = |message: String| field_error("window", message);
@@ -71,9 +106,13 @@ impl Objective {
                 ),
             ));
         }
-        let rows: Vec<usize> = (0..time.len())
-            .filter(|&i| time[i] >= start - slack && time[i] <= stop + slack)
-            .collect();
+        let inside = |t: f64| {
+            experiment
+                .windows
+                .iter()
+                .any(|&(a, b)| t >= a - slack && t <= b + slack)
+        };
+        let rows: Vec<usize> = (0..time.len()).filter(|&i| inside(time[i])).collect();
         if rows.len() < 2 {
             return Err(window_error(format!(
                 "[{start}, {stop}] s holds {} samples of {}: too few to fit",
@@ -94,7 +133,7 @@ impl Objective {
             ));
         }
         let grid: Vec<f64> = rows.iter().map(|&i| time[i]).collect();
-        let measured: Vec<Vec<f64>> = campaign
+        let measured: Vec<Vec<f64>> = experiment
             .outputs
             .iter()
             .map(|o| {
@@ -105,39 +144,50 @@ impl Objective {
             })
             .collect();
         let mut weights = Vec::with_capacity(measured.len());
-        for (i, (o, w)) in campaign.outputs.iter().zip(&measured).enumerate() {
+        for (i, (o, w)) in experiment.outputs.iter().zip(&measured).enumerate() {
             weights.push(match o.scale {
                 OutputScale::None => o.weight,
                 OutputScale::Variance => {
                     let var = variance(w);
                     if !(var > 0.0 && (o.weight / var).is_finite()) {
-                        return Err(CampaignError {
-                            file: campaign.source.clone().unwrap_or_default(),
-                            line: None,
-                            field: format!("outputs[{i}] ({})", o.model),
-                            message: format!(
+                        return Err(field_error(
+                            &format!("outputs[{i}] ({})", o.model),
+                            format!(
                                 "scale = \"variance\": column `{}` of {} has variance {var:e} \
                                  over the window [{start}, {stop}] s, nothing to scale by",
                                 o.measured,
                                 measurement.source.display()
                             ),
-                        });
+                        ));
                     }
                     o.weight / var
                 }
             });
         }
-        let inputs = driving_inputs(campaign, measurement, campaign.solver.start_time, stop)?;
+        let inputs = driving_inputs(
+            campaign,
+            experiment,
+            measurement,
+            campaign.solver.start_time,
+            stop,
+            place,
+        )?;
         let mut objective = Self {
             model: campaign.model,
-            base: campaign.base.clone(),
-            free: campaign.free.iter().map(|p| p.index).collect(),
+            name: experiment.name.clone(),
+            base: experiment.base.clone(),
+            free: campaign
+                .free
+                .iter()
+                .map(|p| p.applies_to(&experiment.name).then_some(p.index))
+                .collect(),
             grid,
-            outputs: campaign.outputs.iter().map(|o| o.model_index).collect(),
+            outputs: experiment.outputs.iter().map(|o| o.model_index).collect(),
             weights,
             measured,
             solver: campaign.solver,
             inputs,
+            more: Vec::new(),
             measurement_hash: measurement.content_hash(),
             fingerprint: [0; 32],
         };
@@ -145,19 +195,29 @@ impl Objective {
         Ok(objective)
     }
 
-    /// The same objective with every parameter fixed at `full` (the full parameter vector):
-    /// nothing left free.
+    /// The same objective with every parameter fixed at `full` (the full parameter vector
+    /// of the first experiment; the others keep their own fixed values): nothing left free.
     pub fn fixed_at(&self, full: Vec<f64>) -> Objective {
         let mut o = self.clone();
+        let free = std::mem::take(&mut o.free);
+        for part in &mut o.more {
+            // What the first experiment's vector holds at the shared free positions.
+            for (k, index) in part.free.iter().enumerate() {
+                if let (Some(i), Some(Some(_))) = (index, free.get(k)) {
+                    part.base[*i] = full[*i];
+                }
+            }
+            part.free.clear();
+            part.fingerprint = part.compute_fingerprint();
+        }
         o.base = full;
-        o.free.clear();
         o.fingerprint = o.compute_fingerprint();
         o
     }
 
     /// A hash of everything that changes the value of the objective at a given point: model
     /// and version, fixed parameters, which parameters are free, grid, measured data,
-    /// output mapping, weights and solver settings.
+    /// output mapping, weights and solver settings (and the other experiments').
     pub fn fingerprint(&self) -> [u8; 32] {
         self.fingerprint
     }
@@ -174,11 +234,13 @@ impl Objective {
             }
         };
         let mut fixed = self.base.clone();
-        for &i in &self.free {
+        for &i in self.free.iter().flatten() {
             fixed[i] = 0.0;
         }
         h.series(&fixed);
-        indices(&mut h, &self.free);
+        // A parameter that does not reach this experiment is written as u64::MAX.
+        let free: Vec<usize> = self.free.iter().map(|i| i.unwrap_or(usize::MAX)).collect();
+        indices(&mut h, &free);
         h.series(&self.grid).bytes(&self.measurement_hash);
         indices(&mut h, &self.outputs);
         h.series(&self.weights)
@@ -192,8 +254,17 @@ impl Objective {
                 self.solver.communication_step.unwrap_or(0.0),
             ]);
         }
-        // Inputs likewise: an undriven objective keeps its fingerprint.
+        // Inputs and further experiments likewise: an objective without them keeps its
+        // fingerprint.
         calib_worker::inputs::hash_into(&mut h, &self.named_inputs());
+        if !self.more.is_empty() || !self.name.is_empty() {
+            h.text("experiments")
+                .text(&self.name)
+                .count(self.more.len());
+            for part in &self.more {
+                h.bytes(&part.fingerprint);
+            }
+        }
         h.finish()
     }
 
@@ -202,16 +273,44 @@ impl Objective {
         self.inputs.named(self.model.info())
     }
 
-    /// The full parameter vector with the free parameters set to `free_values`.
+    /// The full parameter vector of this experiment with the free parameters set to
+    /// `free_values` (those of other experiments left out).
     pub fn full_parameters(&self, free_values: &[f64]) -> Vec<f64> {
         let mut full = self.base.clone();
-        for (&i, v) in self.free.iter().zip(free_values) {
-            full[i] = *v;
+        for (i, v) in self.free.iter().zip(free_values) {
+            if let Some(i) = i {
+                full[*i] = *v;
+            }
         }
         full
     }
 
-    /// What points are scored against: grid, outputs, measured series, weights, solver.
+    /// This experiment and the further ones, in order.
+    pub fn experiments(&self) -> impl Iterator<Item = &Objective> {
+        std::iter::once(self).chain(&self.more)
+    }
+
+    /// Each experiment as an objective of its own (over the same points).
+    pub fn parts(&self) -> Vec<Objective> {
+        if self.more.is_empty() {
+            return vec![self.clone()];
+        }
+        let mut first = self.clone();
+        first.more.clear();
+        first.fingerprint = first.compute_fingerprint();
+        std::iter::once(first)
+            .chain(self.more.iter().cloned())
+            .collect()
+    }
+
+    /// How many series are compared over all experiments (the length of
+    /// [`Evaluation::sse`] and of what [`Objective::simulate`] returns).
+    pub fn series_count(&self) -> usize {
+        self.experiments().map(|e| e.outputs.len()).sum()
+    }
+
+    /// What points of this experiment alone are scored against: grid, outputs, measured
+    /// series, weights, solver, inputs.
     pub fn target(&self) -> Target<'_> {
         Target {
             grid: &self.grid,
@@ -224,33 +323,103 @@ impl Objective {
     }
 
     /// Simulate at `free_values` and score against the measurement (the same computation a
-    /// remote worker makes, bit for bit).
+    /// remote worker makes, bit for bit), summed over the experiments.
     pub fn evaluate(&self, free_values: &[f64]) -> Evaluation {
-        scoring::evaluate(
+        let own = scoring::evaluate(
             self.model,
             &self.full_parameters(free_values),
             &self.target(),
-        )
+        );
+        if self.more.is_empty() {
+            return own;
+        }
+        let parts: Vec<Evaluation> = std::iter::once(own)
+            .chain(self.more.iter().map(|part| part.evaluate(free_values)))
+            .collect();
+        self.combine(parts)
     }
 
-    /// The mapped outputs on the grid at `free_values` (one series per output).
+    /// The evaluations of each experiment (in order) as one: the sum of the objectives and
+    /// the series' errors one after another; failed when one failed.
+    pub fn combine(&self, parts: Vec<Evaluation>) -> Evaluation {
+        if let Some(failed) = parts.iter().find(|e| e.failure.is_some()) {
+            let why = failed.failure.clone().unwrap_or_default();
+            return Evaluation::failed(self.series_count(), why);
+        }
+        let objective = parts.iter().map(|e| e.objective).sum();
+        let sse = parts.into_iter().flat_map(|e| e.sse).collect();
+        Evaluation {
+            objective,
+            sse,
+            failure: None,
+        }
+    }
+
+    /// The mapped outputs on the grid at `free_values` (one series per output), of each
+    /// experiment in turn.
     pub fn simulate(&self, free_values: &[f64]) -> Result<Vec<Vec<f64>>, SimulationError> {
-        let params = self.full_parameters(free_values);
-        self.model
-            .simulate_driven(
+        let mut series = Vec::with_capacity(self.series_count());
+        for part in self.experiments() {
+            let params = part.full_parameters(free_values);
+            let t = self.model.simulate_driven(
                 &params,
-                &self.grid,
-                &self.outputs,
-                &self.solver,
-                &self.inputs,
-            )
-            .map(|t| t.values)
+                &part.grid,
+                &part.outputs,
+                &part.solver,
+                &part.inputs,
+            )?;
+            series.extend(t.values);
+        }
+        Ok(series)
     }
 
-    /// Score simulated series (one per output, on the grid).
+    /// Score simulated series (one per output of each experiment in turn, on its grid).
     pub fn score(&self, simulated: &[Vec<f64>]) -> Evaluation {
-        scoring::score(simulated, &self.measured, &self.weights)
+        let mut parts = Vec::with_capacity(1 + self.more.len());
+        let mut from = 0;
+        for part in self.experiments() {
+            let n = part.outputs.len();
+            parts.push(scoring::score(
+                &simulated[from..from + n],
+                &part.measured,
+                &part.weights,
+            ));
+            from += n;
+        }
+        if parts.len() == 1 {
+            return parts.pop().expect("one experiment");
+        }
+        self.combine(parts)
     }
+}
+
+/// The record of a further experiment: the columns it compares and drives.
+fn load_experiment(
+    campaign: &Campaign,
+    experiment: &Experiment,
+    place: &str,
+) -> Result<Measurement, CampaignError> {
+    let mut columns: Vec<&str> = experiment
+        .outputs
+        .iter()
+        .map(|o| o.measured.as_str())
+        .collect();
+    for i in &experiment.inputs {
+        if !columns.contains(&i.measured.as_str()) {
+            columns.push(&i.measured);
+        }
+    }
+    Measurement::load(
+        &experiment.measurement_file,
+        &experiment.time_column,
+        &columns,
+    )
+    .map_err(|e| CampaignError {
+        file: campaign.source.clone().unwrap_or_default(),
+        line: None,
+        field: format!("{place}.file"),
+        message: e.to_string(),
+    })
 }
 
 /// The measured columns mapped to the campaign's inputs, as signals: the whole column (plots
@@ -258,19 +427,21 @@ impl Objective {
 /// `[start, stop]` is refused naming file, column and times.
 fn driving_inputs(
     campaign: &Campaign,
+    experiment: &Experiment,
     measurement: &Measurement,
     start: f64,
     stop: f64,
+    place: &str,
 ) -> Result<Inputs, CampaignError> {
     let time = &measurement.time;
     let (first, last) = (time[0], time[time.len() - 1]);
     let slack = 1e-9 * stop.abs().max(1.0);
-    let mut signals = Vec::with_capacity(campaign.inputs.len());
-    for (i, input) in campaign.inputs.iter().enumerate() {
+    let mut signals = Vec::with_capacity(experiment.inputs.len());
+    for (i, input) in experiment.inputs.iter().enumerate() {
         let error = |message: String| CampaignError {
             file: campaign.source.clone().unwrap_or_default(),
             line: None,
-            field: format!("inputs[{i}] ({})", input.model),
+            field: format!("{place}inputs[{i}] ({})", input.model),
             message,
         };
         let column = measurement.column(&input.measured).ok_or_else(|| {

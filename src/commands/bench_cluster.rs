@@ -38,6 +38,7 @@ fn points(objective: &Objective, n: usize) -> Vec<Vec<f64>> {
             objective
                 .free
                 .iter()
+                .flatten()
                 .map(|&f| objective.base[f] * (1.0 + 1e-3 * i as f64 / n as f64))
                 .collect()
         })
@@ -52,6 +53,7 @@ fn points_from(objective: &Objective, first: usize, n: usize) -> Vec<Vec<f64>> {
             objective
                 .free
                 .iter()
+                .flatten()
                 .map(|&f| objective.base[f] * (1.0 + 1e-9 * i as f64))
                 .collect()
         })

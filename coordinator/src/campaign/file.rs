@@ -10,7 +10,8 @@ use toml::Spanned;
 pub(super) struct CampaignFile {
     pub(super) name: Option<Spanned<String>>,
     pub(super) model: Spanned<ModelSection>,
-    pub(super) measurement: MeasurementSection,
+    /// The one-experiment form's record; or else `[[experiments]]`.
+    pub(super) measurement: Option<MeasurementSection>,
     #[serde(default)]
     pub(super) outputs: Vec<Spanned<OutputEntry>>,
     #[serde(default)]
@@ -22,6 +23,11 @@ pub(super) struct CampaignFile {
     #[serde(default)]
     pub(super) diagnosis: Option<Spanned<DiagnosisSection>>,
     pub(super) window: Option<Spanned<WindowSection>>,
+    /// Disjoint fitted intervals `[[start, stop], ...]`, instead of `[window]`.
+    pub(super) windows: Option<Spanned<Vec<[f64; 2]>>>,
+    /// Several records fitted together with the same parameters.
+    #[serde(default)]
+    pub(super) experiments: Vec<Spanned<ExperimentEntry>>,
     #[serde(default)]
     pub(super) search: Option<Spanned<SearchSection>>,
     #[serde(default)]
@@ -70,6 +76,33 @@ pub(super) struct OutputEntry {
     /// `"none"` (default) or `"variance"`: `k_i` divided by the measured signal's variance
     /// over the window.
     pub(super) scale: Option<Spanned<String>>,
+}
+
+/// One record of several fitted together.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ExperimentEntry {
+    pub(super) name: Spanned<String>,
+    pub(super) file: Spanned<String>,
+    #[serde(default = "default_time_column")]
+    pub(super) time_column: String,
+    /// Where this experiment's plots end (default: its window's stop).
+    pub(super) stop_time: Option<Spanned<f64>>,
+    pub(super) window: Option<Spanned<WindowSection>>,
+    pub(super) windows: Option<Spanned<Vec<[f64; 2]>>>,
+    /// Model values for this experiment alone (a start angle, a set-point).
+    #[serde(default)]
+    pub(super) fixed: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,
+    /// This experiment's inputs (default: the campaign's `[[inputs]]`).
+    #[serde(default)]
+    pub(super) inputs: Vec<Spanned<InputEntry>>,
+    /// This experiment's outputs (default: the campaign's `[[outputs]]`).
+    #[serde(default)]
+    pub(super) outputs: Vec<Spanned<OutputEntry>>,
+    /// Parameters free in this experiment alone (its unknown start angle, a sensor offset
+    /// of one day).
+    #[serde(default)]
+    pub(super) parameters: Vec<Spanned<ParameterEntry>>,
 }
 
 /// A model input driven by a measured column.

@@ -76,6 +76,37 @@ pub struct FreeParameter {
     pub effect: bool,
     /// The scale the optimisers search it on.
     pub scale: Scale,
+    /// The experiment it belongs to when it is free in that one alone (its name is then
+    /// `<parameter>@<experiment>`); `None`: one value for every experiment.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub experiment: Option<String>,
+}
+
+impl FreeParameter {
+    /// Whether it is set in the experiment called `experiment`.
+    pub fn applies_to(&self, experiment: &str) -> bool {
+        self.experiment.as_deref().is_none_or(|e| e == experiment)
+    }
+}
+
+/// One record of a campaign that fits several together: its file, what is compared and
+/// driven, when, and the model values that are its own.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Experiment {
+    pub name: String,
+    pub measurement_file: PathBuf,
+    pub time_column: String,
+    pub outputs: Vec<OutputMapping>,
+    pub inputs: Vec<InputMapping>,
+    /// From the first fitted interval's start to the last one's stop.
+    pub window: (f64, f64),
+    /// The fitted intervals, disjoint, in time order.
+    pub windows: Vec<(f64, f64)>,
+    /// End of its simulated horizon (plots).
+    pub stop_time: f64,
+    /// Its full parameter vector: the campaign's, with its own fixed values and its own
+    /// free parameters at their nominal values (the campaign-wide free ones at theirs).
+    pub base: Vec<f64>,
 }
 
 /// The scale a parameter is searched on, as PEtab's `parameterScale`: starts, simplices,
@@ -175,7 +206,16 @@ pub struct Campaign {
     pub outputs: Vec<OutputMapping>,
     /// Model inputs driven by measured columns of the same file.
     pub inputs: Vec<InputMapping>,
+    /// From the first fitted interval's start to the last one's stop.
     pub window: (f64, f64),
+    /// The fitted intervals, disjoint, in time order (one: the window).
+    pub windows: Vec<(f64, f64)>,
+    /// The name of the first experiment when the campaign lists `[[experiments]]` (its
+    /// record is `measurement_file`, its settings the fields above); empty for the
+    /// one-record form.
+    pub experiment: String,
+    /// The further experiments fitted with the same parameters.
+    pub more: Vec<Experiment>,
     pub search: Search,
     pub solver: SolverOptions,
     pub diagnosis: DiagnosisSettings,
@@ -236,13 +276,34 @@ impl Campaign {
         self.free.iter().map(|p| p.nominal).collect()
     }
 
-    /// The full parameter vector with the free parameters set to `free_values`.
+    /// The full parameter vector of the first experiment with the free parameters set to
+    /// `free_values` (another experiment's own free parameters left out).
     pub fn full_parameters(&self, free_values: &[f64]) -> Vec<f64> {
         let mut full = self.base.clone();
         for (p, v) in self.free.iter().zip(free_values) {
-            full[p.index] = *v;
+            if p.applies_to(&self.experiment) {
+                full[p.index] = *v;
+            }
         }
         full
+    }
+
+    /// Every experiment: the first (from the campaign's own fields), then the others.
+    pub fn experiments(&self) -> Vec<Experiment> {
+        let first = Experiment {
+            name: self.experiment.clone(),
+            measurement_file: self.measurement_file.clone(),
+            time_column: self.time_column.clone(),
+            outputs: self.outputs.clone(),
+            inputs: self.inputs.clone(),
+            window: self.window,
+            windows: self.windows.clone(),
+            stop_time: self.stop_time,
+            base: self.base.clone(),
+        };
+        std::iter::once(first)
+            .chain(self.more.iter().cloned())
+            .collect()
     }
 
     /// A hash of the resolved campaign run on the measurement with content hash
@@ -270,13 +331,41 @@ impl Campaign {
                 .text(o.scale.name());
         }
         // Inputs, when mapped, change what is simulated; a campaign without them keeps the
-        // identity it always had.
-        if !self.inputs.is_empty() {
-            h.text("inputs").count(self.inputs.len());
-            for i in &self.inputs {
-                h.count(i.model_index)
-                    .text(&i.measured)
-                    .text(i.interpolation.as_str());
+        // identity it always had. So do several windows, experiments and parameters free in
+        // one experiment alone.
+        hash_inputs(&mut h, &self.inputs);
+        if self.windows.len() > 1 {
+            h.text("windows").count(self.windows.len());
+            for w in &self.windows {
+                h.series(&[w.0, w.1]);
+            }
+        }
+        if !self.more.is_empty() || !self.experiment.is_empty() {
+            h.text("experiments")
+                .text(&self.experiment)
+                .count(self.more.len());
+            for e in &self.more {
+                h.text(&e.name)
+                    .text(&e.measurement_file.to_string_lossy())
+                    .text(&e.time_column)
+                    .series(&e.base)
+                    .series(&[e.stop_time])
+                    .count(e.windows.len());
+                for w in &e.windows {
+                    h.series(&[w.0, w.1]);
+                }
+                h.count(e.outputs.len());
+                for o in &e.outputs {
+                    h.count(o.model_index)
+                        .text(&o.measured)
+                        .series(&[o.weight])
+                        .text(o.scale.name());
+                }
+                h.count(e.inputs.len());
+                hash_inputs(&mut h, &e.inputs);
+            }
+            for p in &self.free {
+                h.text(p.experiment.as_deref().unwrap_or(""));
             }
         }
         h.count(self.search.methods.len());
@@ -301,6 +390,17 @@ impl Campaign {
             ]);
         }
         h.finish()
+    }
+}
+
+fn hash_inputs(h: &mut ContentHasher, inputs: &[InputMapping]) {
+    if !inputs.is_empty() {
+        h.text("inputs").count(inputs.len());
+        for i in inputs {
+            h.count(i.model_index)
+                .text(&i.measured)
+                .text(i.interpolation.as_str());
+        }
     }
 }
 
@@ -537,6 +637,117 @@ seed = 7
         assert!(e.message.contains("unknown interpolation `cubic`"), "{e}");
         let e = parse(&format!("{GOOD}{input}{input}")).unwrap_err();
         assert!(e.message.contains("driven twice"), "{e}");
+    }
+
+    const EXPERIMENTS: &str = r#"
+name = "two"
+[model]
+name = "furuta"
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm"
+[[parameters]]
+name = "armFriction"
+min = 0.0
+max = 0.9
+[[experiments]]
+name = "swing"
+file = "swing.csv"
+window = { start = 0.0, stop = 20.0 }
+fixed = { theta0 = 0.5 }
+[[experiments]]
+name = "driven"
+file = "/data/driven.csv"
+time_column = "t"
+windows = [[0.0, 1.0], [2.0, 10.0]]
+inputs = [ { model = "armTorque", measured = "u" } ]
+[[experiments.parameters]]
+name = "theta0"
+nominal = 1.0
+min = 0.0
+max = 3.2
+"#;
+
+    #[test]
+    fn experiments_share_the_free_parameters_and_keep_their_own() {
+        let c = parse(EXPERIMENTS).unwrap();
+        assert_eq!(c.experiment, "swing");
+        assert_eq!(c.measurement_file, Path::new("/campaigns/swing.csv"));
+        assert_eq!(c.windows, vec![(0.0, 20.0)]);
+        let theta0 = c.model.info().parameter_index("theta0").unwrap();
+        assert_eq!(c.base[theta0], 0.5);
+        assert!(c.inputs.is_empty());
+        let driven = &c.more[0];
+        assert_eq!(driven.name, "driven");
+        assert_eq!(driven.windows, vec![(0.0, 1.0), (2.0, 10.0)]);
+        assert_eq!(driven.window, (0.0, 10.0));
+        assert_eq!(driven.inputs[0].measured, "u");
+        assert_eq!(driven.outputs[0].measured, "arm");
+        assert_eq!(driven.base[theta0], 1.0);
+        let names: Vec<&str> = c.free.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names, ["armFriction", "theta0@driven"]);
+        // The first experiment's vector leaves the other's own parameter alone.
+        assert_eq!(c.full_parameters(&[0.1, 2.0])[theta0], 0.5);
+
+        for (from, to, field) in [
+            (
+                "name = \"driven\"",
+                "name = \"swing\"",
+                "experiments[1] (swing)",
+            ),
+            (
+                "name = \"theta0\"\nnominal = 1.0\nmin = 0.0\nmax = 3.2",
+                "name = \"armFriction\"\nmin = 0.0\nmax = 0.5",
+                "experiments[1] (driven).parameters[0] (armFriction)",
+            ),
+            (
+                "nominal = 1.0",
+                "nominal = 5.0",
+                "experiments[1] (driven).parameters[0] (theta0)",
+            ),
+            (
+                "[2.0, 10.0]]",
+                "[0.5, 10.0]]",
+                "experiments[1] (driven).windows[1]",
+            ),
+            (
+                "theta0 = 0.5",
+                "thetaO = 0.5",
+                "experiments[0] (swing).fixed.thetaO",
+            ),
+            (
+                "model = \"armTorque\"",
+                "model = \"armTorq\"",
+                "experiments[1] (driven).inputs[0] (armTorq)",
+            ),
+        ] {
+            let e = parse(&EXPERIMENTS.replacen(from, to, 1)).unwrap_err();
+            assert_eq!(e.field, field, "{to}: {e}");
+            assert!(e.line.is_some(), "{e}");
+        }
+        let both = format!("{EXPERIMENTS}[measurement]\nfile = \"m.csv\"\n");
+        let e = parse(&both).unwrap_err();
+        assert!(e.message.contains("not both"), "{e}");
+    }
+
+    #[test]
+    fn disjoint_windows_in_the_one_record_form() {
+        let c = parse(
+            &GOOD
+                .replacen("[window]\nstart = 0.0\nstop = 40.0", "", 1)
+                .replacen(
+                    "name = \"clean\"",
+                    "name = \"clean\"\nwindows = [[0.0, 5.0], [10.0, 40.0]]",
+                    1,
+                ),
+        )
+        .unwrap();
+        assert_eq!(c.windows, vec![(0.0, 5.0), (10.0, 40.0)]);
+        assert_eq!(c.window, (0.0, 40.0));
+        assert_ne!(
+            c.identity(&[0; 32]),
+            parse(GOOD).unwrap().identity(&[0; 32])
+        );
     }
 
     #[test]

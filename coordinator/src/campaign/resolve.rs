@@ -7,8 +7,8 @@ use super::file::{
     WindowSection,
 };
 use super::{
-    Campaign, CampaignError, DiagnosisSettings, FreeParameter, InputMapping, Interpolation,
-    OutputMapping, OutputScale, Scale, Search,
+    Campaign, CampaignError, DiagnosisSettings, Experiment, FreeParameter, InputMapping,
+    Interpolation, OutputMapping, OutputScale, Scale, Search,
 };
 use crate::limits;
 use calib_worker::fmu::{self, Interface};
@@ -66,25 +66,211 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
     let info = model.info();
 
     let (mut base, fixed) = resolve_fixed(&model_section, info, at)?;
-    let free = resolve_free(&file.parameters, &file.effects, &fixed, &mut base, info, at)?;
-    let outputs = resolve_outputs(&file.outputs, info, at)?;
-    let inputs = resolve_inputs(&file.inputs, info, at)?;
-    let window = resolve_window(file.window, at)?;
-    let stop_time = resolve_stop_time(&model_section, model_span, window.1, at)?;
+    let shared_free = resolve_free(
+        &file.parameters,
+        &file.effects,
+        &fixed,
+        &mut base,
+        info,
+        "",
+        at,
+    );
+    let mut free = match shared_free {
+        // With several experiments, every free parameter may be some experiment's own.
+        Err(_) if !file.experiments.is_empty() && file.parameters.is_empty() => Vec::new(),
+        other => other?,
+    };
+    let mut experiments = Vec::new();
+    if file.experiments.is_empty() {
+        let Some(measurement) = file.measurement else {
+            return at.unlocated(
+                "measurement",
+                "missing [measurement] with the record's `file` (or [[experiments]], one \
+                 per record)",
+            );
+        };
+        let outputs = resolve_outputs(&file.outputs, info, "outputs", at)?;
+        let inputs = resolve_inputs(&file.inputs, info, "inputs", at)?;
+        let windows = resolve_windows(file.window, file.windows, "", at)?;
+        let stop_time = resolve_stop_time(
+            model_section.stop_time.as_ref(),
+            "model.stop_time",
+            model_span.clone(),
+            windows[windows.len() - 1].1,
+            at,
+        )?;
+        experiments.push(Experiment {
+            name: String::new(),
+            measurement_file: relative_to(at, measurement.file.get_ref()),
+            time_column: measurement.time_column,
+            outputs,
+            inputs,
+            window: hull(&windows),
+            windows,
+            stop_time,
+            base: base.clone(),
+        });
+    } else {
+        if let Some(m) = &file.measurement {
+            return at.error(
+                m.file.span(),
+                "measurement",
+                "give one [measurement] or several [[experiments]], not both".into(),
+            );
+        }
+        if let Some(w) = &file.window {
+            return at.error(
+                w.span(),
+                "window",
+                "with [[experiments]], each experiment has its own `window`".into(),
+            );
+        }
+        if let Some(w) = &file.windows {
+            return at.error(
+                w.span(),
+                "windows",
+                "with [[experiments]], each experiment has its own `windows`".into(),
+            );
+        }
+        if let Err(e) = limits::at_most(file.experiments.len(), MAX_EXPERIMENTS, "experiments") {
+            return at.error(file.experiments[MAX_EXPERIMENTS].span(), "experiments", e);
+        }
+        for (k, entry) in file.experiments.into_iter().enumerate() {
+            let span = entry.span();
+            let e = entry.into_inner();
+            let name = e.name.get_ref().clone();
+            let here = format!("experiments[{k}] ({name})");
+            if name.is_empty() || name.contains('@') || name.len() > 64 {
+                return at.error(
+                    e.name.span(),
+                    &format!("experiments[{k}].name"),
+                    "an experiment's name is 1 to 64 characters, without `@`".into(),
+                );
+            }
+            if experiments.iter().any(|x: &Experiment| x.name == name) {
+                return at.error(
+                    e.name.span(),
+                    &here,
+                    "another experiment has this name".into(),
+                );
+            }
+            let outputs = if e.outputs.is_empty() {
+                resolve_outputs(&file.outputs, info, "outputs", at)?
+            } else {
+                resolve_outputs(&e.outputs, info, &format!("{here}.outputs"), at)?
+            };
+            let inputs = if e.inputs.is_empty() {
+                resolve_inputs(&file.inputs, info, "inputs", at)?
+            } else {
+                resolve_inputs(&e.inputs, info, &format!("{here}.inputs"), at)?
+            };
+            if e.window.is_none() && e.windows.is_none() {
+                return at.error(
+                    span,
+                    &here,
+                    "needs a `window = { start = ..., stop = ... }` or `windows = [[a, b], ...]`"
+                        .into(),
+                );
+            }
+            let windows = resolve_windows(e.window, e.windows, &format!("{here}."), at)?;
+            let stop_time = resolve_stop_time(
+                e.stop_time.as_ref(),
+                &format!("{here}.stop_time"),
+                span.clone(),
+                windows[windows.len() - 1].1,
+                at,
+            )?;
+            let mut own = base.clone();
+            let mut own_fixed = fixed.clone();
+            for (pname, value) in &e.fixed {
+                let field = format!("{here}.fixed.{}", pname.get_ref());
+                let index = match validate::parameter(info, pname.get_ref()) {
+                    Ok(index) => index,
+                    Err(err) => return at.error(pname.span(), &field, err.message),
+                };
+                if free.iter().any(|f| f.index == index) {
+                    return at.error(
+                        pname.span(),
+                        &field,
+                        "is free in the campaign and fixed here: fix it in every experiment \
+                         or free it in each"
+                            .into(),
+                    );
+                }
+                let v = *value.get_ref();
+                if let Err(err) = validate::parameter_value(info, index, v) {
+                    return at.error(value.span(), &field, err.message);
+                }
+                own[index] = v;
+                own_fixed.push(index);
+            }
+            let mut own_free = resolve_free(
+                &e.parameters,
+                &[],
+                &own_fixed,
+                &mut own,
+                info,
+                &format!("{here}."),
+                at,
+            )
+            .or_else(|err| {
+                if e.parameters.is_empty() {
+                    Ok(Vec::new())
+                } else {
+                    Err(err)
+                }
+            })?;
+            for (i, p) in own_free.iter_mut().enumerate() {
+                if free
+                    .iter()
+                    .any(|f| f.index == p.index && f.experiment.is_none())
+                {
+                    return at.error(
+                        e.parameters[i].span(),
+                        &format!("{here}.parameters[{i}] ({})", p.name),
+                        "is free for every experiment already".into(),
+                    );
+                }
+                p.name = format!("{}@{name}", p.name);
+                p.experiment = Some(name.clone());
+            }
+            free.extend(own_free);
+            experiments.push(Experiment {
+                name,
+                measurement_file: relative_to(at, e.file.get_ref()),
+                time_column: e.time_column,
+                outputs,
+                inputs,
+                window: hull(&windows),
+                windows,
+                stop_time,
+                base: own,
+            });
+        }
+        if let Err(e) = limits::at_most(
+            free.len(),
+            limits::MAX_FREE_PARAMETERS,
+            "free parameters and effects",
+        ) {
+            return at.unlocated("parameters", &e);
+        }
+        if free.is_empty() {
+            return at.unlocated(
+                "parameters",
+                "nothing to calibrate: add at least one [[parameters]] entry, for all \
+                 experiments or in one",
+            );
+        }
+    }
+    let first = experiments.remove(0);
     let search = resolve_search(file.search, free.len(), at)?;
     let mut solver = resolve_solver(file.solver, model, at)?;
-    resolve_time_settings(&model_section, model, window.0, &mut solver, at)?;
+    let earliest = std::iter::once(&first)
+        .chain(&experiments)
+        .map(|e| e.window.0)
+        .fold(f64::INFINITY, f64::min);
+    resolve_time_settings(&model_section, model, earliest, &mut solver, at)?;
     let diagnosis = resolve_diagnosis(file.diagnosis, info, at)?;
-
-    let measurement_path = PathBuf::from(file.measurement.file.get_ref());
-    let measurement_file = if measurement_path.is_absolute() {
-        measurement_path
-    } else {
-        at.path
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join(measurement_path)
-    };
     let name = resolve_name(file.name, at)?;
 
     Ok(Campaign {
@@ -92,18 +278,39 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
         source: Some(at.path.to_path_buf()),
         spec: at.text.to_string(),
         model,
-        stop_time,
-        base,
+        stop_time: first.stop_time,
+        base: first.base,
         free,
-        measurement_file,
-        time_column: file.measurement.time_column,
-        outputs,
-        inputs,
-        window,
+        measurement_file: first.measurement_file,
+        time_column: first.time_column,
+        outputs: first.outputs,
+        inputs: first.inputs,
+        window: first.window,
+        windows: first.windows,
+        experiment: first.name,
+        more: experiments,
         search,
         solver,
         diagnosis,
     })
+}
+
+/// Most experiments one campaign fits together.
+pub const MAX_EXPERIMENTS: usize = 64;
+
+/// A path written in the campaign, relative to the campaign file's folder unless absolute.
+fn relative_to(at: &Locator, written: &str) -> PathBuf {
+    let path = PathBuf::from(written);
+    if path.is_absolute() {
+        path
+    } else {
+        at.path.parent().unwrap_or(Path::new(".")).join(path)
+    }
+}
+
+/// The span from the first window's start to the last one's stop.
+fn hull(windows: &[(f64, f64)]) -> (f64, f64) {
+    (windows[0].0, windows[windows.len() - 1].1)
 }
 
 /// The campaign's name (the file's stem when it names none), held to
@@ -245,6 +452,7 @@ fn resolve_free(
     fixed: &[usize],
     base: &mut [f64],
     info: &ModelInfo,
+    prefix: &str,
     at: &Locator,
 ) -> Result<Vec<FreeParameter>, CampaignError> {
     let mut free: Vec<FreeParameter> = Vec::new();
@@ -259,7 +467,7 @@ fn resolve_free(
         let span = entry.span();
         let p = entry.get_ref();
         let name = p.name.get_ref();
-        let field = format!("{section}[{i}] ({name})");
+        let field = format!("{prefix}{section}[{i}] ({name})");
         if is_effect {
             if let Err(e) = validate::effect(info, name) {
                 return at.error(p.name.span(), &field, e.message);
@@ -316,6 +524,7 @@ fn resolve_free(
             max: p.max,
             effect: is_effect,
             scale: p.scale,
+            experiment: None,
         });
     }
     if free.is_empty() {
@@ -330,11 +539,12 @@ fn resolve_free(
 fn resolve_outputs(
     entries: &[Spanned<OutputEntry>],
     info: &ModelInfo,
+    list: &str,
     at: &Locator,
 ) -> Result<Vec<OutputMapping>, CampaignError> {
     if entries.is_empty() {
         return at.unlocated(
-            "outputs",
+            list,
             "no output to compare: add at least one [[outputs]] entry",
         );
     }
@@ -342,7 +552,7 @@ fn resolve_outputs(
     for (i, entry) in entries.iter().enumerate() {
         let o = entry.get_ref();
         let output = o.model.get_ref();
-        let field = format!("outputs[{i}] ({output})");
+        let field = format!("{list}[{i}] ({output})");
         let model_index = match validate::output(info, output) {
             Ok(index) => index,
             Err(e) => return at.error(o.model.span(), &field, e.message),
@@ -417,13 +627,14 @@ fn resolve_outputs(
 fn resolve_inputs(
     entries: &[Spanned<InputEntry>],
     info: &ModelInfo,
+    list: &str,
     at: &Locator,
 ) -> Result<Vec<InputMapping>, CampaignError> {
     let mut inputs: Vec<InputMapping> = Vec::new();
     for (i, entry) in entries.iter().enumerate() {
         let e = entry.get_ref();
         let input = e.model.get_ref();
-        let field = format!("inputs[{i}] ({input})");
+        let field = format!("{list}[{i}] ({input})");
         let model_index = match validate::input(info, input) {
             Ok(index) => index,
             Err(err) => return at.error(e.model.span(), &field, err.message),
@@ -455,41 +666,83 @@ fn resolve_inputs(
     Ok(inputs)
 }
 
-fn resolve_window(
+/// The fitted intervals: one `window` table or a `windows` list of disjoint `[start, stop]`
+/// pairs in increasing order (`prefix` places the keys, e.g. "experiments[1] (swing).").
+fn resolve_windows(
     window: Option<Spanned<WindowSection>>,
+    windows: Option<Spanned<Vec<[f64; 2]>>>,
+    prefix: &str,
     at: &Locator,
-) -> Result<(f64, f64), CampaignError> {
-    let Some(window) = window else {
-        return at.unlocated(
-            "window",
-            "missing [window] with `start` and `stop` (seconds)",
-        );
+) -> Result<Vec<(f64, f64)>, CampaignError> {
+    let check = |start: f64, stop: f64, span, field: &str| {
+        if !start.is_finite() || !stop.is_finite() || start < 0.0 || start >= stop {
+            return at.error(
+                span,
+                field,
+                format!("start ({start}) must be ≥ 0 and below stop ({stop})"),
+            );
+        }
+        Ok(())
     };
-    let (start, stop) = (window.get_ref().start, window.get_ref().stop);
-    if !start.is_finite() || !stop.is_finite() || start < 0.0 || start >= stop {
-        return at.error(
-            window.span(),
-            "window",
-            format!("start ({start}) must be ≥ 0 and below stop ({stop})"),
-        );
+    match (window, windows) {
+        (Some(w), None) => {
+            let (start, stop) = (w.get_ref().start, w.get_ref().stop);
+            check(start, stop, w.span(), &format!("{prefix}window"))?;
+            Ok(vec![(start, stop)])
+        }
+        (None, Some(list)) => {
+            let field = format!("{prefix}windows");
+            let span = list.span();
+            let list = list.into_inner();
+            if list.is_empty() {
+                return at.error(span, &field, "lists no interval".into());
+            }
+            let mut out: Vec<(f64, f64)> = Vec::with_capacity(list.len());
+            for (k, [start, stop]) in list.into_iter().enumerate() {
+                check(start, stop, span.clone(), &format!("{field}[{k}]"))?;
+                if let Some(&(_, before)) = out.last() {
+                    if start < before {
+                        return at.error(
+                            span,
+                            &format!("{field}[{k}]"),
+                            format!(
+                                "[{start}, {stop}] starts before the previous interval ends \
+                                 ({before}): list disjoint intervals in time order"
+                            ),
+                        );
+                    }
+                }
+                out.push((start, stop));
+            }
+            Ok(out)
+        }
+        (Some(w), Some(_)) => at.error(
+            w.span(),
+            &format!("{prefix}window"),
+            "give `window` or `windows`, not both".into(),
+        ),
+        (None, None) => at.unlocated(
+            &format!("{prefix}window"),
+            "missing [window] with `start` and `stop` (seconds), or `windows = [[start, stop], \
+             ...]`",
+        ),
     }
-    Ok((start, stop))
 }
 
-/// End of the simulated horizon: the model section's `stop_time`, or the window's stop.
 fn resolve_stop_time(
-    section: &ModelSection,
-    model_span: std::ops::Range<usize>,
+    stop_time: Option<&Spanned<f64>>,
+    field: &str,
+    section_span: std::ops::Range<usize>,
     window_stop: f64,
     at: &Locator,
 ) -> Result<f64, CampaignError> {
-    let stop_time = match &section.stop_time {
+    let stop_time = match stop_time {
         Some(t) => {
             let v = *t.get_ref();
             if !v.is_finite() || v < window_stop {
                 return at.error(
                     t.span(),
-                    "model.stop_time",
+                    field,
                     format!("{v} must be ≥ the window's stop ({window_stop})"),
                 );
             }
@@ -498,7 +751,7 @@ fn resolve_stop_time(
         None => window_stop,
     };
     if let Err(e) = validate::stop_time(stop_time) {
-        return at.error(model_span, "model.stop_time", e.message);
+        return at.error(section_span, field, e.message);
     }
     Ok(stop_time)
 }

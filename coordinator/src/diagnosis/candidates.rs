@@ -37,6 +37,7 @@ pub fn candidate_effects(campaign: &Campaign) -> Vec<FreeParameter> {
                 max: e.max,
                 effect: true,
                 scale: crate::campaign::Scale::Lin,
+                experiment: None,
             })
         })
         .collect()

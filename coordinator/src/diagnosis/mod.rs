@@ -50,7 +50,7 @@ pub use window::{windows, HOLDOUT_FRACTION};
 
 use crate::calibration::{calibrate, load_measurement};
 use crate::campaign::{Campaign, FreeParameter};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::evaluator::{Evaluator, Simulator};
 use crate::measurement::Measurement;
 use crate::objective::Objective;
@@ -173,6 +173,13 @@ pub fn diagnose_with_store<E>(
 where
     E: Evaluator + Simulator,
 {
+    if !campaign.more.is_empty() {
+        return Err(Error::InvalidRequest(format!(
+            "the diagnosis takes one record: this campaign fits {} experiments together; \
+             diagnose each experiment's record in a campaign of its own",
+            1 + campaign.more.len()
+        )));
+    }
     let stored = StoredEngine::new(engine, store);
     let outcome = diagnose_on(campaign, &stored, progress);
     if let Some(e) = stored.error() {

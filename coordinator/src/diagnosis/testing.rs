@@ -43,6 +43,7 @@ pub fn fit(params: &[(&str, f64, f64, f64, f64, bool)]) -> Fit {
                 max,
                 effect,
                 scale: crate::campaign::Scale::Lin,
+                experiment: None,
             })
             .collect(),
         residual_series: Vec::new(),

@@ -21,10 +21,13 @@ pub struct WorkerStatus {
     pub queue_bound: usize,
 }
 
-/// An objective in the form workers take it, built once per objective.
+/// An objective of one experiment in the form workers take it, built once per objective.
 pub struct WireObjective {
     /// Everything but the points and the measurement.
     pub template: proto::EvaluateRequest,
+    /// The entries of a point this experiment's free parameters take (the others belong
+    /// to other experiments).
+    pub uses: Vec<usize>,
     pub measurement: proto::Measurement,
     pub outputs: usize,
     /// The archive of an FMU model, uploaded to a worker that lacks it.
@@ -77,6 +80,7 @@ impl WireObjective {
             free_parameters: objective
                 .free
                 .iter()
+                .flatten()
                 .map(|&i| info.name_at(i).to_string())
                 .collect(),
             outputs: objective
@@ -112,10 +116,21 @@ impl WireObjective {
         };
         Self {
             template,
+            uses: (0..objective.free.len())
+                .filter(|&k| objective.free[k].is_some())
+                .collect(),
             measurement,
             outputs: objective.outputs.len(),
             fmu,
         }
+    }
+
+    /// The values of `point` this experiment's free parameters take.
+    pub fn project(&self, point: Vec<f64>) -> Vec<f64> {
+        if self.uses.len() == point.len() {
+            return point;
+        }
+        self.uses.iter().map(|&k| point[k]).collect()
     }
 }
 
@@ -142,7 +157,7 @@ pub struct WireSimulation {
     names: Vec<String>,
     /// The full parameter vector and where the free entries go, as in the objective.
     base: Vec<f64>,
-    free: Vec<usize>,
+    free: Vec<Option<usize>>,
 }
 
 impl WireSimulation {
@@ -177,8 +192,10 @@ impl WireSimulation {
     /// The request for the free parameters at `point`.
     fn request(&self, point: &[f64]) -> proto::SimulateRequest {
         let mut full = self.base.clone();
-        for (&i, &value) in self.free.iter().zip(point) {
-            full[i] = value;
+        for (i, &value) in self.free.iter().zip(point) {
+            if let Some(i) = i {
+                full[*i] = value;
+            }
         }
         let mut request = self.template.clone();
         request.parameters = self
@@ -274,7 +291,9 @@ impl WorkerClient {
         let mut message = objective.template.clone();
         message.points = points
             .into_iter()
-            .map(|values| proto::Point { values })
+            .map(|values| proto::Point {
+                values: objective.project(values),
+            })
             .collect();
         // At most one FMU upload and one measurement upload, in whichever order they are
         // asked for.

@@ -72,6 +72,38 @@ impl GrpcEvaluator {
     }
 }
 
+impl GrpcEvaluator {
+    /// Evaluate an objective of several experiments: each experiment's batch sent as its
+    /// own (side by side), the answers combined point by point.
+    fn evaluate_experiments(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        let parts = objective.parts();
+        let answers: Vec<Result<Vec<Evaluation>, Fault>> = std::thread::scope(|scope| {
+            let running: Vec<_> = parts
+                .iter()
+                .map(|part| scope.spawn(move || self.evaluate(part, points)))
+                .collect();
+            running
+                .into_iter()
+                .map(|r| r.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
+        let mut answers = answers.into_iter().collect::<Result<Vec<_>, Fault>>()?;
+        Ok((0..points.len())
+            .map(|i| {
+                let each = answers
+                    .iter_mut()
+                    .map(|a| std::mem::replace(&mut a[i], Evaluation::failed(0, String::new())))
+                    .collect();
+                objective.combine(each)
+            })
+            .collect())
+    }
+}
+
 impl Evaluator for GrpcEvaluator {
     fn evaluate(
         &self,
@@ -80,6 +112,9 @@ impl Evaluator for GrpcEvaluator {
     ) -> Result<Vec<Evaluation>, Fault> {
         if points.is_empty() {
             return Ok(Vec::new());
+        }
+        if !objective.more.is_empty() {
+            return self.evaluate_experiments(objective, points);
         }
         // Put in wire form before the round: whichever caller leads it finds it by key.
         self.wire(objective);
@@ -126,9 +161,22 @@ impl Simulator for GrpcEvaluator {
         if points.is_empty() {
             return Ok(Vec::new());
         }
-        let wire = Arc::new(WireSimulation::new(objective));
-        self.runtime
-            .block_on(dispatch(self.pool.clone(), wire, points.to_vec()))
+        // One experiment after another; a point's outputs are those of each in turn.
+        let mut outputs: Vec<Outputs> = vec![Ok(Vec::new()); points.len()];
+        for part in objective.parts() {
+            let wire = Arc::new(WireSimulation::new(&part));
+            let answers =
+                self.runtime
+                    .block_on(dispatch(self.pool.clone(), wire, points.to_vec()))?;
+            for (all, answer) in outputs.iter_mut().zip(answers) {
+                match (all.as_mut(), answer) {
+                    (Ok(series), Ok(more)) => series.extend(more),
+                    (Ok(_), Err(why)) => *all = Err(why),
+                    (Err(_), _) => {}
+                }
+            }
+        }
+        Ok(outputs)
     }
 }
 

@@ -409,6 +409,7 @@ mod tests {
             max: 1.0,
             effect: false,
             scale: Scale::Lin,
+            experiment: None,
         };
         UnitBox::new(&[free(0), free(1)])
     }

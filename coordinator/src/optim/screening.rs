@@ -186,6 +186,7 @@ mod tests {
             max,
             effect: false,
             scale: crate::campaign::Scale::Lin,
+            experiment: None,
         };
         let free = [p(0.0, 0.012, 0.9), p(0.0, 0.5, 0.9), p(0.1, 0.12, 0.9)];
         let space = UnitBox::new(&free);

@@ -141,6 +141,7 @@ mod tests {
             max,
             effect: false,
             scale: Scale::Lin,
+            experiment: None,
         }
     }
 
@@ -165,6 +166,7 @@ mod tests {
     fn a_log10_parameter_is_searched_on_the_scale_of_its_logarithm() {
         let p = FreeParameter {
             scale: Scale::Log10,
+            experiment: None,
             ..free(1e-4, 1.0)
         };
         let b = UnitBox::new(&[p]);

@@ -145,6 +145,7 @@ mod tests {
             max,
             effect: false,
             scale: crate::campaign::Scale::Lin,
+            experiment: None,
         }
     }
 

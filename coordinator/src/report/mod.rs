@@ -99,7 +99,43 @@ pub fn result_json(c: &Calibration) -> Value {
         })
         .collect();
     let evaluations = c.evaluations() as u64;
-    json!({
+    // Each experiment's share of the best fit, when the campaign fits several records.
+    let experiments: Vec<Value> = if c.objective.more.is_empty() && c.objective.name.is_empty() {
+        Vec::new()
+    } else {
+        let mut from = 0;
+        c.campaign
+            .experiments()
+            .iter()
+            .zip(c.objective.experiments())
+            .map(|(e, part)| {
+                let n = part.outputs.len();
+                let sse = &c.best_evaluation.sse[from..(from + n).min(c.best_evaluation.sse.len())];
+                from += n;
+                let samples = part.grid.len() as f64;
+                let by_output = |f: &dyn Fn(f64) -> f64| {
+                    Value::Object(
+                        e.outputs
+                            .iter()
+                            .zip(sse)
+                            .map(|(o, v)| (o.model.clone(), json!(f(*v))))
+                            .collect(),
+                    )
+                };
+                json!({
+                    "name": e.name,
+                    "measurement": e.measurement_file.display().to_string(),
+                    "windows": e.windows.iter().map(|w| json!([w.0, w.1])).collect::<Vec<_>>(),
+                    "samples": part.grid.len(),
+                    "inputs": e.inputs.iter().map(|i| json!({"model": i.model, "measured": i.measured, "interpolation": i.interpolation.as_str()})).collect::<Vec<_>>(),
+                    "sse": by_output(&|v| v),
+                    "rms": by_output(&|v| (v / samples).sqrt()),
+                    "objective": part.weights.iter().zip(sse).map(|(k, s)| k * s).sum::<f64>(),
+                })
+            })
+            .collect()
+    };
+    let mut result = json!({
         "campaign": c.campaign.name,
         "model": c.campaign.model.info().name,
         "model_version": c.campaign.model.info().version,
@@ -125,7 +161,22 @@ pub fn result_json(c: &Calibration) -> Value {
         "runs_at_best": at_best,
         "spread": { "runs_within_1_percent": agreeing.len(), "parameters": spread },
         "elapsed_seconds": c.elapsed.as_secs_f64(),
-    })
+    });
+    if !c.campaign.inputs.is_empty() {
+        result["inputs"] = json!(c.campaign.inputs);
+    }
+    if c.campaign.windows.len() > 1 {
+        result["window"]["windows"] = json!(c
+            .campaign
+            .windows
+            .iter()
+            .map(|w| json!([w.0, w.1]))
+            .collect::<Vec<_>>());
+    }
+    if !experiments.is_empty() {
+        result["experiments"] = Value::Array(experiments);
+    }
+    result
 }
 
 /// Write `result.json` and one plot per output into `dir`; the paths written.

@@ -154,69 +154,129 @@ fn simulated_span(time: &[f64], start: f64, stop: f64) -> Vec<usize> {
         .collect()
 }
 
-/// One plot per output: measured, nominal model, calibrated model.
+/// One plot per experiment and output: measured, nominal model, calibrated model; and one
+/// per driven input, the signal the model was given. A campaign of one record names its
+/// plots after the outputs (`armJoint.phi.svg`), one of several experiments after the
+/// experiment too (`swing.armJoint.phi.svg`, `driven.input.armTorque.svg`).
 pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     let campaign = &c.campaign;
     let info = campaign.model.info();
     // The curves cover what is simulated: from the start time (an FMU's may be past 0).
     let start = campaign.solver.start_time;
-    let grid = uniform_grid(start, campaign.stop_time, CURVE_POINTS);
-    let outputs: Vec<usize> = campaign.outputs.iter().map(|o| o.model_index).collect();
-    let simulate = |free: &[f64]| {
-        campaign
-            .model
-            .simulate(
-                &campaign.full_parameters(free),
-                &grid,
-                &outputs,
-                &campaign.solver,
-            )
-            .map(|t| t.values)
-            .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; outputs.len()])
-    };
-    let nominal = simulate(&campaign.nominal());
-    let calibrated = simulate(&c.best_run().point);
-    let shown = simulated_span(&c.measurement.time, start, campaign.stop_time);
-    let measured_time: Vec<f64> = shown.iter().map(|&i| c.measurement.time[i]).collect();
+    let several = !campaign.more.is_empty() || !campaign.experiment.is_empty();
     let mut written = Vec::new();
-    for (k, o) in campaign.outputs.iter().enumerate() {
-        let column = c.measurement.column(&o.measured).unwrap_or(&[]);
-        let measured: Vec<f64> = shown
-            .iter()
-            .filter_map(|&i| column.get(i).copied())
-            .collect();
-        let unit = &info.outputs[o.model_index].unit;
-        let path = dir.join(format!("{}.svg", sanitize(&o.model)));
-        time_plot(
-            &path,
-            &format!("{}: {} vs measured {}", campaign.name, o.model, o.measured),
-            &format!("{} [{unit}]", o.model),
-            &[
-                Series {
-                    label: "measured",
-                    time: &measured_time,
-                    values: &measured,
-                    color: RGBColor(120, 120, 120),
-                    width: 1,
-                },
-                Series {
-                    label: "nominal",
+    for (k, (experiment, part)) in campaign
+        .experiments()
+        .into_iter()
+        .zip(c.objective.experiments())
+        .enumerate()
+    {
+        let loaded;
+        let measurement = if k == 0 {
+            &c.measurement
+        } else {
+            let columns: Vec<&str> = experiment
+                .outputs
+                .iter()
+                .map(|o| o.measured.as_str())
+                .collect();
+            loaded = crate::measurement::Measurement::load(
+                &experiment.measurement_file,
+                &experiment.time_column,
+                &columns,
+            )?;
+            &loaded
+        };
+        let prefix = if several {
+            format!("{}.", sanitize(&experiment.name))
+        } else {
+            String::new()
+        };
+        let title = if several {
+            format!("{} ({})", campaign.name, experiment.name)
+        } else {
+            campaign.name.clone()
+        };
+        let grid = uniform_grid(start, experiment.stop_time, CURVE_POINTS);
+        let simulate = |free: &[f64]| {
+            campaign
+                .model
+                .simulate_driven(
+                    &part.full_parameters(free),
+                    &grid,
+                    &part.outputs,
+                    &part.solver,
+                    &part.inputs,
+                )
+                .map(|t| t.values)
+                .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; part.outputs.len()])
+        };
+        let nominal = simulate(&campaign.nominal());
+        let calibrated = simulate(&c.best_run().point);
+        let shown = simulated_span(&measurement.time, start, experiment.stop_time);
+        let measured_time: Vec<f64> = shown.iter().map(|&i| measurement.time[i]).collect();
+        for (j, o) in experiment.outputs.iter().enumerate() {
+            let column = measurement.column(&o.measured).unwrap_or(&[]);
+            let measured: Vec<f64> = shown
+                .iter()
+                .filter_map(|&i| column.get(i).copied())
+                .collect();
+            let unit = &info.outputs[o.model_index].unit;
+            let path = dir.join(format!("{prefix}{}.svg", sanitize(&o.model)));
+            time_plot(
+                &path,
+                &format!("{title}: {} vs measured {}", o.model, o.measured),
+                &format!("{} [{unit}]", o.model),
+                &[
+                    Series {
+                        label: "measured",
+                        time: &measured_time,
+                        values: &measured,
+                        color: RGBColor(120, 120, 120),
+                        width: 1,
+                    },
+                    Series {
+                        label: "nominal",
+                        time: &grid,
+                        values: &nominal[j],
+                        color: RGBColor(220, 50, 47),
+                        width: 1,
+                    },
+                    Series {
+                        label: "calibrated",
+                        time: &grid,
+                        values: &calibrated[j],
+                        color: RGBColor(38, 139, 210),
+                        width: 2,
+                    },
+                ],
+                Some(experiment.window),
+            )?;
+            written.push(path);
+        }
+        for signal in &part.inputs.signals {
+            let spec = &info.inputs[signal.input];
+            let values: Vec<f64> = grid.iter().map(|&t| signal.at(t)).collect();
+            let path = dir.join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
+            time_plot(
+                &path,
+                &format!(
+                    "{title}: input {} ({})",
+                    spec.name,
+                    signal.interpolation.as_str()
+                ),
+                &format!("{} [{}]", spec.name, spec.unit),
+                &[Series {
+                    label: "as the model is driven",
                     time: &grid,
-                    values: &nominal[k],
-                    color: RGBColor(220, 50, 47),
+                    values: &values,
+                    color: RGBColor(133, 153, 0),
                     width: 1,
-                },
-                Series {
-                    label: "calibrated",
-                    time: &grid,
-                    values: &calibrated[k],
-                    color: RGBColor(38, 139, 210),
-                    width: 2,
-                },
-            ],
-            Some(campaign.window),
-        )?;
-        written.push(path);
+                }],
+                Some(experiment.window),
+            )?;
+            written.push(path);
+        }
     }
     Ok(written)
 }

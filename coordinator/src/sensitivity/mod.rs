@@ -249,6 +249,13 @@ pub fn analyse_reporting<E: Evaluator>(
             "the campaign has no free parameter to analyse".into(),
         ));
     }
+    if !campaign.more.is_empty() {
+        return Err(Error::InvalidRequest(format!(
+            "the sensitivity analysis takes one record: this campaign fits {} experiments \
+             together; analyse each experiment's record in a campaign of its own",
+            1 + campaign.more.len()
+        )));
+    }
     settings.check()?;
     if settings.methods.sobol()
         && (settings.samples > sampling::SALTELLI_MAX_SAMPLES
