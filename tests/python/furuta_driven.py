@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
 """A record of the Furuta pendulum rig driven by a measured arm motor torque.
 
-An independent simulator of the rig described in docs (DESIGN: model ``furuta``), written with
-scipy and numpy only, so that the worker's model can be checked against it. It writes a CSV
+An independent simulator of the rig of the worker's ``furuta`` model (same equations, see
+worker/src/models/furuta.rs), written with scipy and numpy only and sharing no code with the
+worker, so that the worker's model and its inputs can be checked against it. It writes a CSV
 with columns ``time_s, arm_angle_rad, pendulum_angle_rad, motor_torque_Nm`` and prints the
 truth it used as JSON on stdout (and, with ``--truth FILE``, into that file).
 
@@ -58,8 +59,11 @@ differences 0.0078 and 0.0082 rad): the noise level of that record, whose 0.002 
 4096-count quantisation give sqrt(0.002^2 + (2 pi/4096)^2/12) = 0.00205 rad. With
 ``--arm-viscous 0.002`` it matches ``furuta_viscous_arm.csv`` to 0.00208 and 0.00202 rad.
 Reproduce with ``--no-torque --stop 40 --clean --compare FILE`` (the figures are printed under
-``compare``). The default driven record (20 s) is not chaotic: a relative change of 1e-6 in the
-arm friction moves the arm by 5e-6 rad RMS, 1e-2 by 0.05 rad.
+``compare``). With the pendulum held hanging by its friction, the arm follows the closed forms
+to 1e-14 rad: no creep under a torque below its friction, 0.5 (u - F)/A t^2 above it, and a
+torque ramp breaks it away when it reaches F. The default driven record (20 s) is not
+chaotic: a relative change of 1e-6 in the arm friction moves the arm by 5e-6 rad RMS, 1e-2 by
+0.05 rad.
 """
 
 import argparse
