@@ -5,7 +5,9 @@
 //! folder and registers it as a model beside the hosted ones: its real parameters (causality
 //! `parameter`) are the model's parameters, with their start values, units and min/max; its
 //! outputs, then its other real variables, are the model's outputs; the measurement effects
-//! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]). The
+//! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]); its
+//! inputs (causality `input`: Real, Integer, Boolean) are the model's inputs, set from the
+//! signals of [`Model::simulate_driven`] as [`run`] says. The
 //! model's name is `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`, so that
 //! two different FMUs never share cached evaluations.
 //!

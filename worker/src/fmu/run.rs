@@ -36,6 +36,14 @@
 //! A model without continuous states (a pure time-event model) is integrated with one dummy
 //! state.
 //!
+//! **Inputs** ([`Driven`]): every driven input gets its start-time value in initialisation
+//! mode. Model Exchange sets the continuous ones wherever it sets time and states (so before
+//! every derivative, event-indicator and output read), and every one in event mode; where
+//! what the FMU is given jumps (a held input's new sample, a linear input's repeated sample
+//! time, a discrete input's change) is a time event, the only place discrete inputs change.
+//! Co-Simulation sets every input at each step's start, held over the step, and ends a step
+//! where an input jumps.
+//!
 //! Any call that returns Discard, Error or Fatal ends the simulation with
 //! [`SimulationError::Failed`] carrying the function, the status and the FMU's messages.
 
