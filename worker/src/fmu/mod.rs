@@ -7,7 +7,7 @@
 //! outputs, then its other real variables, are the model's outputs; the measurement effects
 //! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]); its
 //! inputs (causality `input`: Real, Integer, Boolean) are the model's inputs, set from the
-//! signals of [`Model::simulate_driven`] as [`run`] says. The
+//! signals of [`Model::simulate_driven`] as `run.rs` says. The
 //! model's name is `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`, so that
 //! two different FMUs never share cached evaluations.
 //!
@@ -413,7 +413,7 @@ impl Model for FmuModel {
     }
 
     /// The FMU's inputs (causality `input`) set from the signals as the standard's
-    /// simulation algorithms do (see [`run`]); inputs without a signal keep their start
+    /// simulation algorithms do (see `run.rs`); inputs without a signal keep their start
     /// values.
     fn simulate_driven(
         &self,
