@@ -242,6 +242,91 @@ fn simulate_writes_a_trajectory_csv() {
     assert_eq!(bad.status.code(), Some(2));
 }
 
+/// `calib simulate --input`: a constant motor torque from a file drives the Furuta's arm as
+/// the opposite torque bias does, to the bit (the same sum in the equations of motion), held
+/// or read linearly; a column that names no input gets the nearest name; a file that stops
+/// before the simulation is refused.
+#[test]
+fn simulate_drives_a_model_from_an_input_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| -> String {
+        let out = calib(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let torque = write(
+        dir.path(),
+        "torque.csv",
+        "time,armTorque\n0,0.02\n2.5,0.02\n5,0.02\n",
+    );
+    let torque = torque.to_str().unwrap();
+    let common = ["simulate", "furuta", "--stop", "5", "--step", "0.01"];
+    let driven = run(&[&common[..], &["--input", torque]].concat());
+    let held = run(&[
+        &common[..],
+        &["--input", torque, "--input-interpolation", "hold"],
+    ]
+    .concat());
+    let biased = run(&[&common[..], &["--set", "torque_bias.arm=-0.02"]].concat());
+    let free = run(&common);
+    assert_eq!(driven, biased);
+    assert_eq!(held, biased);
+    assert_ne!(driven, free, "the torque moves the arm");
+    assert_eq!(driven.lines().count(), 502);
+
+    let stderr_of = |args: &[&str]| {
+        let out = calib(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let typo = write(dir.path(), "typo.csv", "time,armTorq\n0,0.02\n5,0.02\n");
+    let e = stderr_of(&[
+        "simulate",
+        "furuta",
+        "--stop",
+        "5",
+        "--input",
+        typo.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains(
+            "column `armTorq`: model `furuta` has no input `armTorq`; did you mean `armTorque`?"
+        ),
+        "{e}"
+    );
+    let short = write(dir.path(), "short.csv", "time,armTorque\n0,0.02\n2,0.02\n");
+    let e = stderr_of(&[
+        "simulate",
+        "furuta",
+        "--stop",
+        "5",
+        "--input",
+        short.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("do not cover the simulation from 0 to 5 s"),
+        "{e}"
+    );
+    let e = stderr_of(&["simulate", "furuta", "--input-interpolation", "hold"]);
+    assert!(e.contains("--input"), "{e}");
+}
+
+/// `calib models` lists every model's inputs, or says it has none.
+#[test]
+fn models_lists_inputs() {
+    let out = calib(&["models"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("armTorque"), "{text}");
+    let out = calib(&["models", "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json[0]["inputs"][0]["name"], "armTorque");
+    assert_eq!(json[0]["inputs"][0]["unit"], "N.m");
+}
+
 #[test]
 fn calibrate_writes_the_result_and_plots() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,4 +1,5 @@
 use super::{Failure, Outcome};
+use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
 use calib_worker::limits;
 use calib_worker::validate::{self, SolverOverrides};
 use rand::{Rng, SeedableRng};
@@ -48,9 +49,92 @@ pub struct Args {
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Drive the model's inputs from a CSV file: the first column is time [s], the others
+    /// are named after the model's inputs (see `calib models`); each must cover the
+    /// simulated span. Inputs without a column keep the model's own values.
+    #[arg(long, value_name = "FILE.csv")]
+    input: Option<PathBuf>,
+    /// How the input file's samples are read between them: `linear` (a straight line from
+    /// one sample to the next) or `hold` (each sample until the next).
+    #[arg(long, value_enum, default_value = "linear", requires = "input")]
+    input_interpolation: InterpolationArg,
     /// CSV file to write (default: standard output).
     #[arg(long)]
     out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum InterpolationArg {
+    Linear,
+    Hold,
+}
+
+/// The signals of an input file: time in the first column, one input per other column,
+/// named after the model's inputs.
+fn read_inputs(
+    path: &std::path::Path,
+    info: &calib_worker::ModelInfo,
+    interpolation: Interpolation,
+) -> Result<Inputs, Failure> {
+    let shown = path.display();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| Failure::input(format!("--input {shown}: {e}")))?;
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| Failure::input(format!("--input {shown}: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.len() < 2 {
+        return Err(Failure::input(format!(
+            "--input {shown}: expected a time column, then one column per input"
+        )));
+    }
+    let mut indices = Vec::with_capacity(header.len() - 1);
+    for name in &header[1..] {
+        let index = validate::input(info, name)
+            .map_err(|e| Failure::input(format!("--input {shown}: column `{name}`: {e}")))?;
+        if indices.contains(&index) {
+            return Err(Failure::input(format!(
+                "--input {shown}: column `{name}` appears twice"
+            )));
+        }
+        indices.push(index);
+    }
+    let mut times = Vec::new();
+    let mut columns = vec![Vec::new(); indices.len()];
+    for (row, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| Failure::input(format!("--input {shown}: {e}")))?;
+        let line = row + 2;
+        let number = |k: usize| -> Result<f64, Failure> {
+            let cell = record.get(k).unwrap_or("");
+            cell.parse::<f64>().map_err(|_| {
+                Failure::input(format!(
+                    "--input {shown}: line {line}, column `{}`: `{cell}` is not a number",
+                    header[k]
+                ))
+            })
+        };
+        times.push(number(0)?);
+        for (k, column) in columns.iter_mut().enumerate() {
+            column.push(number(k + 1)?);
+        }
+    }
+    let times: std::sync::Arc<[f64]> = times.into();
+    Ok(Inputs {
+        signals: indices
+            .into_iter()
+            .zip(columns)
+            .map(|(input, values)| InputSignal {
+                input,
+                times: times.clone(),
+                values: values.into(),
+                interpolation,
+            })
+            .collect(),
+    })
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -141,8 +225,22 @@ pub fn run(args: Args) -> Outcome {
             }
         }
     }
+    let inputs = match &args.input {
+        Some(path) => {
+            let interpolation = match args.input_interpolation {
+                InterpolationArg::Linear => Interpolation::Linear,
+                InterpolationArg::Hold => Interpolation::Hold,
+            };
+            let inputs = read_inputs(path, info, interpolation)?;
+            inputs
+                .check(info, options.start_time, args.stop)
+                .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+            inputs
+        }
+        None => Inputs::default(),
+    };
     let mut trajectory = model
-        .simulate(&params, &grid, &outputs, &options)
+        .simulate_driven(&params, &grid, &outputs, &options, &inputs)
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
 
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
