@@ -82,21 +82,28 @@ pub fn summary(c: &Calibration) -> String {
         best.objective,
         c.nominal.objective / best.objective
     );
-    let n = c.objective.grid.len() as f64;
-    for ((o, before), after) in c
-        .campaign
-        .outputs
-        .iter()
-        .zip(&c.nominal.sse)
-        .zip(&c.best_evaluation.sse)
-    {
-        let _ = writeln!(
-            s,
-            "  rms {:<22} {:.4e} -> {:.4e}",
-            o.model,
-            (before / n).sqrt(),
-            (after / n).sqrt()
-        );
+    // One line per compared series: per output, and per experiment when there are several.
+    let several = !c.campaign.more.is_empty() || !c.campaign.experiment.is_empty();
+    let mut k = 0;
+    for part in c.objective.experiments() {
+        let n = part.grid.len() as f64;
+        let info = c.campaign.model.info();
+        for &o in &part.outputs {
+            let (before, after) = (c.nominal.sse[k], c.best_evaluation.sse[k]);
+            k += 1;
+            let name = if several {
+                format!("{}: {}", part.name, info.outputs[o].name)
+            } else {
+                info.outputs[o].name.clone()
+            };
+            let _ = writeln!(
+                s,
+                "  rms {:<22} {:.4e} -> {:.4e}",
+                name,
+                (before / n).sqrt(),
+                (after / n).sqrt()
+            );
+        }
     }
     let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
     let at_best = evidence::runs_at_best(&objectives);
