@@ -66,10 +66,15 @@ pub fn parameter_jacobian(
         steps.push(up - down);
     }
     let results = simulator.simulate(objective, &points)?;
+    // The weights of every compared series, of each experiment in turn.
+    let weights: Vec<f64> = objective
+        .experiments()
+        .flat_map(|part| part.weights.iter().copied())
+        .collect();
     let mut columns = Vec::new();
     for (i, pair) in results.chunks(2).enumerate() {
-        let up = stack(pair[0].as_ref().map_err(|e| failed(e))?, &objective.weights);
-        let down = stack(pair[1].as_ref().map_err(|e| failed(e))?, &objective.weights);
+        let up = stack(pair[0].as_ref().map_err(|e| failed(e))?, &weights);
+        let down = stack(pair[1].as_ref().map_err(|e| failed(e))?, &weights);
         columns.push(
             up.iter()
                 .zip(&down)
