@@ -449,3 +449,170 @@ fn disjoint_windows_fit_only_their_samples() {
         serde_json::json!([[0.0, 5.0], [10.0, 20.0]])
     );
 }
+
+/// `examples/data/furuta_driven.csv` is exactly what the command in
+/// `examples/furuta_driven.toml` writes.
+#[test]
+fn the_driven_examples_record_is_what_its_command_makes() {
+    let example = std::fs::read_to_string(repo().join("examples/furuta_driven.toml")).unwrap();
+    assert!(
+        example.contains(
+            "python3 tests/python/furuta_driven.py --out examples/data/furuta_driven.csv \\\n\
+             #       --stop 20 --theta0 2.8 --seed 5"
+        ),
+        "the example names the command this test runs"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let Some((csv, _)) = record(
+        dir.path(),
+        "driven.csv",
+        &["--theta0", "2.8", "--seed", "5"],
+    ) else {
+        return;
+    };
+    assert!(
+        std::fs::read(&csv).unwrap()
+            == std::fs::read(repo().join("examples/data/furuta_driven.csv")).unwrap(),
+        "furuta_driven.py no longer writes examples/data/furuta_driven.csv"
+    );
+}
+
+/// `examples/furuta_driven.toml` recovers the frictions of `examples/data/furuta_rig.json`.
+#[test]
+fn the_driven_example_fits_the_true_frictions() {
+    let campaign = Campaign::load(&repo().join("examples/furuta_driven.toml")).unwrap();
+    let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    let (arm, pendulum) = true_frictions();
+    let best = c.best_run();
+    println!(
+        "examples/furuta_driven.toml: armFriction {:.6e}, pendulumFriction {:.6e}, objective \
+         {:.5} (noise floor {:.5}), {} evaluations",
+        best.point[0],
+        best.point[1],
+        best.objective,
+        floor(&c),
+        c.evaluations()
+    );
+    within_1_percent("armFriction", best.point[0], arm);
+    within_1_percent("pendulumFriction", best.point[1], pendulum);
+    assert!(best.objective <= 1.5 * floor(&c));
+}
+
+/// `calib calibrate examples/furuta_experiments.toml`: a plot per experiment and output and
+/// per driven input, each experiment's share of the fit in result.json, the numbers of the
+/// library's run; the analyses that take one record refuse it, saying why.
+#[test]
+fn calibrate_writes_each_experiments_plots_and_share_of_the_fit() {
+    let example = repo().join("examples/furuta_experiments.toml");
+    let dir = tempfile::tempdir().unwrap();
+    let (db, out) = (dir.path().join("db"), dir.path().join("out"));
+    let json = calibrate_json(&example, &db, &out, &[]);
+    let folder = out.join("furuta_experiments");
+    for file in [
+        "result.json",
+        "swing.armJoint.phi.svg",
+        "swing.pendulumJoint.phi.svg",
+        "driven.armJoint.phi.svg",
+        "driven.pendulumJoint.phi.svg",
+        "driven.input.armTorque.svg",
+        "waterfall.svg",
+    ] {
+        assert!(folder.join(file).exists(), "{file} was not written");
+    }
+    // The free swing is not driven: no input plot, and no plot without an experiment's name.
+    assert!(!folder.join("swing.input.armTorque.svg").exists());
+    assert!(!folder.join("armJoint.phi.svg").exists());
+    let input = std::fs::read_to_string(folder.join("driven.input.armTorque.svg")).unwrap();
+    assert!(input.contains("armTorque") && input.contains("linear"));
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(folder.join("result.json")).unwrap())
+            .unwrap();
+    assert_eq!(json, written);
+
+    // The library's run of the same campaign: the same best point, objective and shares.
+    let campaign = Campaign::load(&example).unwrap();
+    let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    let best = c.best_run();
+    for (i, name) in ["armFriction", "pendulumFriction", "theta0@driven"]
+        .iter()
+        .enumerate()
+    {
+        assert_eq!(
+            json["best"]["parameters"][name].as_f64(),
+            Some(best.point[i]),
+            "{name}"
+        );
+    }
+    assert_eq!(json["best"]["objective"].as_f64(), Some(best.objective));
+    assert_eq!(
+        json["experiments"],
+        calib_coordinator::report::result_json(&c)["experiments"]
+    );
+
+    let experiments = json["experiments"].as_array().unwrap();
+    assert_eq!(experiments.len(), 2);
+    let (swing, driven) = (&experiments[0], &experiments[1]);
+    assert_eq!(swing["name"], "swing");
+    assert_eq!(driven["name"], "driven");
+    assert_eq!(swing["samples"], 4001);
+    assert_eq!(driven["samples"], 2001);
+    assert_eq!(swing["windows"], serde_json::json!([[0.0, 40.0]]));
+    assert_eq!(swing["inputs"], serde_json::json!([]));
+    assert_eq!(
+        driven["inputs"],
+        serde_json::json!([{"model": "armTorque", "measured": "motor_torque_Nm",
+                            "interpolation": "linear"}])
+    );
+    let shares: Vec<f64> = experiments
+        .iter()
+        .map(|e| e["objective"].as_f64().unwrap())
+        .collect();
+    println!(
+        "calib calibrate {}: armFriction {:.6e}, pendulumFriction {:.6e}, theta0@driven {:.6}, \
+         objective {:.5} = swing {:.5} + driven {:.5}",
+        example.display(),
+        best.point[0],
+        best.point[1],
+        best.point[2],
+        best.objective,
+        shares[0],
+        shares[1]
+    );
+    assert!(((shares[0] + shares[1]) / best.objective - 1.0).abs() < 1e-12);
+    for (e, share) in experiments.iter().zip(&shares) {
+        let samples = e["samples"].as_u64().unwrap() as usize;
+        let floor = synthetic_noise_floor(2, samples);
+        assert!(*share <= 1.5 * floor, "{}: {share} vs {floor}", e["name"]);
+        let sse: f64 = ["armJoint.phi", "pendulumJoint.phi"]
+            .iter()
+            .map(|o| e["sse"][o].as_f64().unwrap())
+            .sum();
+        assert!((sse / share - 1.0).abs() < 1e-12, "weights are 1");
+    }
+    let (arm, pendulum) = true_frictions();
+    within_1_percent("armFriction", best.point[0], arm);
+    within_1_percent("pendulumFriction", best.point[1], pendulum);
+    assert!(
+        (best.point[2] - 2.8).abs() < 1e-3,
+        "theta0@driven {}",
+        best.point[2]
+    );
+
+    // The diagnosis and the sensitivity analysis take one record.
+    for command in ["diagnose", "sensitivity"] {
+        let refused = calib(&[
+            command,
+            example.to_str().unwrap(),
+            "--db",
+            db.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert_eq!(refused.status.code(), Some(2), "{command}: {stderr}");
+        assert!(
+            stderr.contains("this campaign fits 2 experiments together"),
+            "{command}: {stderr}"
+        );
+    }
+}
