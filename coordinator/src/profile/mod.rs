@@ -476,10 +476,10 @@ pub fn local_statistics(
         .simulate(objective, &[point.to_vec()])?
         .remove(0)
         .map_err(|e| Error::Optimiser(format!("simulation at the best point failed: {e}")))?;
-    // Every compared series, of each experiment in turn (as `simulate` returns them).
+    // Every series of every experiment, in the order `simulate` returns them.
     let residual: Vec<Vec<f64>> = objective
         .experiments()
-        .flat_map(|part| &part.measured)
+        .flat_map(|e| &e.measured)
         .zip(&simulated)
         .map(|(w, y)| w.iter().zip(y).map(|(a, b)| a - b).collect())
         .collect();
