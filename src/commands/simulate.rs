@@ -1,4 +1,5 @@
 use super::{Failure, Outcome};
+use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
 use calib_worker::limits;
 use calib_worker::validate::{self, SolverOverrides};
 use rand::{Rng, SeedableRng};
@@ -41,8 +42,15 @@ pub struct Args {
     /// when it gives one].
     #[arg(long)]
     rtol: Option<f64>,
-    /// Add white Gaussian noise to an output: NAME=SIGMA in the output's unit (repeatable),
-    /// to make a synthetic record.
+    /// Drive a model input by a profile: NAME=T:V,T:V,... (repeatable), times in s and
+    /// values in the input's unit, straight lines between the points, the first value
+    /// before them and the last after; two points at one time make a step. The input is
+    /// written as a column of its own, after `time`.
+    #[arg(long = "input", value_name = "NAME=T:V,...")]
+    input: Vec<String>,
+    /// Add white Gaussian noise to an output, or to the column of a driven input (the model
+    /// is driven by the profile itself, as a bench's sensor records its boundary condition):
+    /// NAME=SIGMA in its unit (repeatable), to make a synthetic record.
     #[arg(long = "noise", value_name = "NAME=SIGMA")]
     noise: Vec<String>,
     /// Seed of the noise.
@@ -117,7 +125,18 @@ pub fn run(args: Args) -> Outcome {
     };
     let grid = output_times(args.start, args.stop, args.step);
     validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
-    let mut noise = vec![0.0; outputs.len()];
+    let inputs = Inputs {
+        signals: args
+            .input
+            .iter()
+            .map(|a| profile(info, a, args.stop))
+            .collect::<Result<_, _>>()?,
+    };
+    inputs
+        .check(info, 0.0f64.min(args.start), args.stop)
+        .map_err(|e| Failure::input(format!("--input: {e}")))?;
+    // Noise of the written outputs, then of the driven inputs' columns.
+    let mut noise = vec![0.0; outputs.len() + inputs.signals.len()];
     for assignment in &args.noise {
         let Some((name, sigma)) = assignment.split_once('=') else {
             return Err(Failure::input(format!(
@@ -127,9 +146,16 @@ pub fn run(args: Args) -> Outcome {
         let Some(k) = outputs
             .iter()
             .position(|&o| info.outputs[o].name == name.trim())
+            .or_else(|| {
+                inputs
+                    .signals
+                    .iter()
+                    .position(|s| info.inputs[s.input].name == name.trim())
+                    .map(|k| outputs.len() + k)
+            })
         else {
             return Err(Failure::input(format!(
-                "--noise {assignment}: `{name}` is not among the written outputs"
+                "--noise {assignment}: `{name}` is neither a written output nor a driven input"
             )));
         };
         match sigma.trim().parse::<f64>() {
@@ -142,11 +168,22 @@ pub fn run(args: Args) -> Outcome {
         }
     }
     let mut trajectory = model
-        .simulate(&params, &grid, &outputs, &options)
+        .simulate_driven(&params, &grid, &outputs, &options, &inputs)
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
+    let mut columns: Vec<Vec<f64>> = inputs
+        .signals
+        .iter()
+        .map(|s| grid.iter().map(|&t| s.at(t)).collect())
+        .collect();
 
+    // The outputs' noise is drawn first, so a record without inputs keeps its draws.
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    for (series, &sigma) in trajectory.values.iter_mut().zip(&noise) {
+    for (series, &sigma) in trajectory
+        .values
+        .iter_mut()
+        .chain(columns.iter_mut())
+        .zip(&noise)
+    {
         if sigma > 0.0 {
             // Checked above: every σ is finite and not negative.
             let normal = Normal::new(0.0, sigma)
@@ -167,11 +204,22 @@ pub fn run(args: Args) -> Outcome {
     let mut csv = csv::Writer::from_writer(std::io::BufWriter::new(sink));
     let write_error = |e: csv::Error| Failure::internal(format!("cannot write CSV: {e}"));
     let mut header = vec!["time".to_string()];
+    header.extend(
+        inputs
+            .signals
+            .iter()
+            .map(|s| info.inputs[s.input].name.clone()),
+    );
     header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
     csv.write_record(&header).map_err(write_error)?;
     for (i, t) in grid.iter().enumerate() {
         let mut row = vec![format!("{t}")];
-        row.extend(trajectory.values.iter().map(|v| format!("{}", v[i])));
+        row.extend(
+            columns
+                .iter()
+                .chain(&trajectory.values)
+                .map(|v| format!("{}", v[i])),
+        );
         csv.write_record(&row).map_err(write_error)?;
     }
     csv.flush()
@@ -185,6 +233,51 @@ pub fn run(args: Args) -> Outcome {
         );
     }
     Ok(())
+}
+
+/// The signal of `--input NAME=T:V,T:V,...`: the points, read linearly, extended to cover
+/// the simulation from 0 (hosted models) to `stop` by the first and the last value.
+fn profile(
+    info: &calib_worker::ModelInfo,
+    assignment: &str,
+    stop: f64,
+) -> Result<InputSignal, Failure> {
+    let refused = |why: String| Failure::input(format!("--input {assignment}: {why}"));
+    let Some((name, points)) = assignment.split_once('=') else {
+        return Err(refused("expected NAME=T:V,T:V,...".into()));
+    };
+    let input = validate::input(info, name.trim()).map_err(|e| refused(e.to_string()))?;
+    let mut times = Vec::new();
+    let mut values = Vec::new();
+    for point in points.split(',') {
+        let parsed = point.split_once(':').and_then(|(t, v)| {
+            Some((t.trim().parse::<f64>().ok()?, v.trim().parse::<f64>().ok()?))
+        });
+        let Some((t, v)) = parsed else {
+            return Err(refused(format!("`{point}` is not TIME:VALUE")));
+        };
+        times.push(t);
+        values.push(v);
+    }
+    // Checked with the other inputs; here only what extending them needs.
+    if times.iter().chain(&values).any(|x| !x.is_finite()) {
+        return Err(refused("times and values must be finite".into()));
+    }
+    if times[0] > 0.0 {
+        times.insert(0, 0.0);
+        values.insert(0, values[0]);
+    }
+    let last = times.len() - 1;
+    if times[last] < stop {
+        times.push(stop);
+        values.push(values[last]);
+    }
+    Ok(InputSignal {
+        input,
+        times: times.into(),
+        values: values.into(),
+        interpolation: Interpolation::Linear,
+    })
 }
 
 /// `start`, `start + step`, … up to `stop`, and `stop` itself: the last interval is shorter
