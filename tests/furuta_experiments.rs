@@ -598,21 +598,43 @@ fn calibrate_writes_each_experiments_plots_and_share_of_the_fit() {
         best.point[2]
     );
 
-    // The diagnosis and the sensitivity analysis take one record.
-    for command in ["diagnose", "sensitivity"] {
-        let refused = calib(&[
-            command,
-            example.to_str().unwrap(),
-            "--db",
-            db.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ]);
-        let stderr = String::from_utf8_lossy(&refused.stderr);
-        assert_eq!(refused.status.code(), Some(2), "{command}: {stderr}");
-        assert!(
-            stderr.contains("this campaign fits 2 experiments together"),
-            "{command}: {stderr}"
-        );
+    // The diagnosis takes one record.
+    let refused = calib(&[
+        "diagnose",
+        example.to_str().unwrap(),
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert_eq!(refused.status.code(), Some(2), "diagnose: {stderr}");
+    assert!(
+        stderr.contains("this campaign fits 2 experiments together"),
+        "diagnose: {stderr}"
+    );
+    // The sensitivity analysis reports every experiment's outputs, each named after its
+    // experiment.
+    let analysed = calib(&[
+        "sensitivity",
+        example.to_str().unwrap(),
+        "--samples",
+        "8",
+        "--db",
+        db.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    let stderr = String::from_utf8_lossy(&analysed.stderr);
+    assert!(analysed.status.success(), "sensitivity: {stderr}");
+    let stdout = String::from_utf8_lossy(&analysed.stdout);
+    for series in [
+        "swing: armJoint.phi",
+        "swing: pendulumJoint.phi",
+        "driven: armJoint.phi",
+        "driven: pendulumJoint.phi",
+    ] {
+        assert!(stdout.contains(series), "`{series}` missing from {stdout}");
     }
 }
