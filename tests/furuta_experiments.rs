@@ -21,7 +21,6 @@ use calib_coordinator::store::MemoryStore;
 use common::cluster::*;
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Length of both records [s].
 const STOP: f64 = 20.0;
@@ -34,30 +33,7 @@ const DRIVEN_THETA0: f64 = 2.8;
 /// `name` into `dir`, and the truth it printed; `None` (with the reason) where python3 or
 /// scipy is missing.
 fn record(dir: &Path, name: &str, args: &[&str]) -> Option<(PathBuf, serde_json::Value)> {
-    let csv = dir.join(name);
-    let out = Command::new("python3")
-        .arg(repo().join("tests/python/furuta_driven.py"))
-        .arg("--out")
-        .arg(&csv)
-        .args(["--stop", &STOP.to_string()])
-        .args(args)
-        .output();
-    match out {
-        Err(e) => {
-            skip(&format!("python3 cannot run: {e}"));
-            None
-        }
-        Ok(out) if !out.status.success() => {
-            let why = String::from_utf8_lossy(&out.stderr);
-            assert!(
-                why.contains("No module named 'scipy'") || why.contains("No module named 'numpy'"),
-                "furuta_driven.py failed: {why}"
-            );
-            skip("scipy is not installed (pip install scipy)");
-            None
-        }
-        Ok(out) => Some((csv, serde_json::from_slice(&out.stdout).unwrap())),
-    }
+    furuta_driven_record(dir, name, STOP, args)
 }
 
 /// The two records: the free swing (seed 3) and the driven one (seed 5).

@@ -15,7 +15,6 @@ use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Silent;
 use common::*;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 /// Length of the driven record [s].
 const STOP: f64 = 20.0;
@@ -23,29 +22,7 @@ const STOP: f64 = 20.0;
 /// The driven record (20 s at the rig's true frictions, seed 5) written into `dir`, and the
 /// truth the simulator printed; `None` (with the reason) where python3 or scipy is missing.
 fn driven_record(dir: &Path) -> Option<(PathBuf, serde_json::Value)> {
-    let csv = dir.join("driven.csv");
-    let out = Command::new("python3")
-        .arg(repo().join("tests/python/furuta_driven.py"))
-        .arg("--out")
-        .arg(&csv)
-        .args(["--stop", &STOP.to_string(), "--seed", "5"])
-        .output();
-    match out {
-        Err(e) => {
-            skip(&format!("python3 cannot run: {e}"));
-            None
-        }
-        Ok(out) if !out.status.success() => {
-            let why = String::from_utf8_lossy(&out.stderr);
-            assert!(
-                why.contains("No module named 'scipy'") || why.contains("No module named 'numpy'"),
-                "furuta_driven.py failed: {why}"
-            );
-            skip("scipy is not installed (pip install scipy)");
-            None
-        }
-        Ok(out) => Some((csv, serde_json::from_slice(&out.stdout).unwrap())),
-    }
+    furuta_driven_record(dir, "driven.csv", STOP, &["--seed", "5"])
 }
 
 /// A campaign fitting both frictions on the driven record; `inputs` is its `[[inputs]]`
