@@ -17,6 +17,8 @@ const app = {
   plotting: false,
   plotDue: false,
   started: false,     // the tabs' contents are loaded (after the login, if one is asked)
+  experiments: [],    // further records: {key, prefix, dataset, card, fixed}
+  nextExperiment: 0,  // key of the next experiment added
 };
 
 const $ = (id) => document.getElementById(id);
@@ -463,6 +465,171 @@ function renderCalibration() {
     row.dataset.parameter = p.name;
     params.append(row);
   }
+  inputRows($("input-map").tBodies[0], "", dataset ? dataset.columns : [], "");
+  $("input-map").hidden = !modelInputs().length;
+  renderExperiments();
+}
+
+// ---- inputs and experiments -------------------------------------------------------------
+
+const INTERPOLATIONS = [["linear", "linear"], ["hold", "held (zero-order hold)"]];
+
+const modelInputs = () => (app.model && app.model.inputs) || [];
+
+// A row per model input in `body`: the measured column driving it (ids `<prefix>input-<name>`)
+// and how it is read between samples (`<prefix>interp-<name>`), keeping what the rows held.
+function inputRows(body, prefix, columns, whose) {
+  const kept = {};
+  for (const row of body.rows) {
+    const [column, interp] = row.querySelectorAll("select");
+    kept[row.dataset.input] = [column.value, interp.value];
+  }
+  body.replaceChildren();
+  for (const i of modelInputs()) {
+    const column = el("select", { id: `${prefix}input-${i.name}`, "aria-label": `measured column driving ${i.name}${whose}` },
+      el("option", { value: "", text: "— (not driven)" }));
+    for (const c of columns) column.append(el("option", { value: c, text: c }));
+    const interp = el("select", { id: `${prefix}interp-${i.name}`, "aria-label": `interpolation of ${i.name}${whose}` });
+    for (const [value, text] of INTERPOLATIONS) interp.append(el("option", { value, text }));
+    const old = kept[i.name];
+    if (old) {
+      if (columns.includes(old[0])) column.value = old[0];
+      interp.value = old[1];
+    }
+    const row = el("tr", {}, el("th", { scope: "row", text: `${i.name} [${i.unit}]`, title: i.description }),
+      el("td", {}, column), el("td", {}, interp));
+    row.dataset.input = i.name;
+    body.append(row);
+  }
+}
+
+// The Input messages of the rows `<prefix>input-...` that name a column.
+function inputMessages(prefix) {
+  return modelInputs()
+    .filter((i) => $(`${prefix}input-${i.name}`) && $(`${prefix}input-${i.name}`).value)
+    .map((i) => ({
+      model: i.name, measured: $(`${prefix}input-${i.name}`).value,
+      interpolation: $(`${prefix}interp-${i.name}`).value,
+    }));
+}
+
+function addExperiment() {
+  const key = app.nextExperiment++;
+  const x = `x${key}-`;
+  const n = app.experiments.length + 2;
+  const field = (text, attrs) => el("label", {}, text, el("input", attrs));
+  const uploadButton = el("button", { type: "button", id: `${x}upload`, text: "Upload" });
+  const remove = el("button", { type: "button", text: "Remove", class: "secondary", "aria-label": `remove experiment ${n}` });
+  const addFixed = el("button", { type: "button", id: `${x}add-fixed`, text: "Fix a start value" });
+  const card = el("fieldset", { class: "experiment", id: `experiment-${key}` },
+    el("legend", { text: `Experiment ${n}` }),
+    el("div", { class: "row" },
+      field("Name", { type: "text", id: `${x}name`, value: `record${n}` }),
+      field("File (CSV, or MAT)", { type: "file", id: `${x}file`, accept: ".csv,.txt,.mat" }),
+      field("Time column", { type: "text", id: `${x}time`, value: $("measurement-time").value.trim() || "time" }),
+      uploadButton, remove),
+    el("p", { id: `${x}status`, role: "status", "aria-live": "polite" }),
+    el("div", { id: `${x}error`, class: "error", role: "alert", hidden: true }),
+    el("div", { class: "row" },
+      field("Window start [s]", { type: "number", step: "any", id: `${x}window-start` }),
+      field("Window stop [s]", { type: "number", step: "any", id: `${x}window-stop` })),
+    el("table", { id: `${x}fixed` },
+      el("caption", { text: "Start values for this experiment alone" }),
+      el("thead", {}, el("tr", {}, el("th", { scope: "col", text: "parameter" }), el("th", { scope: "col", text: "value" }),
+        el("th", { scope: "col" }, el("span", { class: "visually-hidden", text: "remove" })))),
+      el("tbody")),
+    el("p", {}, addFixed),
+    el("table", { id: `${x}inputs` },
+      el("caption", { text: "Inputs driven by this record" }),
+      el("thead", {}, el("tr", {}, el("th", { scope: "col", text: "model input" }),
+        el("th", { scope: "col", text: "measured column" }), el("th", { scope: "col", text: "between samples" }))),
+      el("tbody")));
+  const experiment = { key, prefix: x, dataset: null, card, fixed: 0 };
+  uploadButton.addEventListener("click", () => uploadExperiment(experiment));
+  addFixed.addEventListener("click", () => addFixedValue(experiment));
+  remove.addEventListener("click", () => {
+    app.experiments = app.experiments.filter((e) => e !== experiment);
+    card.remove();
+    renderExperiments();
+  });
+  app.experiments.push(experiment);
+  $("experiment-list").append(card);
+  renderExperiments();
+  $(`${x}name`).focus();
+}
+
+// A row fixing one model parameter for this experiment alone.
+function addFixedValue(experiment) {
+  const j = experiment.fixed++;
+  const id = `${experiment.prefix}fixed-${j}`;
+  const name = el("select", { id: `${id}-name`, "aria-label": `parameter fixed in experiment ${experimentName(experiment)}` });
+  for (const p of app.model ? app.model.parameters : []) name.append(el("option", { value: p.name, text: `${p.name} [${p.unit}]` }));
+  const value = el("input", { type: "number", step: "any", id: `${id}-value`, "aria-label": "its value" });
+  const fill = () => {
+    const p = app.model.parameters.find((q) => q.name === name.value);
+    if (p) value.value = String(modelValue(p));
+  };
+  name.addEventListener("change", fill);
+  fill();
+  const remove = el("button", { type: "button", text: "Remove", "aria-label": "remove this start value" });
+  const row = el("tr", {}, el("td", {}, name), el("td", {}, value), el("td", {}, remove));
+  row.dataset.fixed = id;
+  remove.addEventListener("click", () => row.remove());
+  $(`${experiment.prefix}fixed`).tBodies[0].append(row);
+  name.focus();
+}
+
+function experimentName(experiment) {
+  const box = $(`${experiment.prefix}name`);
+  return box ? box.value.trim() : "";
+}
+
+// The experiments' cards follow the model (its inputs and parameters) and the first record.
+function renderExperiments() {
+  const several = app.experiments.length > 0;
+  $("first-experiment").hidden = !several;
+  for (const [k, x] of app.experiments.entries()) {
+    x.card.querySelector("legend").textContent = `Experiment ${k + 2}`;
+    const table = $(`${x.prefix}inputs`);
+    inputRows(table.tBodies[0], x.prefix, x.dataset ? x.dataset.columns : [], ` in experiment ${k + 2}`);
+    table.hidden = !modelInputs().length;
+    for (const row of $(`${x.prefix}fixed`).tBodies[0].rows) {
+      const select = row.querySelector("select");
+      const was = select.value;
+      select.replaceChildren();
+      for (const p of app.model ? app.model.parameters : []) select.append(el("option", { value: p.name, text: `${p.name} [${p.unit}]` }));
+      if ([...select.options].some((o) => o.value === was)) select.value = was;
+    }
+  }
+}
+
+async function uploadExperiment(experiment) {
+  const x = experiment.prefix;
+  showError(`${x}error`, "");
+  const file = $(`${x}file`).files[0];
+  if (!file) { showError(`${x}error`, "choose a file first"); return; }
+  const time = $(`${x}time`).value.trim() || "time";
+  $(`${x}status`).textContent = `uploading ${file.name}…`;
+  try {
+    const query = `file_name=${encodeURIComponent(file.name)}&time_column=${encodeURIComponent(time)}`;
+    const dataset = await call(`UploadDataset?${query}`, null, {
+      headers: { "Content-Type": "application/octet-stream" },
+      body: await file.arrayBuffer(),
+    });
+    dataset.file_name = file.name;
+    experiment.dataset = dataset;
+    $(`${x}status`).textContent =
+      `${file.name}: ${dataset.samples} samples from ${fmt(dataset.start_time)} s to ${fmt(dataset.stop_time)} s; ` +
+      `columns ${dataset.columns.join(", ")}`;
+    $(`${x}window-start`).value = String(dataset.start_time);
+    $(`${x}window-stop`).value = String(dataset.stop_time);
+    renderExperiments();
+  } catch (e) {
+    experiment.dataset = null;
+    $(`${x}status`).textContent = "";
+    showError(`${x}error`, e.message);
+    renderExperiments();
+  }
 }
 
 function number(id) {
@@ -494,7 +661,8 @@ function campaignMessage() {
   }
   const methods = [...document.querySelectorAll('input[name="method"]:checked')].map((m) => m.value);
   const windowStop = number("window-stop");
-  return {
+  const inputs = inputMessages("");
+  const message = {
     name: $("campaign-name").value.trim(),
     model: model.name,
     fmu_id: app.fmus[model.name] ? app.fmus[model.name].id : "",
@@ -502,6 +670,7 @@ function campaignMessage() {
     model_parameters: fixed,
     dataset_id: dataset.id,
     outputs,
+    inputs,
     parameters,
     window_start: number("window-start"),
     window_stop: windowStop,
@@ -512,6 +681,26 @@ function campaignMessage() {
       seed: Math.round(number("seed")),
     },
   };
+  if (!app.experiments.length) return message;
+  // Several records: the first is the experiment of the fields above, each card another.
+  const experiments = [{
+    name: $("experiment-name").value.trim(), dataset_id: dataset.id,
+    windows: [{ start: message.window_start, stop: windowStop }], inputs,
+  }];
+  for (const [k, x] of app.experiments.entries()) {
+    const name = experimentName(x) || `experiment ${k + 2}`;
+    if (!x.dataset) throw new Error(`experiment ${name}: upload its record first`);
+    const own = {};
+    for (const row of $(`${x.prefix}fixed`).tBodies[0].rows) {
+      own[row.querySelector("select").value] = number(`${row.dataset.fixed}-value`);
+    }
+    experiments.push({
+      name, dataset_id: x.dataset.id,
+      windows: [{ start: number(`${x.prefix}window-start`), stop: number(`${x.prefix}window-stop`) }],
+      fixed: own, inputs: inputMessages(x.prefix),
+    });
+  }
+  return { ...message, dataset_id: "", window_start: 0, window_stop: 0, inputs: [], experiments };
 }
 
 async function start() {
@@ -634,17 +823,49 @@ function showResult(s) {
   const json = $("download-json");
   if (json.href.startsWith("blob:")) URL.revokeObjectURL(json.href);
   json.href = URL.createObjectURL(new Blob([s.result_json], { type: "application/json" }));
-  const plots = $("result-plots");
-  plots.replaceChildren();
-  const names = Object.keys(s.plots || {}).sort((a, b) =>
-    (a === "waterfall.svg") - (b === "waterfall.svg") || a.localeCompare(b));
-  for (const name of names) {
-    const caption = name === "waterfall.svg"
-      ? "waterfall: final objective of each run, best first"
-      : `${name.replace(/\.svg$/, "")}: measured, nominal and calibrated`;
-    plots.append(figure(s.plots[name], caption));
-  }
+  showResultPlots(s, r);
   $("result").hidden = false;
+}
+
+// The fit plots, per experiment (one group for a single record): the inputs the model was
+// driven by first, then each output measured, nominal and calibrated; the waterfall last.
+function showResultPlots(s, r) {
+  const holder = $("result-plots");
+  holder.replaceChildren();
+  const files = s.plots || {};
+  const sanitize = (n) => n.replace(/[^A-Za-z0-9._-]/g, "_");
+  const experiments = (r.experiments || []).map((e) => e.name);
+  const groups = experiments.length ? experiments.map((name) => ({ name, prefix: `${sanitize(name)}.` })) : [{ name: "", prefix: "" }];
+  const taken = new Set(["waterfall.svg"]);
+  for (const g of groups) {
+    const mine = Object.keys(files).filter((f) => !taken.has(f) && f.startsWith(g.prefix) &&
+      (g.prefix || !experiments.length));
+    const inputs = mine.filter((f) => f.slice(g.prefix.length).startsWith("input.")).sort();
+    const outputs = mine.filter((f) => !inputs.includes(f)).sort();
+    if (!inputs.length && !outputs.length) continue;
+    const box = el("div", { class: "plots" });
+    for (const f of inputs) {
+      taken.add(f);
+      const input = f.slice(g.prefix.length + "input.".length).replace(/\.svg$/, "");
+      box.append(figure(files[f], `${g.name ? `${g.name}: ` : ""}input ${input} as the model was driven`));
+    }
+    for (const f of outputs) {
+      taken.add(f);
+      const output = f.slice(g.prefix.length).replace(/\.svg$/, "");
+      box.append(figure(files[f], `${g.name ? `${g.name}: ` : ""}${output}: measured, nominal and calibrated`));
+    }
+    if (g.name) {
+      holder.append(el("section", { class: "experiment-plots", "aria-label": `experiment ${g.name}` },
+        el("h4", { text: `Experiment ${g.name}` }), box));
+    } else {
+      holder.append(box);
+    }
+  }
+  const rest = Object.keys(files).filter((f) => !taken.has(f)).sort();
+  const last = el("div", { class: "plots" });
+  for (const f of rest) last.append(figure(files[f], `${f.replace(/\.svg$/, "")}: measured, nominal and calibrated`));
+  if (files["waterfall.svg"]) last.append(figure(files["waterfall.svg"], "waterfall: final objective of each run, best first"));
+  if (last.children.length) holder.append(last);
 }
 
 async function cancel() {
@@ -887,6 +1108,7 @@ $("simulate").addEventListener("click", simulate);
 $("upload").addEventListener("click", upload);
 $("plot-columns").addEventListener("click", plotColumns);
 $("start").addEventListener("click", start);
+$("add-experiment").addEventListener("click", addExperiment);
 $("cancel").addEventListener("click", cancel);
 $("refresh-campaigns").addEventListener("click", refreshCampaigns);
 $("diagnose").addEventListener("click", diagnose);
