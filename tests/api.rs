@@ -258,6 +258,7 @@ fn calib_submit_of_experiments_with_an_input_equals_the_local_calibration() {
         &calib_coordinator::optim::problem::Silent,
     )
     .unwrap();
+    let summary = calib_coordinator::report::table::summary(&local);
     let local = calib_coordinator::report::result_json(&local);
 
     let cluster = TestCluster::start(2, 1);
@@ -307,6 +308,30 @@ fn calib_submit_of_experiments_with_an_input_equals_the_local_calibration() {
         (pendulum_found / pendulum - 1.0).abs() < 0.02,
         "{pendulum_found} vs {pendulum}"
     );
+    // Submitted again (the coordinator answers the finished campaign), the summary `calib
+    // calibrate` prints, but for the line of evaluations from the store and seconds.
+    let out = calib(&[
+        "submit",
+        campaign.to_str().unwrap(),
+        "--coordinator",
+        &coordinator.url(),
+        "--out",
+        dir.path().join("submitted").to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let printed = String::from_utf8(out.stdout).unwrap();
+    let same = |text: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| !l.contains("distinct minima") && !l.starts_with("wrote "))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(same(&printed), same(&summary), "{printed}");
+    assert!(printed.contains("rms pendulumJoint.phi"), "{printed}");
     let folder = dir.path().join("submitted").join("pair");
     for file in [
         "swing.armJoint.phi.svg",

@@ -404,17 +404,7 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
     } else {
         let result: serde_json::Value = serde_json::from_str(&state.result_json)
             .map_err(|e| Failure::internal(format!("coordinator: result is not JSON: {e}")))?;
-        let best = &result["best"];
-        println!("best ({} from start {}):", best["method"], best["start"]);
-        if let Some(parameters) = best["parameters"].as_object() {
-            for (name, value) in parameters {
-                println!("  {name:<20} = {value}");
-            }
-        }
-        println!(
-            "objective {} -> {}",
-            result["nominal_objective"], best["objective"]
-        );
+        print!("{}", calib_coordinator::report::table::summary_of(&result));
         for path in written {
             println!("wrote {}", path.display());
         }

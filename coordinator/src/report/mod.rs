@@ -40,6 +40,7 @@ pub fn result_json(c: &Calibration) -> Value {
         .iter()
         .map(|s| (s / samples).sqrt())
         .collect();
+    let nominal_rms: Vec<f64> = c.nominal.sse.iter().map(|s| (s / samples).sqrt()).collect();
     let runs: Vec<Value> = c
         .runs
         .iter()
@@ -143,6 +144,7 @@ pub fn result_json(c: &Calibration) -> Value {
         "window": { "start": c.campaign.window.0, "stop": c.campaign.window.1, "samples": c.objective.grid.len() },
         "free_parameters": c.campaign.free,
         "nominal_objective": c.nominal.objective,
+        "nominal_rms": per_output(&nominal_rms),
         "best": {
             "parameters": named(&names, &best.point),
             "objective": best.objective,
