@@ -556,7 +556,8 @@ fn an_fmu_dropped_or_picked_on_the_model_tab_is_simulated_and_calibrated() {
 /// Two Furuta records fitted together on the page, the second driven by its measured arm
 /// torque (mapped to the model's `armTorque` input, with its own start angle and window)
 /// give the values `calib calibrate` gives the same campaign file, bit for bit; the results
-/// show each experiment's fits, the driven one's input above them.
+/// show each experiment's fits, the driven one's input above them. The Model tab simulates
+/// the model driven by the uploaded torque column.
 #[test]
 fn experiments_with_a_driven_input_on_the_page_give_the_values_of_calib_calibrate() {
     if let Some(reason) = browser_missing() {
@@ -665,6 +666,15 @@ seed = 1
         page["first_input_choices"],
         serde_json::json!(["", "arm_angle_rad", "pendulum_angle_rad"])
     );
+    // The Model tab drives the input by the uploaded column: its plot above the outputs',
+    // and an arm that moves otherwise than undriven.
+    let model = &page["model"];
+    assert_eq!(
+        model["driven"][0], "input armTorque driven by motor_torque_Nm",
+        "{model}"
+    );
+    assert!(!model["undriven"].to_string().contains("input"), "{model}");
+    assert_eq!(model["arm_differs"], true, "{model}");
     let (arm, pendulum) = common::true_frictions();
     for (name, truth) in [("armFriction", arm), ("pendulumFriction", pendulum)] {
         let expected = best_parameter(&reference_text, name);

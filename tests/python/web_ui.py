@@ -20,7 +20,9 @@ freed on the Calibration tab and calibrated; the calibrated value read off the p
 tab, the driven record added as a second experiment on the Calibration tab (its own upload,
 window, start angle, and its torque column mapped to the model's armTorque input); the
 calibrated values, the status and the plots' captions read off the page; screenshots of the
-mapping and of the result.
+mapping and of the result. On the Model tab, the model simulated with its armTorque input
+driven by the uploaded torque column: the captions of the plots, and whether the arm angle
+differs from the undriven simulation.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
@@ -479,6 +481,34 @@ def experiments(url, swing, driven, shots, out):
         by_id(driver, "experiments").location_once_scrolled_into_view
         screenshot(driver, os.path.join(shots, "experiments.png"))
 
+        # The Model tab simulates the model driven by the uploaded torque column.
+        tab(driver, "model")
+        type_into(driver, "model-stop", "10")
+
+        def simulated():
+            driver.execute_script("document.getElementById('model-status').textContent = ''")
+            press(driver, "simulate")
+            wait(driver).until(lambda d: "simulated" in by_id(d, "model-status").text
+                               or by_id(d, "model-error").is_displayed())
+            no_error(driver, "model-error")
+            return {f.find_element(By.CSS_SELECTOR, "figcaption").text:
+                    f.find_element(By.CSS_SELECTOR, "svg").get_attribute("outerHTML")
+                    for f in driver.find_elements(By.CSS_SELECTOR, "#model-plots figure")}
+
+        undriven = simulated()
+        drive = Select(by_id(driver, "drive-armTorque"))
+        drive.select_by_visible_text("motor_torque_Nm (driven.csv)")
+        driven_plots = simulated()
+        arm = "armJoint.phi simulated over 10 s"
+        model = {
+            "undriven": list(undriven),
+            "driven": list(driven_plots),
+            "arm_differs": undriven.get(arm) != driven_plots.get(arm),
+        }
+        screenshot(driver, os.path.join(shots, "model-driven.png"))
+        drive.select_by_index(0)
+        tab(driver, "calibration")
+
         press(driver, "start")
         wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
                                  or by_id(d, "calibration-error").is_displayed())
@@ -500,6 +530,7 @@ def experiments(url, swing, driven, shots, out):
         with open(out, "w") as f:
             json.dump({
                 "first_input_choices": first_input,
+                "model": model,
                 "calibrated": calibrated,
                 "groups": groups,
                 "plots": plots,

@@ -311,6 +311,62 @@ async function describe(name) {
   renderCalibration();
 }
 
+// The model's inputs on the Model tab: each left at the model's own value, or driven by a
+// column of the uploaded measurement (ids `drive-<name>`, `drive-interp-<name>`).
+function renderModelInputs() {
+  const body = $("model-inputs").tBodies[0];
+  // Every uploaded record's columns: the measurement's, then each experiment's.
+  const records = [app.dataset, ...app.experiments.map((x) => x.dataset)].filter((d) => d);
+  const choices = records.flatMap((d) => d.columns.map((c) => [`${d.id}/${c}`, `${c} (${d.file_name})`]));
+  const note = records.length ? "" : " (upload a measurement to drive it)";
+  const kept = {};
+  for (const row of body.rows) {
+    const [column, interp] = row.querySelectorAll("select");
+    kept[row.dataset.input] = [column.value, interp.value];
+  }
+  body.replaceChildren();
+  for (const i of modelInputs()) {
+    const column = el("select", { id: `drive-${i.name}`, "aria-label": `signal driving ${i.name} in the simulation` },
+      el("option", { value: "", text: `— its own value${note}` }));
+    for (const [value, text] of choices) column.append(el("option", { value, text }));
+    const interp = el("select", { id: `drive-interp-${i.name}`, "aria-label": `interpolation of ${i.name} in the simulation` });
+    for (const [value, text] of INTERPOLATIONS) interp.append(el("option", { value, text }));
+    const old = kept[i.name];
+    if (old) {
+      if (choices.some(([value]) => value === old[0])) column.value = old[0];
+      interp.value = old[1];
+    }
+    const row = el("tr", {}, el("th", { scope: "row", text: `${i.name} [${i.unit}]`, title: i.description }),
+      el("td", {}, column), el("td", {}, interp));
+    row.dataset.input = i.name;
+    body.append(row);
+  }
+  $("model-inputs").hidden = !modelInputs().length;
+}
+
+// A column of an uploaded record with its times (`key`: "<dataset id>/<column>"), fetched
+// once.
+const columnCache = {};
+async function datasetColumn(key) {
+  if (!columnCache[key]) {
+    const cut = key.indexOf("/");
+    const id = key.slice(0, cut), column = key.slice(cut + 1);
+    const response = await fetch(`/ui/datasets/${id}/column/${encodeURIComponent(column)}`);
+    const text = await response.text();
+    if (response.status === 401) showLogin();
+    if (!response.ok) throw new Error(JSON.parse(text).message);
+    columnCache[key] = JSON.parse(text);
+  }
+  return columnCache[key];
+}
+
+// At most `n` points of a series, for drawing.
+function thin(x, y, n = 20000) {
+  const step = Math.max(1, Math.ceil(x.length / n));
+  if (step === 1) return [x, y];
+  return [x.filter((_, k) => k % step === 0), y.filter((_, k) => k % step === 0)];
+}
+
 function modelValue(p) {
   const v = parseFloat($(`value-${p.name}`).value);
   return Number.isFinite(v) ? v : p.default_value;
@@ -333,12 +389,33 @@ async function simulate() {
     .map((p) => ({ name: p.name, value: modelValue(p) }));
   $("model-status").textContent = "simulating…";
   try {
+    // Inputs driven by measured columns: the whole column, read as the campaign reads it.
+    const driven = [];
+    for (const i of modelInputs()) {
+      const key = $(`drive-${i.name}`) && $(`drive-${i.name}`).value;
+      if (!key) continue;
+      const signal = await datasetColumn(key);
+      const column = key.slice(key.indexOf("/") + 1);
+      const hold = $(`drive-interp-${i.name}`).value === "hold";
+      driven.push({ input: i, column, hold, signal });
+    }
+    const inputs = driven.map((d) => ({
+      input: d.input.name, times: d.signal.times, values: d.signal.values, interpolation: d.hold ? 1 : 0,
+    }));
     const answer = await call("Simulate", {
-      protocol_version: 1, model: model.name, parameters, times, outputs, fmu_hash: fmuHash(model.name),
+      protocol_version: 1, model: model.name, parameters, times, outputs, fmu_hash: fmuHash(model.name), inputs,
     });
     if (answer.failure) throw new Error(`simulation failed: ${answer.failure.message}`);
     const plots = $("model-plots");
     plots.replaceChildren();
+    for (const d of driven) {
+      const [x, y] = thin(d.signal.times, d.signal.values);
+      const svg = await plot({
+        title: `${model.name}: input ${d.input.name}`, x_label: "time [s]", y_label: `${d.input.name} [${d.input.unit}]`,
+        series: [{ label: `${d.column} (${d.hold ? "held" : "linear"})`, x, y }],
+      });
+      plots.append(figure(svg, `input ${d.input.name} driven by ${d.column}`));
+    }
     for (const s of answer.series) {
       const unit = (model.outputs.find((o) => o.name === s.output) || {}).unit || "";
       const svg = await plot({
@@ -586,6 +663,7 @@ function experimentName(experiment) {
 
 // The experiments' cards follow the model (its inputs and parameters) and the first record.
 function renderExperiments() {
+  renderModelInputs();
   const several = app.experiments.length > 0;
   $("first-experiment").hidden = !several;
   for (const [k, x] of app.experiments.entries()) {
