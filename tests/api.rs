@@ -331,7 +331,9 @@ fn calib_submit_of_experiments_with_an_input_equals_the_local_calibration() {
             .collect()
     };
     assert_eq!(same(&printed), same(&summary), "{printed}");
-    assert!(printed.contains("rms pendulumJoint.phi"), "{printed}");
+    for series in ["swing: armJoint.phi", "driven: pendulumJoint.phi"] {
+        assert!(printed.contains(&format!("rms {series}")), "{printed}");
+    }
     let folder = dir.path().join("submitted").join("pair");
     for file in [
         "swing.armJoint.phi.svg",

@@ -200,6 +200,8 @@ fn models_lists_the_furuta_contract() {
         "armJoint.phi",
         "pendulumJoint.w",
         "viscous_friction.arm",
+        "armTorque",
+        "T_air_in",
     ] {
         assert!(text.contains(name), "`{name}` missing from: {text}");
     }
@@ -240,6 +242,172 @@ fn simulate_writes_a_trajectory_csv() {
     assert_eq!(bad.status.code(), Some(2));
     let bad = calib(&["simulate", "furuta", "--set", "nope=1"]);
     assert_eq!(bad.status.code(), Some(2));
+}
+
+/// `--input` drives a model input by a profile and writes it as a column; `--noise` on it
+/// perturbs the column only (the model follows the profile, as a bench's sensor records it).
+#[test]
+fn simulate_drives_inputs_by_profiles() {
+    let run = |extra: &[&str]| {
+        let mut args = vec![
+            "simulate",
+            "furuta",
+            "--stop",
+            "2",
+            "--step",
+            "0.5",
+            "--input",
+            "armTorque=0:0,1:0.05",
+        ];
+        args.extend_from_slice(extra);
+        let out = calib(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let text = String::from_utf8(out.stdout).unwrap();
+        let rows: Vec<Vec<String>> = text
+            .lines()
+            .map(|l| l.split(',').map(String::from).collect())
+            .collect();
+        rows
+    };
+    let clean = run(&[]);
+    assert_eq!(
+        clean[0].join(","),
+        "time,armTorque,armJoint.phi,pendulumJoint.phi,armJoint.w,pendulumJoint.w"
+    );
+    let torque: Vec<f64> = clean[1..].iter().map(|r| r[1].parse().unwrap()).collect();
+    assert_eq!(torque, [0.0, 0.025, 0.05, 0.05, 0.05]);
+    let noisy = run(&["--noise", "armTorque=0.01"]);
+    for (c, n) in clean[1..].iter().zip(&noisy[1..]) {
+        assert_ne!(c[1], n[1]);
+        assert_eq!(
+            c[2..],
+            n[2..],
+            "the model follows the profile, not the noise"
+        );
+    }
+    // Driven, the arm turns; free, it would not.
+    let free = calib(&["simulate", "furuta", "--stop", "2", "--step", "0.5"]);
+    let free = String::from_utf8(free.stdout).unwrap();
+    let free_phi: f64 = free
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .nth(1)
+        .unwrap()
+        .parse()
+        .unwrap();
+    let driven_phi: f64 = clean.last().unwrap()[2].parse().unwrap();
+    assert!(
+        (driven_phi - free_phi).abs() > 0.1,
+        "{driven_phi} vs {free_phi}"
+    );
+
+    let stderr_of = |args: &[&str]| {
+        let out = calib(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let e = stderr_of(&["simulate", "furuta", "--input", "armTorqe=0:1"]);
+    assert!(e.contains("did you mean `armTorque`"), "{e}");
+    let e = stderr_of(&["simulate", "furuta", "--input", "armTorque=0:1,x"]);
+    assert!(e.contains("`x` is not TIME:VALUE"), "{e}");
+    let e = stderr_of(&["simulate", "furuta", "--input", "armTorque=2:1,1:0"]);
+    assert!(e.contains("non-decreasing"), "{e}");
+    let e = stderr_of(&["simulate", "furuta", "--noise", "armTorque=0.1"]);
+    assert!(
+        e.contains("neither a written output nor a driven input"),
+        "{e}"
+    );
+}
+
+/// `calib simulate --input`: a constant motor torque from a file drives the Furuta's arm as
+/// the opposite torque bias does, to the bit (the same sum in the equations of motion), held
+/// or read linearly; a column that names no input gets the nearest name; a file that stops
+/// before the simulation is refused.
+#[test]
+fn simulate_drives_a_model_from_an_input_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| -> String {
+        let out = calib(args);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let torque = write(
+        dir.path(),
+        "torque.csv",
+        "time,armTorque\n0,0.02\n2.5,0.02\n5,0.02\n",
+    );
+    let torque = torque.to_str().unwrap();
+    let common = ["simulate", "furuta", "--stop", "5", "--step", "0.01"];
+    let driven = run(&[&common[..], &["--input", torque]].concat());
+    let held = run(&[
+        &common[..],
+        &["--input", torque, "--input-interpolation", "hold"],
+    ]
+    .concat());
+    let biased = run(&[&common[..], &["--set", "torque_bias.arm=-0.02"]].concat());
+    let free = run(&common);
+    assert_eq!(driven, biased);
+    assert_eq!(held, biased);
+    assert_ne!(driven, free, "the torque moves the arm");
+    assert_eq!(driven.lines().count(), 502);
+
+    let stderr_of = |args: &[&str]| {
+        let out = calib(args);
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let typo = write(dir.path(), "typo.csv", "time,armTorq\n0,0.02\n5,0.02\n");
+    let e = stderr_of(&[
+        "simulate",
+        "furuta",
+        "--stop",
+        "5",
+        "--input",
+        typo.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains(
+            "column `armTorq`: model `furuta` has no input `armTorq`; did you mean `armTorque`?"
+        ),
+        "{e}"
+    );
+    let short = write(dir.path(), "short.csv", "time,armTorque\n0,0.02\n2,0.02\n");
+    let e = stderr_of(&[
+        "simulate",
+        "furuta",
+        "--stop",
+        "5",
+        "--input",
+        short.to_str().unwrap(),
+    ]);
+    assert!(
+        e.contains("do not cover the simulation from 0 to 5 s"),
+        "{e}"
+    );
+    let e = stderr_of(&["simulate", "furuta", "--input-interpolation", "hold"]);
+    assert!(e.contains("--input"), "{e}");
+}
+
+/// `calib models` lists every model's inputs, or says it has none.
+#[test]
+fn models_lists_inputs() {
+    let out = calib(&["models"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("armTorque"), "{text}");
+    let out = calib(&["models", "--json"]);
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json[0]["inputs"][0]["name"], "armTorque");
+    assert_eq!(json[0]["inputs"][0]["unit"], "N.m");
 }
 
 #[test]

@@ -164,12 +164,13 @@ impl Objective {
                 }
             });
         }
+        // The inputs must cover what is simulated: plots run to the experiment's stop time.
         let inputs = driving_inputs(
             campaign,
             experiment,
             measurement,
             campaign.solver.start_time,
-            stop,
+            stop.max(experiment.stop_time),
             place,
         )?;
         let mut objective = Self {
@@ -422,9 +423,9 @@ fn load_experiment(
     })
 }
 
-/// The measured columns mapped to the campaign's inputs, as signals: the whole column (plots
-/// may simulate past the window). A column that does not cover the fitted span
-/// `[start, stop]` is refused naming file, column and times.
+/// The measured columns mapped to the campaign's inputs, as signals: the whole column. A
+/// column that does not cover the simulated span `[start, stop]` (to the stop time, where
+/// plots end) is refused naming file, column and times.
 fn driving_inputs(
     campaign: &Campaign,
     experiment: &Experiment,
@@ -453,7 +454,8 @@ fn driving_inputs(
         })?;
         if first > start + slack || last < stop - slack {
             return Err(error(format!(
-                "column `{}` of {} runs from {first} to {last} s and does not cover the                  simulation from {start} to {stop} s",
+                "column `{}` of {} runs from {first} to {last} s and does not cover the \
+                 simulation from {start} to {stop} s",
                 input.measured,
                 measurement.source.display()
             )));

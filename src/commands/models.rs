@@ -75,6 +75,14 @@ pub fn run(args: Args) -> Outcome {
         for o in &info.outputs {
             println!("    {:<22} {:<8} {}", o.name, o.unit, o.description);
         }
+        if info.inputs.is_empty() {
+            println!("  inputs: none");
+        } else {
+            println!("  inputs (driven by `calib simulate --input`, campaigns' [[inputs]]):");
+            for i in &info.inputs {
+                println!("    {:<22} {:<8} {}", i.name, i.unit, i.description);
+            }
+        }
         println!("  effects (0 = absent):");
         for e in &info.effects {
             println!(

@@ -1,4 +1,5 @@
 use super::{Failure, Outcome};
+use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
 use calib_worker::limits;
 use calib_worker::validate::{self, SolverOverrides};
 use rand::{Rng, SeedableRng};
@@ -41,16 +42,103 @@ pub struct Args {
     /// when it gives one].
     #[arg(long)]
     rtol: Option<f64>,
-    /// Add white Gaussian noise to an output: NAME=SIGMA in the output's unit (repeatable),
-    /// to make a synthetic record.
+    /// Drive model inputs (repeatable), from a file or by a profile. FILE.csv: the first
+    /// column is time [s], the others are named after the model's inputs (see `calib
+    /// models`), each covering the simulated span. NAME=T:V,T:V,...: times in s and values
+    /// in the input's unit, straight lines between the points, the first value before them
+    /// and the last after; two points at one time make a step; the input is written as a
+    /// column of its own, after `time`. Inputs left undriven keep the model's own values.
+    #[arg(long = "input", value_name = "FILE.csv | NAME=T:V,...")]
+    input: Vec<String>,
+    /// Add white Gaussian noise to an output, or to the column of a driven input (the model
+    /// is driven by the profile itself, as a bench's sensor records its boundary condition):
+    /// NAME=SIGMA in its unit (repeatable), to make a synthetic record.
     #[arg(long = "noise", value_name = "NAME=SIGMA")]
     noise: Vec<String>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// How an input file's samples are read between them: `linear` (a straight line from
+    /// one sample to the next) or `hold` (each sample until the next).
+    #[arg(long, value_enum, default_value = "linear", requires = "input")]
+    input_interpolation: InterpolationArg,
     /// CSV file to write (default: standard output).
     #[arg(long)]
     out: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+pub enum InterpolationArg {
+    Linear,
+    Hold,
+}
+
+/// The signals of an input file: time in the first column, one input per other column,
+/// named after the model's inputs.
+fn read_inputs(
+    path: &std::path::Path,
+    info: &calib_worker::ModelInfo,
+    interpolation: Interpolation,
+) -> Result<Inputs, Failure> {
+    let shown = path.display();
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| Failure::input(format!("--input {shown}: {e}")))?;
+    let header: Vec<String> = reader
+        .headers()
+        .map_err(|e| Failure::input(format!("--input {shown}: {e}")))?
+        .iter()
+        .map(str::to_string)
+        .collect();
+    if header.len() < 2 {
+        return Err(Failure::input(format!(
+            "--input {shown}: expected a time column, then one column per input"
+        )));
+    }
+    let mut indices = Vec::with_capacity(header.len() - 1);
+    for name in &header[1..] {
+        let index = validate::input(info, name)
+            .map_err(|e| Failure::input(format!("--input {shown}: column `{name}`: {e}")))?;
+        if indices.contains(&index) {
+            return Err(Failure::input(format!(
+                "--input {shown}: column `{name}` appears twice"
+            )));
+        }
+        indices.push(index);
+    }
+    let mut times = Vec::new();
+    let mut columns = vec![Vec::new(); indices.len()];
+    for (row, record) in reader.records().enumerate() {
+        let record = record.map_err(|e| Failure::input(format!("--input {shown}: {e}")))?;
+        let line = row + 2;
+        let number = |k: usize| -> Result<f64, Failure> {
+            let cell = record.get(k).unwrap_or("");
+            cell.parse::<f64>().map_err(|_| {
+                Failure::input(format!(
+                    "--input {shown}: line {line}, column `{}`: `{cell}` is not a number",
+                    header[k]
+                ))
+            })
+        };
+        times.push(number(0)?);
+        for (k, column) in columns.iter_mut().enumerate() {
+            column.push(number(k + 1)?);
+        }
+    }
+    let times: std::sync::Arc<[f64]> = times.into();
+    Ok(Inputs {
+        signals: indices
+            .into_iter()
+            .zip(columns)
+            .map(|(input, values)| InputSignal {
+                input,
+                times: times.clone(),
+                values: values.into(),
+                interpolation,
+            })
+            .collect(),
+    })
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -117,7 +205,30 @@ pub fn run(args: Args) -> Outcome {
     };
     let grid = output_times(args.start, args.stop, args.step);
     validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
-    let mut noise = vec![0.0; outputs.len()];
+    // A profile is NAME=T:V,...; anything else names a file.
+    let is_profile = |a: &str| {
+        a.split_once('=')
+            .is_some_and(|(name, points)| !name.contains(['/', '.']) && points.contains(':'))
+    };
+    let (profiles, files): (Vec<&String>, Vec<&String>) =
+        args.input.iter().partition(|a| is_profile(a));
+    if files.len() > 1 {
+        return Err(Failure::input(format!(
+            "--input {}: one input file at most (put every input's column in it)",
+            files[1]
+        )));
+    }
+    let inputs = Inputs {
+        signals: profiles
+            .iter()
+            .map(|a| profile(info, a, args.stop))
+            .collect::<Result<_, _>>()?,
+    };
+    inputs
+        .check(info, 0.0f64.min(args.start), args.stop)
+        .map_err(|e| Failure::input(format!("--input: {e}")))?;
+    // Noise of the written outputs, then of the driven inputs' columns.
+    let mut noise = vec![0.0; outputs.len() + inputs.signals.len()];
     for assignment in &args.noise {
         let Some((name, sigma)) = assignment.split_once('=') else {
             return Err(Failure::input(format!(
@@ -127,9 +238,16 @@ pub fn run(args: Args) -> Outcome {
         let Some(k) = outputs
             .iter()
             .position(|&o| info.outputs[o].name == name.trim())
+            .or_else(|| {
+                inputs
+                    .signals
+                    .iter()
+                    .position(|s| info.inputs[s.input].name == name.trim())
+                    .map(|k| outputs.len() + k)
+            })
         else {
             return Err(Failure::input(format!(
-                "--noise {assignment}: `{name}` is not among the written outputs"
+                "--noise {assignment}: `{name}` is neither a written output nor a driven input"
             )));
         };
         match sigma.trim().parse::<f64>() {
@@ -141,12 +259,40 @@ pub fn run(args: Args) -> Outcome {
             }
         }
     }
+    // The file's signals drive the model beside the profiles; only the profiles are written
+    // (the file holds its own columns already).
+    let mut driving = inputs.clone();
+    if let Some(path) = files.first() {
+        let path = PathBuf::from(path.as_str());
+        let interpolation = match args.input_interpolation {
+            InterpolationArg::Linear => Interpolation::Linear,
+            InterpolationArg::Hold => Interpolation::Hold,
+        };
+        let read = read_inputs(&path, info, interpolation)?;
+        read.check(info, options.start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+        driving.signals.extend(read.signals);
+        driving
+            .check(info, options.start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+    }
     let mut trajectory = model
-        .simulate(&params, &grid, &outputs, &options)
+        .simulate_driven(&params, &grid, &outputs, &options, &driving)
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
+    let mut columns: Vec<Vec<f64>> = inputs
+        .signals
+        .iter()
+        .map(|s| grid.iter().map(|&t| s.at(t)).collect())
+        .collect();
 
+    // The outputs' noise is drawn first, so a record without inputs keeps its draws.
     let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    for (series, &sigma) in trajectory.values.iter_mut().zip(&noise) {
+    for (series, &sigma) in trajectory
+        .values
+        .iter_mut()
+        .chain(columns.iter_mut())
+        .zip(&noise)
+    {
         if sigma > 0.0 {
             // Checked above: every σ is finite and not negative.
             let normal = Normal::new(0.0, sigma)
@@ -167,11 +313,22 @@ pub fn run(args: Args) -> Outcome {
     let mut csv = csv::Writer::from_writer(std::io::BufWriter::new(sink));
     let write_error = |e: csv::Error| Failure::internal(format!("cannot write CSV: {e}"));
     let mut header = vec!["time".to_string()];
+    header.extend(
+        inputs
+            .signals
+            .iter()
+            .map(|s| info.inputs[s.input].name.clone()),
+    );
     header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
     csv.write_record(&header).map_err(write_error)?;
     for (i, t) in grid.iter().enumerate() {
         let mut row = vec![format!("{t}")];
-        row.extend(trajectory.values.iter().map(|v| format!("{}", v[i])));
+        row.extend(
+            columns
+                .iter()
+                .chain(&trajectory.values)
+                .map(|v| format!("{}", v[i])),
+        );
         csv.write_record(&row).map_err(write_error)?;
     }
     csv.flush()
@@ -185,6 +342,51 @@ pub fn run(args: Args) -> Outcome {
         );
     }
     Ok(())
+}
+
+/// The signal of `--input NAME=T:V,T:V,...`: the points, read linearly, extended to cover
+/// the simulation from 0 (hosted models) to `stop` by the first and the last value.
+fn profile(
+    info: &calib_worker::ModelInfo,
+    assignment: &str,
+    stop: f64,
+) -> Result<InputSignal, Failure> {
+    let refused = |why: String| Failure::input(format!("--input {assignment}: {why}"));
+    let Some((name, points)) = assignment.split_once('=') else {
+        return Err(refused("expected NAME=T:V,T:V,...".into()));
+    };
+    let input = validate::input(info, name.trim()).map_err(|e| refused(e.to_string()))?;
+    let mut times = Vec::new();
+    let mut values = Vec::new();
+    for point in points.split(',') {
+        let parsed = point.split_once(':').and_then(|(t, v)| {
+            Some((t.trim().parse::<f64>().ok()?, v.trim().parse::<f64>().ok()?))
+        });
+        let Some((t, v)) = parsed else {
+            return Err(refused(format!("`{point}` is not TIME:VALUE")));
+        };
+        times.push(t);
+        values.push(v);
+    }
+    // Checked with the other inputs; here only what extending them needs.
+    if times.iter().chain(&values).any(|x| !x.is_finite()) {
+        return Err(refused("times and values must be finite".into()));
+    }
+    if times[0] > 0.0 {
+        times.insert(0, 0.0);
+        values.insert(0, values[0]);
+    }
+    let last = times.len() - 1;
+    if times[last] < stop {
+        times.push(stop);
+        values.push(values[last]);
+    }
+    Ok(InputSignal {
+        input,
+        times: times.into(),
+        values: values.into(),
+        interpolation: Interpolation::Linear,
+    })
 }
 
 /// `start`, `start + step`, … up to `stop`, and `stop` itself: the last interval is shorter

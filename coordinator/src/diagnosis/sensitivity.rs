@@ -32,6 +32,15 @@ pub fn stack(series: &[Vec<f64>], weights: &[f64]) -> Column {
         .collect()
 }
 
+/// The weights of every series an objective compares, experiment after experiment: those
+/// [`Objective::simulate`] returns and [`stack`] scales.
+pub fn series_weights(objective: &Objective) -> Vec<f64> {
+    objective
+        .experiments()
+        .flat_map(|e| e.weights.iter().copied())
+        .collect()
+}
+
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
@@ -44,7 +53,8 @@ pub struct Sensitivities {
     pub steps: Vec<f64>,
 }
 
-/// Central differences of the outputs with respect to each free parameter.
+/// Central differences of the outputs (of every experiment) with respect to each free
+/// parameter.
 pub fn parameter_jacobian(
     simulator: &dyn Simulator,
     objective: &Objective,
@@ -66,10 +76,12 @@ pub fn parameter_jacobian(
         steps.push(up - down);
     }
     let results = simulator.simulate(objective, &points)?;
+    // Every experiment's series, not the first one's alone.
+    let weights = series_weights(objective);
     let mut columns = Vec::new();
     for (i, pair) in results.chunks(2).enumerate() {
-        let up = stack(pair[0].as_ref().map_err(|e| failed(e))?, &objective.weights);
-        let down = stack(pair[1].as_ref().map_err(|e| failed(e))?, &objective.weights);
+        let up = stack(pair[0].as_ref().map_err(|e| failed(e))?, &weights);
+        let down = stack(pair[1].as_ref().map_err(|e| failed(e))?, &weights);
         columns.push(
             up.iter()
                 .zip(&down)

@@ -476,9 +476,10 @@ pub fn local_statistics(
         .simulate(objective, &[point.to_vec()])?
         .remove(0)
         .map_err(|e| Error::Optimiser(format!("simulation at the best point failed: {e}")))?;
+    // Every series of every experiment, in the order `simulate` returns them.
     let residual: Vec<Vec<f64>> = objective
-        .measured
-        .iter()
+        .experiments()
+        .flat_map(|e| &e.measured)
         .zip(&simulated)
         .map(|(w, y)| w.iter().zip(y).map(|(a, b)| a - b).collect())
         .collect();

@@ -30,6 +30,24 @@ pub fn time_plot(
     line_plot(path, title, "time [s]", y_label, series, shade)
 }
 
+/// A time plot of several series, each fitted interval of `windows` shaded.
+fn time_plot_windows(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    series: &[Series],
+    windows: &[(f64, f64)],
+) -> Result<()> {
+    let text = plot_svg(title, "time [s]", y_label, series, windows).map_err(|e| Error::Write {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    })?;
+    std::fs::write(path, text).map_err(|source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
 /// A plot of several series against a common abscissa (their `time`), the range `shade`
 /// (start, stop) shaded.
 pub fn line_plot(
@@ -58,6 +76,18 @@ pub fn line_plot_svg(
     y_label: &str,
     series: &[Series],
     shade: Option<(f64, f64)>,
+) -> std::result::Result<String, String> {
+    let shades: Vec<(f64, f64)> = shade.into_iter().collect();
+    plot_svg(title, x_label, y_label, series, &shades)
+}
+
+/// [`line_plot_svg`] with any number of shaded ranges.
+fn plot_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    shades: &[(f64, f64)],
 ) -> std::result::Result<String, String> {
     let (mut x0, mut x1, mut y0, mut y1) = (
         f64::INFINITY,
@@ -103,7 +133,7 @@ pub fn line_plot_svg(
             .y_desc(y_label)
             .light_line_style(WHITE.mix(0.0))
             .draw()?;
-        if let Some((a, b)) = shade {
+        for &(a, b) in shades {
             chart.draw_series(std::iter::once(Rectangle::new(
                 [(a.max(x0), y0), (b.min(x1), y1)],
                 RGBColor(235, 242, 250).filled(),
@@ -223,7 +253,7 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
                 .collect();
             let unit = &info.outputs[o.model_index].unit;
             let path = dir.join(format!("{prefix}{}.svg", sanitize(&o.model)));
-            time_plot(
+            time_plot_windows(
                 &path,
                 &format!("{title}: {} vs measured {}", o.model, o.measured),
                 &format!("{} [{unit}]", o.model),
@@ -250,7 +280,7 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
                         width: 2,
                     },
                 ],
-                Some(experiment.window),
+                &experiment.windows,
             )?;
             written.push(path);
         }
@@ -258,7 +288,7 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
             let spec = &info.inputs[signal.input];
             let values: Vec<f64> = grid.iter().map(|&t| signal.at(t)).collect();
             let path = dir.join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
-            time_plot(
+            time_plot_windows(
                 &path,
                 &format!(
                     "{title}: input {} ({})",
@@ -273,7 +303,7 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
                     color: RGBColor(133, 153, 0),
                     width: 1,
                 }],
-                Some(experiment.window),
+                &experiment.windows,
             )?;
             written.push(path);
         }

@@ -138,18 +138,29 @@ pub fn summary_of(result: &Value) -> String {
         best_objective,
         nominal / best_objective
     );
-    if let (Some(before), Some(after)) =
-        (result["nominal_rms"].as_object(), best["rms"].as_object())
-    {
-        for (output, after) in after {
-            let _ = writeln!(
-                s,
-                "  rms {:<22} {:.4e} -> {:.4e}",
-                output,
-                before.get(output).map_or(f64::NAN, number),
-                number(after)
-            );
+    // One line per compared series: per output, and per experiment when there are several.
+    let experiments = list(&result["experiments"]);
+    let mut series: Vec<(String, f64, f64)> = Vec::new();
+    if experiments.is_empty() {
+        if let Some(after) = best["rms"].as_object() {
+            for (output, value) in after {
+                let before = number(&result["nominal_rms"][output]);
+                series.push((output.clone(), before, number(value)));
+            }
         }
+    } else {
+        for e in experiments {
+            let name = e["name"].as_str().unwrap_or_default();
+            if let Some(after) = e["rms"].as_object() {
+                for (output, value) in after {
+                    let before = number(&e["nominal_rms"][output]);
+                    series.push((format!("{name}: {output}"), before, number(value)));
+                }
+            }
+        }
+    }
+    for (name, before, after) in series {
+        let _ = writeln!(s, "  rms {name:<22} {before:.4e} -> {after:.4e}");
     }
     let objectives: Vec<f64> = runs.iter().map(|r| r.objective).collect();
     let at_best = evidence::runs_at_best(&objectives);

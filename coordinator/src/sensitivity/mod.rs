@@ -204,7 +204,8 @@ fn quantities(objective: &Objective, e: &Evaluation) -> Option<Vec<f64>> {
         return None;
     }
     let mut q = vec![e.objective];
-    q.extend(e.sse.iter().zip(&objective.weights).map(|(s, k)| s * k));
+    let weights = objective.experiments().flat_map(|part| &part.weights);
+    q.extend(e.sse.iter().zip(weights).map(|(s, k)| s * k));
     Some(q)
 }
 
@@ -249,13 +250,7 @@ pub fn analyse_reporting<E: Evaluator>(
             "the campaign has no free parameter to analyse".into(),
         ));
     }
-    if !campaign.more.is_empty() {
-        return Err(Error::InvalidRequest(format!(
-            "the sensitivity analysis takes one record: this campaign fits {} experiments \
-             together; analyse each experiment's record in a campaign of its own",
-            1 + campaign.more.len()
-        )));
-    }
+
     settings.check()?;
     if settings.methods.sobol()
         && (settings.samples > sampling::SALTELLI_MAX_SAMPLES
@@ -275,7 +270,7 @@ pub fn analyse_reporting<E: Evaluator>(
     }
     let space = UnitBox::new(&campaign.free);
     let evaluator = StoredEvaluator::new(evaluator, store);
-    let outputs = campaign.outputs.len();
+    let outputs = objective.series_count();
     let total = planned(dim, settings);
     let done = std::cell::Cell::new(0);
     progress(0, total);
@@ -297,7 +292,20 @@ pub fn analyse_reporting<E: Evaluator>(
         values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
     };
     let mut names = vec!["objective".to_string()];
-    names.extend(campaign.outputs.iter().map(|o| o.model.clone()));
+    // Each compared series, named after its output (and its experiment when there are
+    // several).
+    let several = !campaign.more.is_empty() || !campaign.experiment.is_empty();
+    let info = campaign.model.info();
+    for part in objective.experiments() {
+        for &o in &part.outputs {
+            let output = &info.outputs[o].name;
+            names.push(if several {
+                format!("{}: {output}", part.name)
+            } else {
+                output.clone()
+            });
+        }
+    }
     let mut result = Sensitivity {
         campaign: campaign.name.clone(),
         parameters: campaign.free.iter().map(|p| p.name.clone()).collect(),

@@ -284,6 +284,12 @@ impl Description {
         })
     }
 
+    /// Variables a simulation may drive: causality `input`, of a type calib sets (Real /
+    /// Float64, Integer / Int32, Boolean).
+    pub fn inputs(&self) -> impl Iterator<Item = &Variable> {
+        self.variables.iter().filter(|v| v.causality == "input")
+    }
+
     /// Variables a simulation can report (integers and booleans as numbers): outputs first, then every other variable
     /// that is neither a parameter, a constant nor the independent variable.
     pub fn observables(&self) -> Vec<&Variable> {

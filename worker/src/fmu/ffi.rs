@@ -41,6 +41,9 @@ type Fmi2SetReals = unsafe extern "C" fn(Ptr, *const c_uint, usize, *const c_dou
 type Fmi2Ints = unsafe extern "C" fn(Ptr, *const c_uint, usize, *mut c_int) -> c_int;
 type Fmi3GetI32 = unsafe extern "C" fn(Ptr, *const c_uint, usize, *mut i32, usize) -> c_int;
 type Fmi3GetBool = unsafe extern "C" fn(Ptr, *const c_uint, usize, *mut bool, usize) -> c_int;
+type Fmi2SetInts = unsafe extern "C" fn(Ptr, *const c_uint, usize, *const c_int) -> c_int;
+type Fmi3SetI32 = unsafe extern "C" fn(Ptr, *const c_uint, usize, *const i32, usize) -> c_int;
+type Fmi3SetBool = unsafe extern "C" fn(Ptr, *const c_uint, usize, *const bool, usize) -> c_int;
 type Fmi2NewDiscreteStates = unsafe extern "C" fn(Ptr, *mut Fmi2EventInfo) -> c_int;
 type Fmi2SetTime = unsafe extern "C" fn(Ptr, c_double) -> c_int;
 type Fmi2Array = unsafe extern "C" fn(Ptr, *mut c_double, usize) -> c_int;
@@ -215,7 +218,7 @@ extern "C" {
 
 /// The loaded shared library of one interface of an FMU.
 /// Every FMI function calib calls; a library resolves them once, when it is loaded.
-const FUNCTIONS: [&str; 41] = [
+const FUNCTIONS: [&str; 45] = [
     "fmi2CompletedIntegratorStep",
     "fmi2DoStep",
     "fmi2EnterContinuousTimeMode",
@@ -234,6 +237,8 @@ const FUNCTIONS: [&str; 41] = [
     "fmi2NewDiscreteStates",
     "fmi2Reset",
     "fmi2SetContinuousStates",
+    "fmi2SetBoolean",
+    "fmi2SetInteger",
     "fmi2SetReal",
     "fmi2SetTime",
     "fmi2SetupExperiment",
@@ -253,8 +258,10 @@ const FUNCTIONS: [&str; 41] = [
     "fmi3InstantiateCoSimulation",
     "fmi3InstantiateModelExchange",
     "fmi3Reset",
+    "fmi3SetBoolean",
     "fmi3SetContinuousStates",
     "fmi3SetFloat64",
+    "fmi3SetInt32",
     "fmi3SetTime",
     "fmi3UpdateDiscreteStates",
 ];
@@ -587,6 +594,49 @@ impl Instance {
                 values.as_ptr()
             )),
             FmiVersion::V3 => call!(self, Fmi3SetF64, "", "fmi3SetFloat64", |f| f(
+                h,
+                vrs.as_ptr(),
+                n,
+                values.as_ptr(),
+                n
+            )),
+        }
+    }
+
+    pub fn set_integers(&mut self, vrs: &[u32], values: &[i32]) -> Result<(), FmuError> {
+        let h = self.handle;
+        let n = vrs.len();
+        match self.lib.version {
+            FmiVersion::V2 => call!(self, Fmi2SetInts, "fmi2SetInteger", "", |f| f(
+                h,
+                vrs.as_ptr(),
+                n,
+                values.as_ptr()
+            )),
+            FmiVersion::V3 => call!(self, Fmi3SetI32, "", "fmi3SetInt32", |f| f(
+                h,
+                vrs.as_ptr(),
+                n,
+                values.as_ptr(),
+                n
+            )),
+        }
+    }
+
+    pub fn set_booleans(&mut self, vrs: &[u32], values: &[bool]) -> Result<(), FmuError> {
+        let h = self.handle;
+        let n = vrs.len();
+        match self.lib.version {
+            FmiVersion::V2 => {
+                let ints: Vec<c_int> = values.iter().map(|&b| c_int::from(b)).collect();
+                call!(self, Fmi2SetInts, "fmi2SetBoolean", "", |f| f(
+                    h,
+                    vrs.as_ptr(),
+                    n,
+                    ints.as_ptr()
+                ))
+            }
+            FmiVersion::V3 => call!(self, Fmi3SetBool, "", "fmi3SetBoolean", |f| f(
                 h,
                 vrs.as_ptr(),
                 n,

@@ -28,6 +28,7 @@
 //! started, whatever it did to get away ([`super::contain`]).
 
 use super::{FmuError, Interface};
+use crate::inputs::{InputSignal, Inputs, Interpolation};
 use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
 use std::collections::VecDeque;
 use std::io::{Read, Write};
@@ -236,6 +237,7 @@ impl Hosts {
         grid: &[f64],
         outputs: &[usize],
         options: &SolverOptions,
+        inputs: &Inputs,
     ) -> Result<Trajectory, SimulationError> {
         let failed = |reason: String| SimulationError::Failed { time: 0.0, reason };
         let idle = self.idle.lock().unwrap_or_else(|e| e.into_inner()).pop();
@@ -243,7 +245,7 @@ impl Hosts {
             Some(child) => child,
             None => self.spawn().map_err(|e| failed(e.to_string()))?,
         };
-        let request = encode_request(params, grid, outputs, options);
+        let request = encode_request(params, grid, outputs, options, inputs);
         child.output.logged.store(0, Ordering::Relaxed);
         let sent = write_frame(&mut child.channel, &request);
         let reply = match sent {
@@ -622,10 +624,12 @@ pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
             Err(_) => return Ok(()),
         };
         let reply = match decode_request(&frame) {
-            Some((params, grid, outputs, options)) => {
+            Some((params, grid, outputs, options, inputs)) => {
                 #[cfg(target_os = "linux")]
                 super::contain::allow_cpu(deadline().as_secs_f64());
-                let result = crate::Model::simulate(&model, &params, &grid, &outputs, &options);
+                let result = crate::Model::simulate_driven(
+                    &model, &params, &grid, &outputs, &options, &inputs,
+                );
                 encode_reply(&result)
             }
             None => encode_reply(&Err(SimulationError::InvalidInput(
@@ -718,6 +722,7 @@ fn encode_request(
     grid: &[f64],
     outputs: &[usize],
     options: &SolverOptions,
+    inputs: &Inputs,
 ) -> Vec<u8> {
     let mut w = Writer::default();
     w.f64s(params).f64s(grid).u64(outputs.len() as u64);
@@ -729,10 +734,18 @@ fn encode_request(
         .u64(options.max_steps as u64)
         .f64(options.start_time)
         .f64(options.communication_step.unwrap_or(0.0));
+    // The signals, once per simulation: the child samples them at every step itself.
+    w.u64(inputs.signals.len() as u64);
+    for s in &inputs.signals {
+        w.u64(s.input as u64)
+            .u64(u64::from(s.interpolation.code()))
+            .f64s(&s.times)
+            .f64s(&s.values);
+    }
     w.0
 }
 
-type Request = (Vec<f64>, Vec<f64>, Vec<usize>, SolverOptions);
+type Request = (Vec<f64>, Vec<f64>, Vec<usize>, SolverOptions, Inputs);
 
 fn decode_request(frame: &[u8]) -> Option<Request> {
     let mut r = Reader(frame);
@@ -750,7 +763,22 @@ fn decode_request(frame: &[u8]) -> Option<Request> {
         // 0: none (a communication step is positive).
         communication_step: Some(r.f64()?).filter(|h| *h != 0.0),
     };
-    Some((params, grid, outputs, options))
+    let n = r.len()?;
+    let signals = (0..n)
+        .map(|_| {
+            Some(InputSignal {
+                input: usize::try_from(r.u64()?).ok()?,
+                interpolation: match r.u64()? {
+                    0 => Interpolation::Linear,
+                    1 => Interpolation::Hold,
+                    _ => return None,
+                },
+                times: r.f64s()?.into(),
+                values: r.f64s()?.into(),
+            })
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some((params, grid, outputs, options, Inputs { signals }))
 }
 
 fn encode_reply(result: &Result<Trajectory, SimulationError>) -> Vec<u8> {
@@ -885,16 +913,33 @@ mod tests {
             start_time: 0.5,
             communication_step: Some(1e-3),
         };
-        let (p, g, o, opts) = decode_request(&encode_request(
+        let inputs = Inputs {
+            signals: vec![
+                InputSignal {
+                    input: 1,
+                    times: vec![0.0, 0.25, 0.5].into(),
+                    values: vec![1.0 / 3.0, -0.0, 7.0].into(),
+                    interpolation: Interpolation::Hold,
+                },
+                InputSignal {
+                    input: 0,
+                    times: vec![0.0].into(),
+                    values: vec![2.5].into(),
+                    interpolation: Interpolation::Linear,
+                },
+            ],
+        };
+        let (p, g, o, opts, i) = decode_request(&encode_request(
             &[0.1, f64::NAN],
             &[0.0, 0.5],
             &[2, 0],
             &options,
+            &inputs,
         ))
         .unwrap();
         assert_eq!(
-            (p[0], g, o, opts),
-            (0.1, vec![0.0, 0.5], vec![2, 0], options)
+            (p[0], g, o, opts, i),
+            (0.1, vec![0.0, 0.5], vec![2, 0], options, inputs)
         );
         assert!(p[1].is_nan());
         let t = Trajectory {

@@ -5,7 +5,9 @@
 //! folder and registers it as a model beside the hosted ones: its real parameters (causality
 //! `parameter`) are the model's parameters, with their start values, units and min/max; its
 //! outputs, then its other real variables, are the model's outputs; the measurement effects
-//! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]). The
+//! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]); its
+//! inputs (causality `input`: Real, Integer, Boolean) are the model's inputs, set from the
+//! signals of [`Model::simulate_driven`] as `run.rs` says. The
 //! model's name is `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`, so that
 //! two different FMUs never share cached evaluations.
 //!
@@ -36,9 +38,10 @@ mod run;
 pub use description::{Description, FmiVersion, Interface, Kind, Variable};
 
 use crate::effects::WithOutputEffects;
+use crate::inputs::Inputs;
 use crate::model::{
-    check_request, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError, SolverOptions,
-    Trajectory,
+    check_request, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
+    SolverOptions, Trajectory,
 };
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
@@ -98,6 +101,7 @@ pub struct FmuModel {
     dir: PathBuf,
     parameter_vrs: Vec<u32>,
     output_refs: Vec<(Kind, u32)>,
+    input_refs: Vec<run::InputRef>,
     runner: Runner,
 }
 
@@ -176,6 +180,41 @@ impl FmuModel {
             .iter()
             .map(|v| (v.kind, v.value_reference))
             .collect();
+        let inputs = description
+            .inputs()
+            .map(|v| {
+                let undriven = match (v.kind, v.start) {
+                    (Kind::Boolean, Some(s)) => format!("{}", s != 0.0),
+                    (_, Some(s)) => format!("{s}"),
+                    (_, None) => "its start value".to_string(),
+                };
+                let held = match v.kind {
+                    Kind::Real if v.variability != "discrete" => String::new(),
+                    Kind::Real => "discrete, held between samples; ".to_string(),
+                    Kind::Integer => "integer, held between samples and rounded; ".to_string(),
+                    Kind::Boolean => {
+                        "boolean, held between samples, true when non-zero; ".to_string()
+                    }
+                };
+                InputSpec {
+                    name: v.name.clone(),
+                    unit: v.unit.clone(),
+                    description: if v.description.is_empty() {
+                        format!("{held}undriven: {undriven}")
+                    } else {
+                        format!("{} ({held}undriven: {undriven})", v.description)
+                    },
+                }
+            })
+            .collect();
+        let input_refs = description
+            .inputs()
+            .map(|v| run::InputRef {
+                kind: v.kind,
+                vr: v.value_reference,
+                discrete: v.kind != Kind::Real || v.variability == "discrete",
+            })
+            .collect();
         let kind = match interface {
             Interface::ModelExchange => "me",
             Interface::CoSimulation => "cs",
@@ -196,7 +235,7 @@ impl FmuModel {
             parameters,
             outputs,
             effects: Vec::new(),
-            inputs: Vec::new(),
+            inputs,
         };
         let runner = if isolated {
             Runner::Isolated(host::Hosts::new(dir.clone(), interface, identifier.clone()))
@@ -214,6 +253,7 @@ impl FmuModel {
             dir,
             parameter_vrs,
             output_refs,
+            input_refs,
             runner,
         })
     }
@@ -267,6 +307,7 @@ impl FmuModel {
         grid: &[f64],
         outputs: &[usize],
         options: &SolverOptions,
+        inputs: &Inputs,
     ) -> Result<Trajectory, SimulationError> {
         let library = local
             .library
@@ -305,6 +346,7 @@ impl FmuModel {
             outputs: &outputs,
             states: self.description.continuous_states,
             indicators: self.description.event_indicators,
+            inputs: &run::Driven::new(&self.input_refs, inputs),
         };
         let result = run::simulate(&mut instance, fresh, &plan, grid, options);
         // An instance that failed is dropped (freed) rather than reset for the next run.
@@ -367,10 +409,30 @@ impl Model for FmuModel {
         outputs: &[usize],
         options: &SolverOptions,
     ) -> Result<Trajectory, SimulationError> {
+        self.simulate_driven(params, grid, outputs, options, Inputs::none())
+    }
+
+    /// The FMU's inputs (causality `input`) set from the signals as the standard's
+    /// simulation algorithms do (see `run.rs`); inputs without a signal keep their start
+    /// values.
+    fn simulate_driven(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+    ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
+        let stop = grid.last().copied().unwrap_or(options.start_time);
+        inputs
+            .check(&self.info, options.start_time, stop.max(options.start_time))
+            .map_err(SimulationError::InvalidInput)?;
         match &self.runner {
-            Runner::Local(local) => self.simulate_here(local, params, grid, outputs, options),
-            Runner::Isolated(hosts) => hosts.simulate(params, grid, outputs, options),
+            Runner::Local(local) => {
+                self.simulate_here(local, params, grid, outputs, options, inputs)
+            }
+            Runner::Isolated(hosts) => hosts.simulate(params, grid, outputs, options, inputs),
         }
     }
 }

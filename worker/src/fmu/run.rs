@@ -36,12 +36,21 @@
 //! A model without continuous states (a pure time-event model) is integrated with one dummy
 //! state.
 //!
+//! **Inputs** ([`Driven`]): every driven input gets its start-time value in initialisation
+//! mode. Model Exchange sets the continuous ones wherever it sets time and states (so before
+//! every derivative, event-indicator and output read), and every one in event mode; where
+//! what the FMU is given jumps (a held input's new sample, a linear input's repeated sample
+//! time, a discrete input's change) is a time event, the only place discrete inputs change.
+//! Co-Simulation sets every input at each step's start, held over the step, and ends a step
+//! where an input jumps.
+//!
 //! Any call that returns Discard, Error or Fatal ends the simulation with
 //! [`SimulationError::Failed`] carrying the function, the status and the FMU's messages.
 
 use super::description::{Interface, Kind};
 use super::ffi::Instance;
 use super::FmuError;
+use crate::inputs::{InputSignal, Inputs};
 use crate::limits;
 use crate::model::{SimulationError, SolverOptions, SolverStats, Trajectory};
 use crate::ode::{self, HybridSystem};
@@ -59,6 +68,136 @@ pub struct Plan<'a> {
     pub outputs: &'a Outputs,
     pub states: usize,
     pub indicators: usize,
+    /// The signals that drive the FMU's inputs.
+    pub inputs: &'a Driven<'a>,
+}
+
+/// An input variable of the FMU and how calib sets it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InputRef {
+    pub kind: Kind,
+    pub vr: u32,
+    /// It changes only at events (Integer, Boolean, a Real of variability `discrete`): it is
+    /// given the value of the last sample at or before the time (rounded when it is an
+    /// Integer, true when that is non-zero for a Boolean), whatever the signal's
+    /// interpolation, and it changes at time events.
+    pub discrete: bool,
+}
+
+/// The signals that drive one simulation, each with the FMU input it sets, and the times at
+/// which what the FMU is given jumps.
+#[derive(Debug, Default)]
+pub struct Driven<'a> {
+    signals: Vec<(InputRef, &'a InputSignal)>,
+    /// Sorted, without repeats: each sample of a discrete or held input where its value
+    /// changes, each repeated sample time of a linear one where it steps.
+    events: Vec<f64>,
+}
+
+/// The value of the last sample at or before `t` (the first before the first sample).
+fn held(s: &InputSignal, t: f64) -> f64 {
+    let k = s.times.partition_point(|&u| u <= t);
+    s.values[k.saturating_sub(1)]
+}
+
+impl<'a> Driven<'a> {
+    /// `inputs` (checked against the model) onto the FMU's inputs `refs` (in the order of
+    /// the model's inputs).
+    pub fn new(refs: &[InputRef], inputs: &'a Inputs) -> Self {
+        let signals: Vec<(InputRef, &InputSignal)> =
+            inputs.signals.iter().map(|s| (refs[s.input], s)).collect();
+        let mut events = Vec::new();
+        for (r, s) in &signals {
+            let value = |v: f64| Self::value_of(r, v);
+            for k in 1..s.times.len() {
+                let jumps = value(s.values[k]) != value(s.values[k - 1])
+                    && (r.discrete
+                        || s.interpolation == crate::inputs::Interpolation::Hold
+                        || s.times[k] == s.times[k - 1]);
+                if jumps {
+                    events.push(s.times[k]);
+                }
+            }
+        }
+        events.sort_by(f64::total_cmp);
+        events.dedup();
+        Driven { signals, events }
+    }
+
+    /// A sample's value as the input's type takes it.
+    fn value_of(r: &InputRef, v: f64) -> f64 {
+        match r.kind {
+            Kind::Real => v,
+            Kind::Integer => v.round().clamp(f64::from(i32::MIN), f64::from(i32::MAX)),
+            Kind::Boolean => f64::from(u8::from(v.round() != 0.0)),
+        }
+    }
+
+    /// The value input `r` driven by `s` has at `t` (after an event at `t`).
+    fn at(r: &InputRef, s: &InputSignal, t: f64) -> f64 {
+        if r.discrete {
+            Self::value_of(r, held(s, t))
+        } else {
+            s.at(t)
+        }
+    }
+
+    /// Set the inputs to their values at `t`: the continuous ones only (as Model Exchange
+    /// may in continuous-time mode), or every one (at initialisation, at an event, before
+    /// a Co-Simulation step).
+    fn apply(&self, fmu: &mut Instance, t: f64, discrete_too: bool) -> Result<(), FmuError> {
+        if self.signals.is_empty() {
+            return Ok(());
+        }
+        let mut reals = (Vec::new(), Vec::new());
+        let mut integers = (Vec::new(), Vec::new());
+        let mut booleans = (Vec::new(), Vec::new());
+        for (r, s) in &self.signals {
+            if r.discrete && !discrete_too {
+                continue;
+            }
+            let v = Self::at(r, s, t);
+            match r.kind {
+                Kind::Real => {
+                    reals.0.push(r.vr);
+                    reals.1.push(v);
+                }
+                Kind::Integer => {
+                    integers.0.push(r.vr);
+                    integers.1.push(v as i32);
+                }
+                Kind::Boolean => {
+                    booleans.0.push(r.vr);
+                    booleans.1.push(v != 0.0);
+                }
+            }
+        }
+        if !reals.0.is_empty() {
+            fmu.set_reals(&reals.0, &reals.1)?;
+        }
+        if !integers.0.is_empty() {
+            fmu.set_integers(&integers.0, &integers.1)?;
+        }
+        if !booleans.0.is_empty() {
+            fmu.set_booleans(&booleans.0, &booleans.1)?;
+        }
+        Ok(())
+    }
+
+    /// The first time after `t` at which an input jumps.
+    fn next_event(&self, t: f64) -> Option<f64> {
+        let k = self.events.partition_point(|&e| e <= t);
+        self.events.get(k).copied()
+    }
+}
+
+/// The earlier of two optional times.
+fn earliest(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    match (a, b) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, None) => a,
+        (None, b) => b,
+    }
 }
 
 /// Output variables grouped by type, each with its place in the returned outputs.
@@ -156,6 +295,8 @@ pub fn simulate(
         instance.set_reals(plan.parameter_vrs, plan.parameters)?;
         let tolerance = (plan.interface == Interface::CoSimulation).then_some(options.rtol);
         instance.enter_initialization(tolerance, start, Some(stop))?;
+        // Inputs have their start-time values during initialisation.
+        plan.inputs.apply(instance, start, true)?;
         instance.exit_initialization()
     };
     init(instance).map_err(|e| failed(start, e))?;
@@ -233,7 +374,15 @@ fn co_simulate(
     for &target in grid {
         let mut stepped = false;
         while target > t && !terminated {
-            let next = next_communication_point(t, target, start, options.communication_step);
+            let mut next = next_communication_point(t, target, start, options.communication_step);
+            // A step ends where an input jumps, so that the FMU gets its new value there.
+            if let Some(e) = plan.inputs.next_event(t).filter(|&e| e < next) {
+                next = e;
+            }
+            // The inputs at the step's start, held over the step.
+            plan.inputs
+                .apply(instance, t, true)
+                .map_err(|e| failed(t, e))?;
             terminated = instance.do_step(t, next - t).map_err(|e| failed(t, e))?;
             stats.accepted_steps += 1;
             t = next;
@@ -303,6 +452,7 @@ struct Point {
 struct Host<'a> {
     fmu: RefCell<&'a mut Instance>,
     outputs: &'a Outputs,
+    inputs: &'a Driven<'a>,
     states: usize,
     indicators: usize,
     completed_step: bool,
@@ -350,6 +500,7 @@ impl Host<'_> {
         if self.states > 0 {
             fmu.set_states(x)?;
         }
+        self.inputs.apply(fmu, t, false)?;
         point.t = t;
         point.x.clear();
         point.x.extend_from_slice(x);
@@ -381,7 +532,7 @@ impl Host<'_> {
         if self.states > 0 {
             fmu.set_states(&y[..self.states])?;
         }
-        Ok(())
+        self.inputs.apply(fmu, t, false)
     }
 
     /// The event indicators at `t`, `y` into `self.z`.
@@ -435,6 +586,8 @@ impl Host<'_> {
         // event indicators there), then switches.
         self.indicators_at(&mut fmu, t, y)?;
         fmu.enter_event_mode()?;
+        // Every input at its value after the event (discrete ones change only here).
+        self.inputs.apply(&mut fmu, t, true)?;
         let update = event_iteration(&mut fmu)?;
         if update.terminate {
             self.terminate(&mut fmu)?;
@@ -446,7 +599,7 @@ impl Host<'_> {
         }
         // A new mode: what the FMU computed before the event is stale.
         self.point.borrow_mut().set = false;
-        Ok(update.next_event_time)
+        Ok(earliest(update.next_event_time, self.inputs.next_event(t)))
     }
 }
 
@@ -599,6 +752,7 @@ fn integrate(
     let host = Host {
         fmu: RefCell::new(instance),
         outputs: plan.outputs,
+        inputs: plan.inputs,
         states: nx,
         indicators: plan.indicators,
         completed_step,
@@ -610,7 +764,10 @@ fn integrate(
     };
     let mut system = Exchange {
         host: &host,
-        next_event: Cell::new(update.next_event_time),
+        next_event: Cell::new(earliest(
+            update.next_event_time,
+            plan.inputs.next_event(start),
+        )),
     };
     let mut values = vec![vec![0.0; grid.len()]; n_out];
     let mut sample = vec![0.0; n_out];

@@ -13,7 +13,7 @@
 
 use std::cell::Cell;
 
-use super::boundary::{Inputs, Ramps};
+use super::boundary::{Driven, Inputs, Ramps};
 use super::correlations::{
     chen, colburn_j, fin_efficiency, louver_group, nusselt_gnielinski, nusselt_gnielinski_with, Air,
 };
@@ -139,9 +139,11 @@ pub struct Evaporator {
     /// `ρ0` of the low-fidelity model: the path-mean density of its steady state at the
     /// nominal point (see [`Evaporator::nominal_density`]); NaN for the high fidelity.
     rho0: f64,
-    /// The last air side computed, with its air inlet temperature and mass flow: the air
-    /// inputs only move during their own ramps.
+    /// The last air side computed, with its air inlet temperature and mass flow: undriven,
+    /// the air inputs only move during their own ramps.
     air_cache: Cell<Option<(f64, f64, AirSide)>>,
+    /// Measured signals in place of ramps (none: every input follows its ramp).
+    driven: Driven,
 }
 
 /// Quality of dry-out inception: above it the boiling coefficient falls linearly to the
@@ -255,7 +257,33 @@ impl Evaporator {
             ),
             rho0: f64::NAN,
             air_cache: Cell::new(None),
+            driven: Driven::default(),
         }
+    }
+
+    /// The same evaporator with the inputs of `driven` following their signals instead of
+    /// their ramps.
+    pub fn driven_by(self, driven: Driven) -> Self {
+        Self { driven, ..self }
+    }
+
+    /// The inputs at time `t`: the ramps, where a signal drives an input its value.
+    #[inline]
+    pub fn inputs_at(&self, t: f64) -> Inputs {
+        let mut inp = self.settings.ramps.at(t);
+        self.driven.apply(t, &mut inp);
+        inp
+    }
+
+    /// A time up to which every input keeps its value of t = 0 (see
+    /// [`Driven::steady_until`]).
+    pub fn steady_until(&self) -> f64 {
+        self.driven.steady_until()
+    }
+
+    /// Whether a signal drives any input.
+    pub fn is_driven(&self) -> bool {
+        !self.driven.is_empty()
     }
 
     /// `ρ0` of the density-profile pressure drop: the path-mean density `ρ̄` of this
@@ -627,7 +655,7 @@ impl Evaporator {
         p_in: f64,
         net: &mut [f64],
     ) -> (Inputs, AirSide, March, f64) {
-        let inp = self.settings.ramps.at(t);
+        let inp = self.inputs_at(t);
         let air = self.air_side(&inp);
         let m = match self.march(&inp, &air, p_in, Walls::Given(tw), net) {
             Ok(m) => m,
@@ -640,7 +668,7 @@ impl Evaporator {
 
     /// Steady state at the inputs of time `t`: wall temperatures, then the inlet pressure.
     pub fn steady_state(&self, t: f64) -> Result<Vec<f64>, String> {
-        let inp = self.settings.ramps.at(t);
+        let inp = self.inputs_at(t);
         let air = self.air_side(&inp);
         let mut tw = vec![inp.t_air_in; self.n];
         let mut net = vec![0.0; self.n];

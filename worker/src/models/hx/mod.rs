@@ -121,7 +121,11 @@
 //!
 //! Ramps of refrigerant mass flow, inlet enthalpy, outlet pressure, air inlet temperature
 //! and air mass flow, in turn between 60 s and 230 s ([`boundary`]); their start and end
-//! values are parameters.
+//! values are parameters. Each is also a model input (`mdot_ref` kg/s, `h_in` J/kg,
+//! `p_out` Pa, `T_air_in` K, `mdot_air` kg/s): a measured signal that drives it replaces
+//! its ramp, and inputs left undriven keep their ramps, to the bit. The steady initial
+//! state is then that of the inputs at t = 0, and the integration starts where the first
+//! input moves (for a bench record with noise on its signals: at once).
 //!
 //! # Nominal operating point
 //!
@@ -149,12 +153,13 @@ pub mod refrigerant;
 #[cfg(test)]
 mod tests;
 
+use crate::inputs::Inputs as Signals;
 use crate::model::{
-    check_request, EffectSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
-    SolverOptions, Trajectory,
+    check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec,
+    SimulationError, SolverOptions, Trajectory,
 };
 use crate::ode::{integrate, rkc, HybridSystem};
-use boundary::{Inputs, Ramps};
+use boundary::{Driven, Inputs, Ramps};
 use evaporator::{describe_out_of_range, Evaporator, Fidelity, NominalPoint, Settings};
 use geometry::Geometry;
 use std::cell::RefCell;
@@ -474,7 +479,15 @@ impl HxModel {
                 parameters,
                 outputs,
                 effects,
-                inputs: Vec::new(),
+                inputs: boundary::INPUTS
+                    .iter()
+                    .enumerate()
+                    .map(|(k, (name, unit, ..))| InputSpec {
+                        name: (*name).into(),
+                        unit: (*unit).into(),
+                        description: boundary::input_description(k),
+                    })
+                    .collect(),
             },
             fidelity,
             segments,
@@ -667,15 +680,36 @@ impl Model for HxModel {
         outputs: &[usize],
         options: &SolverOptions,
     ) -> Result<Trajectory, SimulationError> {
+        self.simulate_driven(params, grid, outputs, options, Signals::none())
+    }
+
+    fn simulate_driven(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Signals,
+    ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
+        inputs
+            .check(&self.info, 0.0, grid[grid.len() - 1])
+            .map_err(SimulationError::InvalidInput)?;
         let settings = self.settings(params)?;
         let failed = |time: f64| move |reason: String| SimulationError::Failed { time, reason };
-        let evap = Evaporator::new(settings).map_err(failed(0.0))?;
+        let evap = Evaporator::new(settings)
+            .map_err(failed(0.0))?
+            .driven_by(Driven::new(inputs));
         let y0 = evap.steady_state(0.0).map_err(failed(0.0))?;
-        // The inputs hold their start values until the first ramp and `y0` is the steady
-        // state there, so the exact solution is `y0` up to then: the integration starts at
-        // the first ramp.
-        let t0 = boundary::FIRST_RAMP;
+        // The inputs hold their values of t = 0 until the first ramp (undriven) or the last
+        // sample before a signal moves (driven), and `y0` is the steady state there, so the
+        // exact solution is `y0` up to then: the integration starts there (a driven run
+        // whose inputs never move: at its last time).
+        let t0 = if evap.is_driven() {
+            evap.steady_until().min(grid[grid.len() - 1])
+        } else {
+            boundary::FIRST_RAMP
+        };
         let mut system = Dynamics {
             evap: &evap,
             inv_capacity: 1.0 / evap.segment_capacity(),
@@ -690,8 +724,8 @@ impl Model for HxModel {
         };
         let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
         let mut scratch = vec![0.0; evap.segments()];
-        // Up to the first ramp the inputs hold their start values exactly and the state is
-        // `y0`: one evaluation of the outputs serves every time there.
+        // Up to `t0` the inputs hold their values of t = 0 exactly and the state is `y0`: one
+        // evaluation of the outputs serves every time there.
         let flat = grid.partition_point(|&t| t <= t0);
         if flat > 0 {
             let all = outputs_at(&evap, grid[0], &y0, &mut scratch);
