@@ -178,6 +178,172 @@ fn calib_submit_gives_the_runs_of_calib_calibrate() {
     assert!(out.status.success() && listed.contains("finished") && listed.contains("clean"));
 }
 
+/// Two experiments fitted together: a free swing, and a record driven by its measured arm
+/// torque through the model's `armTorque` input.
+fn experiments_campaign(swing: &Path, driven: &Path) -> String {
+    format!(
+        r#"
+name = "pair"
+[model]
+name = "furuta"
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "pendulum_angle_rad"
+[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 0.0
+max = 0.9
+[[parameters]]
+name = "pendulumFriction"
+nominal = 0.002
+min = 0.0
+max = 0.9
+[[experiments]]
+name = "swing"
+file = "{}"
+time_column = "time_s"
+window = {{ start = 0.0, stop = 10.0 }}
+fixed = {{ theta0 = 0.5235987755983 }}
+[[experiments]]
+name = "driven"
+file = "{}"
+time_column = "time_s"
+windows = [[0.0, 4.0], [5.0, 10.0]]
+fixed = {{ theta0 = 0.2 }}
+inputs = [ {{ model = "armTorque", measured = "motor_torque_Nm" }} ]
+[search]
+methods = ["nelder-mead"]
+starts = 2
+max_evaluations = 150
+seed = 1
+"#,
+        swing.display(),
+        driven.display()
+    )
+}
+
+/// A campaign of two experiments, one driven by a measured torque, submitted with `calib
+/// submit` (each record uploaded as a dataset, the input mapped) ends at the best point and
+/// objective of the same file calibrated in this process, bit for bit; its frictions are the
+/// records' truth.
+#[test]
+fn calib_submit_of_experiments_with_an_input_equals_the_local_calibration() {
+    let dir = tempfile::tempdir().unwrap();
+    let swing = furuta_record(
+        &dir.path().join("swing.csv"),
+        std::f64::consts::FRAC_PI_6,
+        10.0,
+        3,
+        None,
+    );
+    let driven = furuta_record(
+        &dir.path().join("driven.csv"),
+        0.2,
+        10.0,
+        4,
+        Some(&arm_torque),
+    );
+    let campaign = write(
+        dir.path(),
+        "pair.toml",
+        &experiments_campaign(&swing, &driven),
+    );
+    let local = calib_coordinator::calibration::calibrate(
+        &calib_coordinator::campaign::Campaign::load(&campaign).unwrap(),
+        calib_coordinator::evaluator::LocalEvaluator,
+        &calib_coordinator::optim::problem::Silent,
+    )
+    .unwrap();
+    let summary = calib_coordinator::report::table::summary(&local);
+    let local = calib_coordinator::report::result_json(&local);
+
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let out = calib(&[
+        "submit",
+        campaign.to_str().unwrap(),
+        "--coordinator",
+        &coordinator.url(),
+        "--out",
+        dir.path().join("submitted").to_str().unwrap(),
+        "--json",
+    ]);
+    let submitted = json_of(&out);
+    let uploads = String::from_utf8_lossy(&out.stderr)
+        .matches(": dataset ")
+        .count();
+    assert_eq!(uploads, 2, "one upload per record");
+    for key in ["parameters", "objective"] {
+        assert_eq!(submitted["best"][key], local["best"][key], "best {key}");
+    }
+    let objective = |v: &Value| v["best"]["objective"].as_f64().unwrap();
+    assert_eq!(
+        objective(&submitted).to_bits(),
+        objective(&local).to_bits(),
+        "the objective bit for bit"
+    );
+    assert_eq!(runs_of(&submitted), runs_of(&local));
+    let experiments = submitted["experiments"].as_array().unwrap();
+    assert_eq!(experiments.len(), 2);
+    assert_eq!(experiments[1]["inputs"][0]["model"], "armTorque");
+    assert_eq!(
+        experiments[1]["windows"],
+        serde_json::json!([[0.0, 4.0], [5.0, 10.0]])
+    );
+    let (arm, pendulum) = true_frictions();
+    let best = &submitted["best"]["parameters"];
+    let arm_found = best["armFriction"].as_f64().unwrap();
+    let pendulum_found = best["pendulumFriction"].as_f64().unwrap();
+    println!(
+        "armFriction {arm_found:.6e} (truth {arm:.6e}), pendulumFriction {pendulum_found:.6e} \
+         (truth {pendulum:.6e}), objective {:.6e}",
+        objective(&submitted)
+    );
+    assert!((arm_found / arm - 1.0).abs() < 0.02, "{arm_found} vs {arm}");
+    assert!(
+        (pendulum_found / pendulum - 1.0).abs() < 0.02,
+        "{pendulum_found} vs {pendulum}"
+    );
+    // Submitted again (the coordinator answers the finished campaign), the summary `calib
+    // calibrate` prints, but for the line of evaluations from the store and seconds.
+    let out = calib(&[
+        "submit",
+        campaign.to_str().unwrap(),
+        "--coordinator",
+        &coordinator.url(),
+        "--out",
+        dir.path().join("submitted").to_str().unwrap(),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let printed = String::from_utf8(out.stdout).unwrap();
+    let same = |text: &str| -> Vec<String> {
+        text.lines()
+            .filter(|l| !l.contains("distinct minima") && !l.starts_with("wrote "))
+            .map(str::to_string)
+            .collect()
+    };
+    assert_eq!(same(&printed), same(&summary), "{printed}");
+    for series in ["swing: armJoint.phi", "driven: pendulumJoint.phi"] {
+        assert!(printed.contains(&format!("rms {series}")), "{printed}");
+    }
+    let folder = dir.path().join("submitted").join("pair");
+    for file in [
+        "swing.armJoint.phi.svg",
+        "driven.pendulumJoint.phi.svg",
+        "driven.input.armTorque.svg",
+    ] {
+        assert!(folder.join(file).exists(), "{file} not written");
+    }
+}
+
 #[test]
 fn two_campaigns_at_once_both_equal_their_local_runs_and_a_retried_submit_starts_nothing() {
     let dir = tempfile::tempdir().unwrap();
@@ -319,6 +485,11 @@ fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
             }))
             .unwrap_err()
     };
+    let experiments = |swing: &str, driven: &str| {
+        let text = experiments_campaign(Path::new("swing.csv"), Path::new("driven.csv"));
+        let ids = [swing.to_string(), driven.to_string()];
+        calib_coordinator::api::spec::campaign_message_on(&text, "", &ids).unwrap()
+    };
     let cases: Vec<(Option<pb::Campaign>, tonic::Code, &str)> = vec![
         (None, tonic::Code::InvalidArgument, "campaign"),
         (
@@ -357,6 +528,50 @@ fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
             Some(message(search, "")),
             tonic::Code::InvalidArgument,
             "campaign.dataset_id",
+        ),
+        // Experiments: each names its own dataset, which holds what it maps.
+        (
+            Some(experiments(&dataset.id, &dataset.id)),
+            tonic::Code::InvalidArgument,
+            "campaign.experiments[1].inputs[0].measured: dataset",
+        ),
+        (
+            Some(experiments(&dataset.id, &"0".repeat(64))),
+            tonic::Code::NotFound,
+            "campaign.experiments[1].dataset_id",
+        ),
+        (
+            Some(experiments(&dataset.id, "")),
+            tonic::Code::InvalidArgument,
+            "campaign.experiments[1].dataset_id: missing",
+        ),
+        (
+            Some(pb::Campaign {
+                dataset_id: dataset.id.clone(),
+                ..experiments(&dataset.id, &dataset.id)
+            }),
+            tonic::Code::InvalidArgument,
+            "campaign.dataset_id: with experiments",
+        ),
+        (
+            Some({
+                let mut m = experiments(&dataset.id, &dataset.id);
+                m.experiments[1].inputs.clear();
+                m.experiments[1].windows[1].stop = 99.0;
+                m
+            }),
+            tonic::Code::InvalidArgument,
+            "campaign.experiments[1].windows[1].stop: 99 s lies outside",
+        ),
+        (
+            Some({
+                let mut m = experiments(&dataset.id, &dataset.id);
+                m.experiments[1].inputs[0].measured = "arm_angle_rad".into();
+                m.experiments[1].inputs[0].interpolation = "cubic".into();
+                m
+            }),
+            tonic::Code::InvalidArgument,
+            "campaign.experiments[1] (driven).inputs[0] (armTorque): unknown interpolation",
         ),
     ];
     for (campaign, code, field) in cases {

@@ -38,6 +38,10 @@ pub const MAX_FREE_PARAMETERS: usize = 64;
 /// outputs of 500,000 samples are 128 MB.
 pub const MAX_OUTPUTS: usize = 32;
 
+/// Most fitted intervals of one record (`windows`): every sample of the record is tested
+/// against each interval when the objective is built, and the API takes them from clients.
+pub const MAX_WINDOWS: usize = 1_000;
+
 /// Longest campaign name, in bytes of UTF-8 (`name`). The name is the folder of the
 /// campaign's results; 128 bytes leave room below the 255 most file systems allow.
 pub const MAX_NAME_BYTES: usize = 128;

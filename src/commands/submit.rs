@@ -107,39 +107,31 @@ pub fn submit(args: SubmitArgs) -> Outcome {
     };
     let text = std::fs::read_to_string(&args.campaign)
         .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
-    let bytes = std::fs::read(&campaign.measurement_file)
-        .map_err(|e| Failure::input(format!("{}: {e}", campaign.measurement_file.display())))?;
     let runtime = super::runtime()?;
     runtime.block_on(async {
         let mut client = connect(&args.coordinator).await?;
-        let file_name = campaign
-            .measurement_file
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let mut chunks = Vec::new();
-        for (i, data) in bytes.chunks(CHUNK).enumerate() {
-            chunks.push(pb::DatasetChunk {
-                file_name: if i == 0 {
-                    file_name.clone()
-                } else {
-                    String::new()
-                },
-                time_column: if i == 0 {
-                    campaign.time_column.clone()
-                } else {
-                    String::new()
-                },
-                data: data.to_vec(),
-            });
+        // Each record uploaded once, however many experiments read it.
+        let mut uploaded: Vec<((PathBuf, String), String)> = Vec::new();
+        let mut ids = Vec::new();
+        for experiment in campaign.experiments() {
+            let key = (experiment.measurement_file, experiment.time_column);
+            let id = match uploaded.iter().find(|(k, _)| *k == key) {
+                Some((_, id)) => id.clone(),
+                None => {
+                    let id = upload(&mut client, &key.0, &key.1).await?;
+                    uploaded.push((key, id.clone()));
+                    id
+                }
+            };
+            ids.push(id);
         }
-        let dataset = client
-            .upload_dataset(tokio_stream::iter(chunks))
-            .await
-            .map_err(rpc)?
-            .into_inner();
-        let mut message = calib_coordinator::api::spec::campaign_message(&text, &dataset.id)
-            .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
+        let several = !campaign.experiment.is_empty();
+        let mut message = if several {
+            calib_coordinator::api::spec::campaign_message_on(&text, "", &ids)
+        } else {
+            calib_coordinator::api::spec::campaign_message(&text, &ids[0])
+        }
+        .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
         if let Some((hash, archive)) = &fmu {
             message.fmu_id = send_fmu(&mut client, hash, archive, &campaign).await?;
         }
@@ -168,6 +160,45 @@ pub fn submit(args: SubmitArgs) -> Outcome {
         let last = follow(&args.coordinator, client, &submitted.id).await?;
         finish(&args, &campaign, &last)
     })
+}
+
+/// Upload the record `file` (its time in `time_column`) as a dataset; its id.
+async fn upload(client: &mut Client, file: &Path, time_column: &str) -> Result<String, Failure> {
+    let bytes =
+        std::fs::read(file).map_err(|e| Failure::input(format!("{}: {e}", file.display())))?;
+    let file_name = file
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let chunks: Vec<pb::DatasetChunk> = bytes
+        .chunks(CHUNK)
+        .enumerate()
+        .map(|(i, data)| pb::DatasetChunk {
+            file_name: if i == 0 {
+                file_name.clone()
+            } else {
+                String::new()
+            },
+            time_column: if i == 0 {
+                time_column.to_string()
+            } else {
+                String::new()
+            },
+            data: data.to_vec(),
+        })
+        .collect();
+    let dataset = client
+        .upload_dataset(tokio_stream::iter(chunks))
+        .await
+        .map_err(rpc)?
+        .into_inner();
+    eprintln!(
+        "{}: dataset {} ({} samples)",
+        file.display(),
+        dataset.id,
+        dataset.samples
+    );
+    Ok(dataset.id)
 }
 
 /// Make sure the coordinator has the FMU `archive` (content hash `hash`): asked first, sent
@@ -373,17 +404,7 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
     } else {
         let result: serde_json::Value = serde_json::from_str(&state.result_json)
             .map_err(|e| Failure::internal(format!("coordinator: result is not JSON: {e}")))?;
-        let best = &result["best"];
-        println!("best ({} from start {}):", best["method"], best["start"]);
-        if let Some(parameters) = best["parameters"].as_object() {
-            for (name, value) in parameters {
-                println!("  {name:<20} = {value}");
-            }
-        }
-        println!(
-            "objective {} -> {}",
-            result["nominal_objective"], best["objective"]
-        );
+        print!("{}", calib_coordinator::report::table::summary_of(&result));
         for path in written {
             println!("wrote {}", path.display());
         }

@@ -368,3 +368,85 @@ pub fn c_test_fmu(
     }
     Some(fmu)
 }
+
+/// A synthetic record of calib's own Furuta model at the rig's true frictions
+/// ([`true_frictions`]), started at rest at pendulum angle `theta0` [rad], sampled at 100 Hz
+/// for `stop` s, its angles with gaussian noise (2 mrad, seed `seed`). With `torque`, the
+/// model's `armTorque` input is driven by `torque(t)` [N m] (linear between the samples) and
+/// the record has a `motor_torque_Nm` column holding it; without, it is a free swing. Columns:
+/// `time_s, arm_angle_rad, pendulum_angle_rad[, motor_torque_Nm]`.
+pub fn furuta_record(
+    csv: &Path,
+    theta0: f64,
+    stop: f64,
+    seed: u64,
+    torque: Option<&dyn Fn(f64) -> f64>,
+) -> PathBuf {
+    use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
+    use rand::SeedableRng;
+    let model = calib_worker::models::find("furuta").expect("the furuta model");
+    let info = model.info();
+    let mut p = info.default_vector();
+    let (arm, pendulum) = true_frictions();
+    for (name, value) in [
+        ("armFriction", arm),
+        ("pendulumFriction", pendulum),
+        ("theta0", theta0),
+    ] {
+        p[info.parameter_index(name).expect(name)] = value;
+    }
+    let samples = (stop * 100.0).round() as usize + 1;
+    let times: Vec<f64> = (0..samples).map(|k| k as f64 / 100.0).collect();
+    let applied: Option<Vec<f64>> = torque.map(|u| times.iter().map(|&t| u(t)).collect());
+    let inputs = match &applied {
+        Some(values) => Inputs {
+            signals: vec![InputSignal {
+                input: 0,
+                times: times.clone().into(),
+                values: values.clone().into(),
+                interpolation: Interpolation::Linear,
+            }],
+        },
+        None => Inputs::default(),
+    };
+    let outputs = [
+        info.output_index("armJoint.phi").expect("arm"),
+        info.output_index("pendulumJoint.phi").expect("pendulum"),
+    ];
+    let trajectory = model
+        .simulate_driven(&p, &times, &outputs, &model.default_options(), &inputs)
+        .expect("the synthetic record simulates");
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut text = String::from("time_s,arm_angle_rad,pendulum_angle_rad");
+    if applied.is_some() {
+        text.push_str(",motor_torque_Nm");
+    }
+    text.push('\n');
+    for (k, t) in times.iter().enumerate() {
+        let arm = trajectory.values[0][k] + gaussian(&mut rng, 0.002);
+        let pendulum = trajectory.values[1][k] + gaussian(&mut rng, 0.002);
+        text.push_str(&format!("{t},{arm},{pendulum}"));
+        if let Some(u) = &applied {
+            text.push_str(&format!(",{}", u[k]));
+        }
+        text.push('\n');
+    }
+    std::fs::write(csv, text).unwrap();
+    csv.to_path_buf()
+}
+
+/// A motor torque [N m] that swings the rig's arm: a doublet of steps, then two sines.
+pub fn arm_torque(t: f64) -> f64 {
+    let a = 0.03;
+    if (1.0..1.6).contains(&t) {
+        a
+    } else if (1.6..2.2).contains(&t) {
+        -a
+    } else if t >= 3.0 {
+        let s = t - 3.0;
+        a * (0.7 * (2.0 * std::f64::consts::PI * 0.45 * s).sin()
+            + 0.5 * (2.0 * std::f64::consts::PI * 1.3 * s + 1.0).sin())
+    } else {
+        0.0
+    }
+}

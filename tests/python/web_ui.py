@@ -4,6 +4,7 @@
     python3 web_ui.py broken URL BROKEN.csv OUT.json
     python3 web_ui.py login URL TOKEN_FILE DATA.csv OUT.json
     python3 web_ui.py fmu URL MODEL.fmu RECORD.csv DROPPED.fmu OUT.json
+    python3 web_ui.py experiments URL SWING.csv DRIVEN.csv SCREENSHOTS_DIR OUT.json
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
@@ -15,6 +16,13 @@ signed in simulates, uploads and draws the measurement's plots; what scripts can
 `fmu`: an FMU dropped on the Model tab (DROPPED.fmu, a drop event carrying the file), then
 the Reference FMU VanDerPol as the user's own model: chosen with the Model tab's file picker, its parameters and outputs listed, simulated and plotted; its record uploaded; mu
 freed on the Calibration tab and calibrated; the calibrated value read off the page.
+`experiments`: two Furuta records fitted together: the free swing uploaded on the Measurement
+tab, the driven record added as a second experiment on the Calibration tab (its own upload,
+window, start angle, and its torque column mapped to the model's armTorque input); the
+calibrated values, the status and the plots' captions read off the page; screenshots of the
+mapping and of the result. On the Model tab, the model simulated with its armTorque input
+driven by the uploaded torque column: the captions of the plots, and whether the arm angle
+differs from the undriven simulation.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
@@ -414,6 +422,124 @@ def fmu(url, model, record, dropped, out):
         driver.quit()
 
 
+def press(driver, id_):
+    """Click a button, scrolled to the middle of the window (clear of the sticky header)."""
+    button = by_id(driver, id_)
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", button)
+    button.click()
+
+
+def experiments(url, swing, driven, shots, out):
+    driver = browser()
+    try:
+        driver.get(url)
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        Select(by_id(driver, "model-select")).select_by_value("furuta")
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        type_into(driver, "value-theta0", THETA0)
+
+        upload(driver, swing, "time_s")
+        wait(driver).until(lambda d: "samples" in by_id(d, "measurement-status").text
+                           or by_id(d, "measurement-error").is_displayed())
+        no_error(driver, "measurement-error")
+
+        tab(driver, "calibration")
+        Select(by_id(driver, "measured-armJoint.phi")).select_by_value("arm_angle_rad")
+        Select(by_id(driver, "measured-pendulumJoint.phi")).select_by_value("pendulum_angle_rad")
+        # The free swing drives nothing: its record has no torque column.
+        first_input = [o.get_attribute("value") for o in
+                       Select(by_id(driver, "input-armTorque")).options]
+        for name, nominal in (("armFriction", "0.012"), ("pendulumFriction", "0.002")):
+            press(driver, f"free-{name}")
+            type_into(driver, f"nominal-{name}", nominal)
+            type_into(driver, f"min-{name}", "0")
+            type_into(driver, f"max-{name}", "0.9")
+        type_into(driver, "campaign-name", "pair")
+        type_into(driver, "window-start", "0")
+        type_into(driver, "window-stop", "10")
+        type_into(driver, "starts", "2")
+        type_into(driver, "max-evaluations", "150")
+        type_into(driver, "seed", "1")
+
+        # The driven record: a second experiment with its own upload, start angle and input.
+        press(driver, "add-experiment")
+        type_into(driver, "experiment-name", "swing")
+        type_into(driver, "x0-name", "driven")
+        type_into(driver, "x0-time", "time_s")
+        by_id(driver, "x0-file").send_keys(os.path.abspath(driven))
+        press(driver, "x0-upload")
+        wait(driver).until(lambda d: "samples" in by_id(d, "x0-status").text
+                           or by_id(d, "x0-error").is_displayed())
+        no_error(driver, "x0-error")
+        Select(by_id(driver, "x0-input-armTorque")).select_by_value("motor_torque_Nm")
+        Select(by_id(driver, "x0-interp-armTorque")).select_by_value("linear")
+        type_into(driver, "x0-window-start", "0")
+        type_into(driver, "x0-window-stop", "10")
+        press(driver, "x0-add-fixed")
+        Select(by_id(driver, "x0-fixed-0-name")).select_by_value("theta0")
+        type_into(driver, "x0-fixed-0-value", "0.2")
+        by_id(driver, "experiments").location_once_scrolled_into_view
+        screenshot(driver, os.path.join(shots, "experiments.png"))
+
+        # The Model tab simulates the model driven by the uploaded torque column.
+        tab(driver, "model")
+        type_into(driver, "model-stop", "10")
+
+        def simulated():
+            driver.execute_script("document.getElementById('model-status').textContent = ''")
+            press(driver, "simulate")
+            wait(driver).until(lambda d: "simulated" in by_id(d, "model-status").text
+                               or by_id(d, "model-error").is_displayed())
+            no_error(driver, "model-error")
+            return {f.find_element(By.CSS_SELECTOR, "figcaption").text:
+                    f.find_element(By.CSS_SELECTOR, "svg").get_attribute("outerHTML")
+                    for f in driver.find_elements(By.CSS_SELECTOR, "#model-plots figure")}
+
+        undriven = simulated()
+        drive = Select(by_id(driver, "drive-armTorque"))
+        drive.select_by_visible_text("motor_torque_Nm (driven.csv)")
+        driven_plots = simulated()
+        arm = "armJoint.phi simulated over 10 s"
+        model = {
+            "undriven": list(undriven),
+            "driven": list(driven_plots),
+            "arm_differs": undriven.get(arm) != driven_plots.get(arm),
+        }
+        screenshot(driver, os.path.join(shots, "model-driven.png"))
+        drive.select_by_index(0)
+        tab(driver, "calibration")
+
+        press(driver, "start")
+        wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
+                                 or by_id(d, "calibration-error").is_displayed())
+        no_error(driver, "calibration-error")
+        calibrated = {}
+        for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr"):
+            cell = row.find_element(By.CSS_SELECTOR, "td.calibrated")
+            calibrated[row.get_attribute("data-parameter")] = cell.get_attribute("data-value")
+        groups = {}
+        for section in driver.find_elements(By.CSS_SELECTOR, "#result-plots section.experiment-plots"):
+            heading = section.find_element(By.CSS_SELECTOR, "h4").text
+            groups[heading] = [f.text for f in section.find_elements(By.CSS_SELECTOR, "figcaption")]
+        plots = [f.text for f in driver.find_elements(By.CSS_SELECTOR, "#result-plots figcaption")]
+        status = by_id(driver, "calibration-status").text
+        # The result alone: the calibrated values, then each experiment's plots.
+        driver.set_window_size(1366, 6000)
+        by_id(driver, "result").screenshot(os.path.join(shots, "experiments-result.png"))
+        driver.set_window_size(1366, 900)
+        with open(out, "w") as f:
+            json.dump({
+                "first_input_choices": first_input,
+                "model": model,
+                "calibrated": calibrated,
+                "groups": groups,
+                "plots": plots,
+                "status": status,
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
 if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "workflow":
@@ -424,5 +550,7 @@ if __name__ == "__main__":
         login(*args)
     elif mode == "fmu":
         fmu(*args)
+    elif mode == "experiments":
+        experiments(*args)
     else:
         raise SystemExit(f"unknown mode {mode}")

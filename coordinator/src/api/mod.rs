@@ -3,6 +3,7 @@
 
 pub mod spec;
 
+use crate::campaign::MAX_EXPERIMENTS;
 use crate::campaigns::analyses::AnalysisSnapshot;
 use crate::campaigns::datasets::DatasetInfo;
 use crate::campaigns::diagnoses::DiagnosisSnapshot;
@@ -99,28 +100,109 @@ impl CalibrationApi {
         })
     }
 
-    /// The campaign file of a campaign message, its measurement the uploaded dataset it
-    /// names.
-    async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
-        if campaign.dataset_id.is_empty() {
-            return Err(Status::invalid_argument(
-                "campaign.dataset_id: missing; upload the data with UploadDataset first",
-            ));
+    /// The uploaded dataset `id`, named by the message's `field`; NOT_FOUND when absent.
+    async fn dataset(&self, id: &str, field: &str) -> Result<DatasetInfo, Status> {
+        if id.is_empty() {
+            return Err(Status::invalid_argument(format!(
+                "{field}: missing; upload the data with UploadDataset first"
+            )));
         }
-        let dataset = {
+        let found = {
             let campaigns = self.campaigns.clone();
-            let id = campaign.dataset_id.clone();
+            let id = id.to_string();
             self.blocking(move || campaigns.datasets().get(&id)).await?
         };
-        let Some(dataset) = dataset else {
-            return Err(Status::not_found(format!(
-                "campaign.dataset_id: no dataset `{}` on this coordinator; upload it with \
-                 UploadDataset",
-                campaign.dataset_id
-            )));
+        found.ok_or_else(|| {
+            Status::not_found(format!(
+                "{field}: no dataset `{id}` on this coordinator; upload it with UploadDataset"
+            ))
+        })
+    }
+
+    /// The dataset as the campaign file names it.
+    fn record(&self, dataset: &DatasetInfo) -> spec::Record {
+        spec::Record {
+            file: self.campaigns.datasets().file(dataset),
+            time_column: dataset.time_column.clone(),
+        }
+    }
+
+    /// The campaign file of a campaign message, its records the uploaded datasets it names:
+    /// `dataset_id`, or each experiment's.
+    async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
+        let (record, experiments) = if campaign.experiments.is_empty() {
+            let dataset = self
+                .dataset(&campaign.dataset_id, "campaign.dataset_id")
+                .await?;
+            let mut windows = Vec::new();
+            // A window of 0 to 0 is no window: the campaign's check names it missing.
+            if campaign.window_start != 0.0 || campaign.window_stop != 0.0 {
+                windows.push((
+                    "window_start".to_string(),
+                    "window_stop".to_string(),
+                    campaign.window_start,
+                    campaign.window_stop,
+                ));
+            }
+            for (j, w) in campaign.windows.iter().enumerate() {
+                windows.push((
+                    format!("windows[{j}].start"),
+                    format!("windows[{j}].stop"),
+                    w.start,
+                    w.stop,
+                ));
+            }
+            let mapped = Mapped {
+                place: String::new(),
+                outputs: &campaign.outputs,
+                inputs: &campaign.inputs,
+                windows,
+            };
+            check_against_dataset(&mapped, &dataset)?;
+            (Some(self.record(&dataset)), Vec::new())
+        } else {
+            if !campaign.dataset_id.is_empty() {
+                return Err(Status::invalid_argument(
+                    "campaign.dataset_id: with experiments, each experiment names its dataset \
+                     (experiments[k].dataset_id); leave this one empty",
+                ));
+            }
+            if campaign.experiments.len() > MAX_EXPERIMENTS {
+                return Err(Status::invalid_argument(format!(
+                    "campaign.experiments: {} experiments, more than the {MAX_EXPERIMENTS} \
+                     accepted",
+                    campaign.experiments.len()
+                )));
+            }
+            let mut records = Vec::with_capacity(campaign.experiments.len());
+            for (k, e) in campaign.experiments.iter().enumerate() {
+                let place = format!("experiments[{k}].");
+                let dataset = self
+                    .dataset(&e.dataset_id, &format!("campaign.{place}dataset_id"))
+                    .await?;
+                let mapped = Mapped {
+                    place: place.clone(),
+                    outputs: own_or(&e.outputs, &campaign.outputs),
+                    inputs: own_or(&e.inputs, &campaign.inputs),
+                    windows: e
+                        .windows
+                        .iter()
+                        .enumerate()
+                        .map(|(j, w)| {
+                            (
+                                format!("{place}windows[{j}].start"),
+                                format!("{place}windows[{j}].stop"),
+                                w.start,
+                                w.stop,
+                            )
+                        })
+                        .collect(),
+                };
+                check_against_dataset(&mapped, &dataset)?;
+                records.push(self.record(&dataset));
+            }
+            (None, records)
         };
-        check_against_dataset(campaign, &dataset)?;
-        let file = self.campaigns.datasets().file(&dataset);
         if campaign.fmu_id.is_empty() {
             if fmu::interface_in_name(&campaign.model).is_some() {
                 return Err(Status::invalid_argument(format!(
@@ -129,7 +211,7 @@ impl CalibrationApi {
                     campaign.model
                 )));
             }
-            return spec::campaign_file(campaign, &file, &dataset.time_column)
+            return spec::campaign_file_with(campaign, record.as_ref(), &experiments, None)
                 .map_err(Status::invalid_argument);
         }
         let info = self.fmu(&campaign.fmu_id, "campaign.fmu_id").await?;
@@ -163,7 +245,7 @@ impl CalibrationApi {
             .ok()
             .and_then(|f| f.file(&info.id))
             .ok_or_else(|| Status::internal("the FMU's archive has no path"))?;
-        spec::campaign_file_on(&campaign, &file, &dataset.time_column, Some(&archive))
+        spec::campaign_file_with(&campaign, record.as_ref(), &experiments, Some(&archive))
             .map_err(Status::invalid_argument)
     }
 
@@ -181,11 +263,42 @@ impl CalibrationApi {
 /// Most column names a refusal lists.
 const LISTED_COLUMNS: usize = 20;
 
-/// The campaign's fields checked against the dataset it names, before anything is parsed
-/// or run: every mapped column is one of the dataset's, the window lies inside its data.
-fn check_against_dataset(campaign: &pb::Campaign, dataset: &DatasetInfo) -> Result<(), Status> {
-    for (i, output) in campaign.outputs.iter().enumerate() {
-        if !dataset.columns.contains(&output.measured) {
+/// An experiment's own list, or the campaign's when it has none.
+fn own_or<'a, T>(own: &'a [T], campaign: &'a [T]) -> &'a [T] {
+    if own.is_empty() {
+        campaign
+    } else {
+        own
+    }
+}
+
+/// What a campaign (or one of its experiments) maps onto a dataset: `place` prefixes the
+/// fields named (e.g. "experiments[1]."); each window is its start's and stop's fields and
+/// values.
+struct Mapped<'a> {
+    place: String,
+    outputs: &'a [pb::Output],
+    inputs: &'a [pb::Input],
+    windows: Vec<(String, String, f64, f64)>,
+}
+
+/// The fields mapped onto a dataset checked against it, before anything is parsed or run:
+/// every mapped column is one of the dataset's, the windows lie inside its data.
+fn check_against_dataset(mapped: &Mapped, dataset: &DatasetInfo) -> Result<(), Status> {
+    let columns = mapped
+        .outputs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| (format!("outputs[{i}]"), &o.measured))
+        .chain(
+            mapped
+                .inputs
+                .iter()
+                .enumerate()
+                .map(|(i, input)| (format!("inputs[{i}]"), &input.measured)),
+        );
+    for (field, measured) in columns {
+        if !dataset.columns.contains(measured) {
             let mut listed: Vec<String> = dataset
                 .columns
                 .iter()
@@ -196,15 +309,14 @@ fn check_against_dataset(campaign: &pb::Campaign, dataset: &DatasetInfo) -> Resu
                 listed.push(format!("… ({} in all)", dataset.columns.len()));
             }
             return Err(Status::invalid_argument(format!(
-                "campaign.outputs[{i}].measured: dataset `{}` has no column {:?}; its columns \
-                 are: {}",
+                "campaign.{}{field}.measured: dataset `{}` has no column {measured:?}; its \
+                 columns are: {}",
+                mapped.place,
                 dataset.id,
-                output.measured,
                 listed.join(", ")
             )));
         }
     }
-    let (start, stop) = (campaign.window_start, campaign.window_stop);
     let (first, last) = (dataset.start_time, dataset.stop_time);
     let slack = 1e-9 * last.abs().max(1.0);
     let outside = |field: &str, value: f64| {
@@ -214,13 +326,12 @@ fn check_against_dataset(campaign: &pb::Campaign, dataset: &DatasetInfo) -> Resu
             dataset.id
         ))
     };
-    // A window of 0 to 0 is no window: the campaign's check names it missing.
-    if start != 0.0 || stop != 0.0 {
-        if stop > last + slack {
-            return Err(outside("window_stop", stop));
+    for (start_field, stop_field, start, stop) in &mapped.windows {
+        if *stop > last + slack {
+            return Err(outside(stop_field, *stop));
         }
-        if start < first - slack {
-            return Err(outside("window_start", start));
+        if *start < first - slack {
+            return Err(outside(start_field, *start));
         }
     }
     Ok(())
@@ -239,6 +350,23 @@ fn message_field(field: &str) -> String {
         other => {
             if let Some(name) = other.strip_prefix("model.parameters.") {
                 return format!("campaign.model_parameters[{name:?}]");
+            }
+            if other.starts_with("experiments[") {
+                // An experiment's `window` is its message's `windows`, its `fixed.x` the
+                // map's entry.
+                let (head, tail) = other.split_once(").").unwrap_or((other, ""));
+                let tail = match tail {
+                    "window" | "window.start" | "window.stop" => "windows".to_string(),
+                    t => match t.strip_prefix("fixed.") {
+                        Some(name) => format!("fixed[{name:?}]"),
+                        None => t.to_string(),
+                    },
+                };
+                return if tail.is_empty() {
+                    format!("campaign.{other}")
+                } else {
+                    format!("campaign.{head}).{tail}")
+                };
             }
             other.strip_prefix("solver.").unwrap_or(other)
         }

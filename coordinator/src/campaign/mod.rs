@@ -10,6 +10,7 @@ mod resolve;
 use calib_worker::content_hash::ContentHasher;
 pub use calib_worker::inputs::Interpolation;
 use calib_worker::{Model, SolverOptions};
+pub use resolve::MAX_EXPERIMENTS;
 use resolve::{resolve, Locator};
 use serde::Deserialize;
 use std::fmt;
@@ -748,6 +749,35 @@ max = 3.2
             c.identity(&[0; 32]),
             parse(GOOD).unwrap().identity(&[0; 32])
         );
+    }
+
+    /// A client's campaign cannot make the objective test each sample against a million
+    /// intervals, nor an experiment compare more outputs than a campaign may.
+    #[test]
+    fn windows_and_an_experiments_outputs_are_bounded() {
+        let windows: Vec<String> = (0..=crate::limits::MAX_WINDOWS)
+            .map(|k| format!("[{}.0, {}.5]", k, k))
+            .collect();
+        let text = GOOD
+            .replacen("[window]\nstart = 0.0\nstop = 40.0", "", 1)
+            .replacen(
+                "name = \"clean\"",
+                &format!("name = \"clean\"\nwindows = [{}]", windows.join(", ")),
+                1,
+            );
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.field, "windows", "{e}");
+        assert!(e.message.contains("1001 is more than the 1000"), "{e}");
+        let output = "{ model = \"armJoint.phi\", measured = \"arm\" }";
+        let outputs = vec![output; crate::limits::MAX_OUTPUTS + 1].join(", ");
+        let text = EXPERIMENTS.replacen(
+            "inputs = [",
+            &format!("outputs = [{outputs}]\ninputs = ["),
+            1,
+        );
+        let e = parse(&text).unwrap_err();
+        assert_eq!(e.field, "experiments[1] (driven).outputs", "{e}");
+        assert!(e.message.contains("33 is more than the 32"), "{e}");
     }
 
     #[test]

@@ -548,6 +548,9 @@ fn resolve_outputs(
             "no output to compare: add at least one [[outputs]] entry",
         );
     }
+    if let Err(e) = limits::at_most(entries.len(), limits::MAX_OUTPUTS, "outputs") {
+        return at.error(entries[limits::MAX_OUTPUTS].span(), list, e);
+    }
     let mut outputs = Vec::new();
     for (i, entry) in entries.iter().enumerate() {
         let o = entry.get_ref();
@@ -696,6 +699,9 @@ fn resolve_windows(
             let list = list.into_inner();
             if list.is_empty() {
                 return at.error(span, &field, "lists no interval".into());
+            }
+            if let Err(e) = limits::at_most(list.len(), limits::MAX_WINDOWS, "fitted intervals") {
+                return at.error(span, &field, e);
             }
             let mut out: Vec<(f64, f64)> = Vec::with_capacity(list.len());
             for (k, [start, stop]) in list.into_iter().enumerate() {

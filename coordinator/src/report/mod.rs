@@ -40,6 +40,7 @@ pub fn result_json(c: &Calibration) -> Value {
         .iter()
         .map(|s| (s / samples).sqrt())
         .collect();
+    let nominal_rms: Vec<f64> = c.nominal.sse.iter().map(|s| (s / samples).sqrt()).collect();
     let runs: Vec<Value> = c
         .runs
         .iter()
@@ -111,17 +112,19 @@ pub fn result_json(c: &Calibration) -> Value {
             .map(|(e, part)| {
                 let n = part.outputs.len();
                 let sse = &c.best_evaluation.sse[from..(from + n).min(c.best_evaluation.sse.len())];
+                let nominal = &c.nominal.sse[from..(from + n).min(c.nominal.sse.len())];
                 from += n;
                 let samples = part.grid.len() as f64;
-                let by_output = |f: &dyn Fn(f64) -> f64| {
+                let over = |values: &[f64], f: &dyn Fn(f64) -> f64| {
                     Value::Object(
                         e.outputs
                             .iter()
-                            .zip(sse)
+                            .zip(values)
                             .map(|(o, v)| (o.model.clone(), json!(f(*v))))
                             .collect(),
                     )
                 };
+                let by_output = |f: &dyn Fn(f64) -> f64| over(sse, f);
                 json!({
                     "name": e.name,
                     "measurement": e.measurement_file.display().to_string(),
@@ -130,6 +133,7 @@ pub fn result_json(c: &Calibration) -> Value {
                     "inputs": e.inputs.iter().map(|i| json!({"model": i.model, "measured": i.measured, "interpolation": i.interpolation.as_str()})).collect::<Vec<_>>(),
                     "sse": by_output(&|v| v),
                     "rms": by_output(&|v| (v / samples).sqrt()),
+                    "nominal_rms": over(nominal, &|v| (v / samples).sqrt()),
                     "objective": part.weights.iter().zip(sse).map(|(k, s)| k * s).sum::<f64>(),
                 })
             })
@@ -143,6 +147,7 @@ pub fn result_json(c: &Calibration) -> Value {
         "window": { "start": c.campaign.window.0, "stop": c.campaign.window.1, "samples": c.objective.grid.len() },
         "free_parameters": c.campaign.free,
         "nominal_objective": c.nominal.objective,
+        "nominal_rms": per_output(&nominal_rms),
         "best": {
             "parameters": named(&names, &best.point),
             "objective": best.objective,

@@ -8,8 +8,9 @@
 //! `{"code", "message"}`. Server streams (`WatchCampaign`, `Diagnose`) are Server-Sent
 //! Events, one whole message per event. HTTP JSON rather than gRPC-web: the page would need a
 //! protobuf codec in JavaScript, and without npm it would be hand-written. Routes under
-//! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]) and the
-//! campaign file of a campaign.
+//! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]), the
+//! campaign file of a campaign, and a column of an uploaded dataset with its times (which
+//! the Model tab drives a model's input with, through `Simulate`'s `inputs`).
 //!
 //! The page (`assets/`) is hand-written HTML, CSS and JavaScript compiled into the binary:
 //! nothing is loaded from elsewhere. Every route is behind the [`door`]: the Host check, the
@@ -135,6 +136,10 @@ impl WebApp {
             .route("/api/v1/Simulate", post(simulate))
             .route("/ui/plot", post(plots::plot))
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
+            .route(
+                "/ui/datasets/{id}/column/{column}",
+                get(plots::dataset_column),
+            )
             .route("/ui/campaigns/{id}/campaign.toml", get(campaign_file))
             .with_state(self)
             .merge(login)

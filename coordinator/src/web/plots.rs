@@ -153,6 +153,36 @@ pub async fn dataset_plot(
     Ok(svg(text))
 }
 
+/// `GET /ui/datasets/{id}/column/{column}`: one column of an uploaded dataset and its times,
+/// as JSON `{"times": [...], "values": [...]}` (a signal to drive a model's input with).
+pub async fn dataset_column(
+    State(app): State<WebApp>,
+    Path((id, column)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
+    let campaigns = app.campaigns.clone();
+    let body = tokio::task::spawn_blocking(move || {
+        let datasets = campaigns.datasets();
+        let info = datasets
+            .get(&id)
+            .map_err(|e| invalid(e.to_string()))?
+            .ok_or_else(|| ApiError(Status::not_found(format!("id: no dataset `{id}` here"))))?;
+        let m = Measurement::load(&datasets.file(&info), &info.time_column, &[&column])
+            .map_err(|e| invalid(format!("data: {e}")))?;
+        let values = m.column(&column).unwrap_or(&[]);
+        Ok::<_, ApiError>(serde_json::json!({ "times": m.time, "values": values }).to_string())
+    })
+    .await
+    .map_err(|e| ApiError(Status::internal(e.to_string())))??;
+    Ok((
+        [
+            (header::CONTENT_TYPE, "application/json"),
+            (header::CACHE_CONTROL, "no-cache"),
+        ],
+        body,
+    )
+        .into_response())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,6 +17,8 @@ const app = {
   plotting: false,
   plotDue: false,
   started: false,     // the tabs' contents are loaded (after the login, if one is asked)
+  experiments: [],    // further records: {key, prefix, dataset, card, fixed}
+  nextExperiment: 0,  // key of the next experiment added
 };
 
 const $ = (id) => document.getElementById(id);
@@ -309,6 +311,62 @@ async function describe(name) {
   renderCalibration();
 }
 
+// The model's inputs on the Model tab: each left at the model's own value, or driven by a
+// column of the uploaded measurement (ids `drive-<name>`, `drive-interp-<name>`).
+function renderModelInputs() {
+  const body = $("model-inputs").tBodies[0];
+  // Every uploaded record's columns: the measurement's, then each experiment's.
+  const records = [app.dataset, ...app.experiments.map((x) => x.dataset)].filter((d) => d);
+  const choices = records.flatMap((d) => d.columns.map((c) => [`${d.id}/${c}`, `${c} (${d.file_name})`]));
+  const note = records.length ? "" : " (upload a measurement to drive it)";
+  const kept = {};
+  for (const row of body.rows) {
+    const [column, interp] = row.querySelectorAll("select");
+    kept[row.dataset.input] = [column.value, interp.value];
+  }
+  body.replaceChildren();
+  for (const i of modelInputs()) {
+    const column = el("select", { id: `drive-${i.name}`, "aria-label": `signal driving ${i.name} in the simulation` },
+      el("option", { value: "", text: `— its own value${note}` }));
+    for (const [value, text] of choices) column.append(el("option", { value, text }));
+    const interp = el("select", { id: `drive-interp-${i.name}`, "aria-label": `interpolation of ${i.name} in the simulation` });
+    for (const [value, text] of INTERPOLATIONS) interp.append(el("option", { value, text }));
+    const old = kept[i.name];
+    if (old) {
+      if (choices.some(([value]) => value === old[0])) column.value = old[0];
+      interp.value = old[1];
+    }
+    const row = el("tr", {}, el("th", { scope: "row", text: `${i.name} [${i.unit}]`, title: i.description }),
+      el("td", {}, column), el("td", {}, interp));
+    row.dataset.input = i.name;
+    body.append(row);
+  }
+  $("model-inputs").hidden = !modelInputs().length;
+}
+
+// A column of an uploaded record with its times (`key`: "<dataset id>/<column>"), fetched
+// once.
+const columnCache = {};
+async function datasetColumn(key) {
+  if (!columnCache[key]) {
+    const cut = key.indexOf("/");
+    const id = key.slice(0, cut), column = key.slice(cut + 1);
+    const response = await fetch(`/ui/datasets/${id}/column/${encodeURIComponent(column)}`);
+    const text = await response.text();
+    if (response.status === 401) showLogin();
+    if (!response.ok) throw new Error(JSON.parse(text).message);
+    columnCache[key] = JSON.parse(text);
+  }
+  return columnCache[key];
+}
+
+// At most `n` points of a series, for drawing.
+function thin(x, y, n = 20000) {
+  const step = Math.max(1, Math.ceil(x.length / n));
+  if (step === 1) return [x, y];
+  return [x.filter((_, k) => k % step === 0), y.filter((_, k) => k % step === 0)];
+}
+
 function modelValue(p) {
   const v = parseFloat($(`value-${p.name}`).value);
   return Number.isFinite(v) ? v : p.default_value;
@@ -331,12 +389,33 @@ async function simulate() {
     .map((p) => ({ name: p.name, value: modelValue(p) }));
   $("model-status").textContent = "simulating…";
   try {
+    // Inputs driven by measured columns: the whole column, read as the campaign reads it.
+    const driven = [];
+    for (const i of modelInputs()) {
+      const key = $(`drive-${i.name}`) && $(`drive-${i.name}`).value;
+      if (!key) continue;
+      const signal = await datasetColumn(key);
+      const column = key.slice(key.indexOf("/") + 1);
+      const hold = $(`drive-interp-${i.name}`).value === "hold";
+      driven.push({ input: i, column, hold, signal });
+    }
+    const inputs = driven.map((d) => ({
+      input: d.input.name, times: d.signal.times, values: d.signal.values, interpolation: d.hold ? 1 : 0,
+    }));
     const answer = await call("Simulate", {
-      protocol_version: 1, model: model.name, parameters, times, outputs, fmu_hash: fmuHash(model.name),
+      protocol_version: 1, model: model.name, parameters, times, outputs, fmu_hash: fmuHash(model.name), inputs,
     });
     if (answer.failure) throw new Error(`simulation failed: ${answer.failure.message}`);
     const plots = $("model-plots");
     plots.replaceChildren();
+    for (const d of driven) {
+      const [x, y] = thin(d.signal.times, d.signal.values);
+      const svg = await plot({
+        title: `${model.name}: input ${d.input.name}`, x_label: "time [s]", y_label: `${d.input.name} [${d.input.unit}]`,
+        series: [{ label: `${d.column} (${d.hold ? "held" : "linear"})`, x, y }],
+      });
+      plots.append(figure(svg, `input ${d.input.name} driven by ${d.column}`));
+    }
     for (const s of answer.series) {
       const unit = (model.outputs.find((o) => o.name === s.output) || {}).unit || "";
       const svg = await plot({
@@ -463,6 +542,172 @@ function renderCalibration() {
     row.dataset.parameter = p.name;
     params.append(row);
   }
+  inputRows($("input-map").tBodies[0], "", dataset ? dataset.columns : [], "");
+  $("input-map").hidden = !modelInputs().length;
+  renderExperiments();
+}
+
+// ---- inputs and experiments -------------------------------------------------------------
+
+const INTERPOLATIONS = [["linear", "linear"], ["hold", "held (zero-order hold)"]];
+
+const modelInputs = () => (app.model && app.model.inputs) || [];
+
+// A row per model input in `body`: the measured column driving it (ids `<prefix>input-<name>`)
+// and how it is read between samples (`<prefix>interp-<name>`), keeping what the rows held.
+function inputRows(body, prefix, columns, whose) {
+  const kept = {};
+  for (const row of body.rows) {
+    const [column, interp] = row.querySelectorAll("select");
+    kept[row.dataset.input] = [column.value, interp.value];
+  }
+  body.replaceChildren();
+  for (const i of modelInputs()) {
+    const column = el("select", { id: `${prefix}input-${i.name}`, "aria-label": `measured column driving ${i.name}${whose}` },
+      el("option", { value: "", text: "— (not driven)" }));
+    for (const c of columns) column.append(el("option", { value: c, text: c }));
+    const interp = el("select", { id: `${prefix}interp-${i.name}`, "aria-label": `interpolation of ${i.name}${whose}` });
+    for (const [value, text] of INTERPOLATIONS) interp.append(el("option", { value, text }));
+    const old = kept[i.name];
+    if (old) {
+      if (columns.includes(old[0])) column.value = old[0];
+      interp.value = old[1];
+    }
+    const row = el("tr", {}, el("th", { scope: "row", text: `${i.name} [${i.unit}]`, title: i.description }),
+      el("td", {}, column), el("td", {}, interp));
+    row.dataset.input = i.name;
+    body.append(row);
+  }
+}
+
+// The Input messages of the rows `<prefix>input-...` that name a column.
+function inputMessages(prefix) {
+  return modelInputs()
+    .filter((i) => $(`${prefix}input-${i.name}`) && $(`${prefix}input-${i.name}`).value)
+    .map((i) => ({
+      model: i.name, measured: $(`${prefix}input-${i.name}`).value,
+      interpolation: $(`${prefix}interp-${i.name}`).value,
+    }));
+}
+
+function addExperiment() {
+  const key = app.nextExperiment++;
+  const x = `x${key}-`;
+  const n = app.experiments.length + 2;
+  const field = (text, attrs) => el("label", {}, text, el("input", attrs));
+  const uploadButton = el("button", { type: "button", id: `${x}upload`, text: "Upload" });
+  const remove = el("button", { type: "button", text: "Remove", class: "secondary", "aria-label": `remove experiment ${n}` });
+  const addFixed = el("button", { type: "button", id: `${x}add-fixed`, text: "Fix a start value" });
+  const card = el("fieldset", { class: "experiment", id: `experiment-${key}` },
+    el("legend", { text: `Experiment ${n}` }),
+    el("div", { class: "row" },
+      field("Name", { type: "text", id: `${x}name`, value: `record${n}` }),
+      field("File (CSV, or MAT)", { type: "file", id: `${x}file`, accept: ".csv,.txt,.mat" }),
+      field("Time column", { type: "text", id: `${x}time`, value: $("measurement-time").value.trim() || "time" }),
+      uploadButton, remove),
+    el("p", { id: `${x}status`, role: "status", "aria-live": "polite" }),
+    el("div", { id: `${x}error`, class: "error", role: "alert", hidden: true }),
+    el("div", { class: "row" },
+      field("Window start [s]", { type: "number", step: "any", id: `${x}window-start` }),
+      field("Window stop [s]", { type: "number", step: "any", id: `${x}window-stop` })),
+    el("table", { id: `${x}fixed` },
+      el("caption", { text: "Start values for this experiment alone" }),
+      el("thead", {}, el("tr", {}, el("th", { scope: "col", text: "parameter" }), el("th", { scope: "col", text: "value" }),
+        el("th", { scope: "col" }, el("span", { class: "visually-hidden", text: "remove" })))),
+      el("tbody")),
+    el("p", {}, addFixed),
+    el("table", { id: `${x}inputs` },
+      el("caption", { text: "Inputs driven by this record" }),
+      el("thead", {}, el("tr", {}, el("th", { scope: "col", text: "model input" }),
+        el("th", { scope: "col", text: "measured column" }), el("th", { scope: "col", text: "between samples" }))),
+      el("tbody")));
+  const experiment = { key, prefix: x, dataset: null, card, fixed: 0 };
+  uploadButton.addEventListener("click", () => uploadExperiment(experiment));
+  addFixed.addEventListener("click", () => addFixedValue(experiment));
+  remove.addEventListener("click", () => {
+    app.experiments = app.experiments.filter((e) => e !== experiment);
+    card.remove();
+    renderExperiments();
+  });
+  app.experiments.push(experiment);
+  $("experiment-list").append(card);
+  renderExperiments();
+  $(`${x}name`).focus();
+}
+
+// A row fixing one model parameter for this experiment alone.
+function addFixedValue(experiment) {
+  const j = experiment.fixed++;
+  const id = `${experiment.prefix}fixed-${j}`;
+  const name = el("select", { id: `${id}-name`, "aria-label": `parameter fixed in experiment ${experimentName(experiment)}` });
+  for (const p of app.model ? app.model.parameters : []) name.append(el("option", { value: p.name, text: `${p.name} [${p.unit}]` }));
+  const value = el("input", { type: "number", step: "any", id: `${id}-value`, "aria-label": "its value" });
+  const fill = () => {
+    const p = app.model.parameters.find((q) => q.name === name.value);
+    if (p) value.value = String(modelValue(p));
+  };
+  name.addEventListener("change", fill);
+  fill();
+  const remove = el("button", { type: "button", text: "Remove", "aria-label": "remove this start value" });
+  const row = el("tr", {}, el("td", {}, name), el("td", {}, value), el("td", {}, remove));
+  row.dataset.fixed = id;
+  remove.addEventListener("click", () => row.remove());
+  $(`${experiment.prefix}fixed`).tBodies[0].append(row);
+  name.focus();
+}
+
+function experimentName(experiment) {
+  const box = $(`${experiment.prefix}name`);
+  return box ? box.value.trim() : "";
+}
+
+// The experiments' cards follow the model (its inputs and parameters) and the first record.
+function renderExperiments() {
+  renderModelInputs();
+  const several = app.experiments.length > 0;
+  $("first-experiment").hidden = !several;
+  for (const [k, x] of app.experiments.entries()) {
+    x.card.querySelector("legend").textContent = `Experiment ${k + 2}`;
+    const table = $(`${x.prefix}inputs`);
+    inputRows(table.tBodies[0], x.prefix, x.dataset ? x.dataset.columns : [], ` in experiment ${k + 2}`);
+    table.hidden = !modelInputs().length;
+    for (const row of $(`${x.prefix}fixed`).tBodies[0].rows) {
+      const select = row.querySelector("select");
+      const was = select.value;
+      select.replaceChildren();
+      for (const p of app.model ? app.model.parameters : []) select.append(el("option", { value: p.name, text: `${p.name} [${p.unit}]` }));
+      if ([...select.options].some((o) => o.value === was)) select.value = was;
+    }
+  }
+}
+
+async function uploadExperiment(experiment) {
+  const x = experiment.prefix;
+  showError(`${x}error`, "");
+  const file = $(`${x}file`).files[0];
+  if (!file) { showError(`${x}error`, "choose a file first"); return; }
+  const time = $(`${x}time`).value.trim() || "time";
+  $(`${x}status`).textContent = `uploading ${file.name}…`;
+  try {
+    const query = `file_name=${encodeURIComponent(file.name)}&time_column=${encodeURIComponent(time)}`;
+    const dataset = await call(`UploadDataset?${query}`, null, {
+      headers: { "Content-Type": "application/octet-stream" },
+      body: await file.arrayBuffer(),
+    });
+    dataset.file_name = file.name;
+    experiment.dataset = dataset;
+    $(`${x}status`).textContent =
+      `${file.name}: ${dataset.samples} samples from ${fmt(dataset.start_time)} s to ${fmt(dataset.stop_time)} s; ` +
+      `columns ${dataset.columns.join(", ")}`;
+    $(`${x}window-start`).value = String(dataset.start_time);
+    $(`${x}window-stop`).value = String(dataset.stop_time);
+    renderExperiments();
+  } catch (e) {
+    experiment.dataset = null;
+    $(`${x}status`).textContent = "";
+    showError(`${x}error`, e.message);
+    renderExperiments();
+  }
 }
 
 function number(id) {
@@ -494,7 +739,8 @@ function campaignMessage() {
   }
   const methods = [...document.querySelectorAll('input[name="method"]:checked')].map((m) => m.value);
   const windowStop = number("window-stop");
-  return {
+  const inputs = inputMessages("");
+  const message = {
     name: $("campaign-name").value.trim(),
     model: model.name,
     fmu_id: app.fmus[model.name] ? app.fmus[model.name].id : "",
@@ -502,6 +748,7 @@ function campaignMessage() {
     model_parameters: fixed,
     dataset_id: dataset.id,
     outputs,
+    inputs,
     parameters,
     window_start: number("window-start"),
     window_stop: windowStop,
@@ -512,6 +759,26 @@ function campaignMessage() {
       seed: Math.round(number("seed")),
     },
   };
+  if (!app.experiments.length) return message;
+  // Several records: the first is the experiment of the fields above, each card another.
+  const experiments = [{
+    name: $("experiment-name").value.trim(), dataset_id: dataset.id,
+    windows: [{ start: message.window_start, stop: windowStop }], inputs,
+  }];
+  for (const [k, x] of app.experiments.entries()) {
+    const name = experimentName(x) || `experiment ${k + 2}`;
+    if (!x.dataset) throw new Error(`experiment ${name}: upload its record first`);
+    const own = {};
+    for (const row of $(`${x.prefix}fixed`).tBodies[0].rows) {
+      own[row.querySelector("select").value] = number(`${row.dataset.fixed}-value`);
+    }
+    experiments.push({
+      name, dataset_id: x.dataset.id,
+      windows: [{ start: number(`${x.prefix}window-start`), stop: number(`${x.prefix}window-stop`) }],
+      fixed: own, inputs: inputMessages(x.prefix),
+    });
+  }
+  return { ...message, dataset_id: "", window_start: 0, window_stop: 0, inputs: [], experiments };
 }
 
 async function start() {
@@ -634,17 +901,49 @@ function showResult(s) {
   const json = $("download-json");
   if (json.href.startsWith("blob:")) URL.revokeObjectURL(json.href);
   json.href = URL.createObjectURL(new Blob([s.result_json], { type: "application/json" }));
-  const plots = $("result-plots");
-  plots.replaceChildren();
-  const names = Object.keys(s.plots || {}).sort((a, b) =>
-    (a === "waterfall.svg") - (b === "waterfall.svg") || a.localeCompare(b));
-  for (const name of names) {
-    const caption = name === "waterfall.svg"
-      ? "waterfall: final objective of each run, best first"
-      : `${name.replace(/\.svg$/, "")}: measured, nominal and calibrated`;
-    plots.append(figure(s.plots[name], caption));
-  }
+  showResultPlots(s, r);
   $("result").hidden = false;
+}
+
+// The fit plots, per experiment (one group for a single record): the inputs the model was
+// driven by first, then each output measured, nominal and calibrated; the waterfall last.
+function showResultPlots(s, r) {
+  const holder = $("result-plots");
+  holder.replaceChildren();
+  const files = s.plots || {};
+  const sanitize = (n) => n.replace(/[^A-Za-z0-9._-]/g, "_");
+  const experiments = (r.experiments || []).map((e) => e.name);
+  const groups = experiments.length ? experiments.map((name) => ({ name, prefix: `${sanitize(name)}.` })) : [{ name: "", prefix: "" }];
+  const taken = new Set(["waterfall.svg"]);
+  for (const g of groups) {
+    const mine = Object.keys(files).filter((f) => !taken.has(f) && f.startsWith(g.prefix) &&
+      (g.prefix || !experiments.length));
+    const inputs = mine.filter((f) => f.slice(g.prefix.length).startsWith("input.")).sort();
+    const outputs = mine.filter((f) => !inputs.includes(f)).sort();
+    if (!inputs.length && !outputs.length) continue;
+    const box = el("div", { class: "plots" });
+    for (const f of inputs) {
+      taken.add(f);
+      const input = f.slice(g.prefix.length + "input.".length).replace(/\.svg$/, "");
+      box.append(figure(files[f], `${g.name ? `${g.name}: ` : ""}input ${input} as the model was driven`));
+    }
+    for (const f of outputs) {
+      taken.add(f);
+      const output = f.slice(g.prefix.length).replace(/\.svg$/, "");
+      box.append(figure(files[f], `${g.name ? `${g.name}: ` : ""}${output}: measured, nominal and calibrated`));
+    }
+    if (g.name) {
+      holder.append(el("section", { class: "experiment-plots", "aria-label": `experiment ${g.name}` },
+        el("h4", { text: `Experiment ${g.name}` }), box));
+    } else {
+      holder.append(box);
+    }
+  }
+  const rest = Object.keys(files).filter((f) => !taken.has(f)).sort();
+  const last = el("div", { class: "plots" });
+  for (const f of rest) last.append(figure(files[f], `${f.replace(/\.svg$/, "")}: measured, nominal and calibrated`));
+  if (files["waterfall.svg"]) last.append(figure(files["waterfall.svg"], "waterfall: final objective of each run, best first"));
+  if (last.children.length) holder.append(last);
 }
 
 async function cancel() {
@@ -887,6 +1186,7 @@ $("simulate").addEventListener("click", simulate);
 $("upload").addEventListener("click", upload);
 $("plot-columns").addEventListener("click", plotColumns);
 $("start").addEventListener("click", start);
+$("add-experiment").addEventListener("click", addExperiment);
 $("cancel").addEventListener("click", cancel);
 $("refresh-campaigns").addEventListener("click", refreshCampaigns);
 $("diagnose").addEventListener("click", diagnose);
