@@ -36,6 +36,9 @@ pub struct GrpcEvaluator {
     runtime: Handle,
     /// Objectives already put in wire form, by fingerprint.
     wire: Mutex<HashMap<[u8; 32], Arc<WireObjective>>>,
+    /// The experiments of objectives of several, each as an objective of its own, by the
+    /// whole objective's fingerprint (split once, not per batch).
+    parts: Mutex<HashMap<[u8; 32], Arc<Vec<Objective>>>>,
     /// Concurrent callers' points, sent together.
     coalescer: Coalescer<[u8; 32]>,
 }
@@ -47,6 +50,7 @@ impl GrpcEvaluator {
             pool,
             runtime,
             wire: Mutex::new(HashMap::new()),
+            parts: Mutex::new(HashMap::new()),
             coalescer: Coalescer::default(),
         }
     }
@@ -80,7 +84,13 @@ impl GrpcEvaluator {
         objective: &Objective,
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
-        let parts = objective.parts();
+        let parts = self
+            .parts
+            .lock()
+            .expect("parts lock")
+            .entry(objective.fingerprint())
+            .or_insert_with(|| Arc::new(objective.parts()))
+            .clone();
         let answers: Vec<Result<Vec<Evaluation>, Fault>> = std::thread::scope(|scope| {
             let running: Vec<_> = parts
                 .iter()
