@@ -109,20 +109,57 @@ pub struct Sensitivity {
 }
 
 impl Sensitivity {
-    /// Whether parameter `i` matters: its total index on the objective is at least
-    /// [`INFLUENTIAL_TOTAL`] (or, with Morris alone, its μ* on the objective is at least
-    /// that fraction of the largest μ*).
-    pub fn influential(&self, i: usize) -> bool {
-        let objective = &self.quantities[0];
-        if let Some(s) = &objective.sobol {
+    /// Whether parameter `i` matters on quantity `q` (the objective, 0, or one output's
+    /// contribution): its total index there is at least [`INFLUENTIAL_TOTAL`] (or, with
+    /// Morris alone, its μ* there is at least that fraction of the largest μ*).
+    pub fn influential_on(&self, q: usize, i: usize) -> bool {
+        let quantity = &self.quantities[q];
+        if let Some(s) = &quantity.sobol {
             return s.total[i] >= INFLUENTIAL_TOTAL;
         }
-        let m = objective.morris.as_ref().expect("one method ran");
+        let m = quantity.morris.as_ref().expect("one method ran");
         let largest = m.mu_star.iter().copied().fold(0.0, f64::max);
         largest > 0.0 && m.mu_star[i] >= INFLUENTIAL_TOTAL * largest
     }
 
-    /// The parameters that can be held fixed (not influential), in campaign order.
+    /// Whether parameter `i` matters: on the objective or on any output's contribution. The
+    /// objective over the whole box can be dominated by one output's errors far from any
+    /// fit (the heat exchanger's pressure drop), hiding a parameter that carries another
+    /// output: holding it fixed would lose that output's fit.
+    pub fn influential(&self, i: usize) -> bool {
+        (0..self.quantities.len()).any(|q| self.influential_on(q, i))
+    }
+
+    /// The output (quantity index ≥ 1) that keeps parameter `i` in although it is not
+    /// influential on the objective: the one on which its index is largest among those it
+    /// is influential on. `None` when it is influential on the objective or on nothing.
+    pub fn kept_for(&self, i: usize) -> Option<usize> {
+        if self.influential_on(0, i) {
+            return None;
+        }
+        (1..self.quantities.len())
+            .filter(|&q| self.influential_on(q, i))
+            .max_by(|&a, &b| self.score(a, i).total_cmp(&self.score(b, i)))
+    }
+
+    /// Parameter `i`'s index on quantity `q`: the total index, else μ* relative to the
+    /// largest μ* there.
+    fn score(&self, q: usize, i: usize) -> f64 {
+        let quantity = &self.quantities[q];
+        if let Some(s) = &quantity.sobol {
+            return s.total[i];
+        }
+        let m = quantity.morris.as_ref().expect("one method ran");
+        let largest = m.mu_star.iter().copied().fold(0.0, f64::max);
+        if largest > 0.0 {
+            m.mu_star[i] / largest
+        } else {
+            0.0
+        }
+    }
+
+    /// The parameters that can be held fixed (not influential on the objective nor on any
+    /// output), in campaign order.
     pub fn fixable(&self) -> Vec<&str> {
         (0..self.parameters.len())
             .filter(|&i| !self.influential(i))
@@ -178,12 +215,20 @@ impl Sensitivity {
 
     fn fixable_sentence(&self) -> String {
         let fixable = self.fixable();
-        let rule = if self.quantities[0].sobol.is_some() {
-            format!("total index on the objective below {INFLUENTIAL_TOTAL}")
+        let sobol = self.quantities[0].sobol.is_some();
+        let index = if sobol { "total index" } else { "μ*" };
+        let below = if sobol {
+            format!("below {INFLUENTIAL_TOTAL}")
         } else {
-            format!("μ* on the objective below {INFLUENTIAL_TOTAL} of the largest")
+            format!("below {INFLUENTIAL_TOTAL} of the largest")
         };
-        match fixable.len() {
+        let outputs = if self.quantities.len() > 1 {
+            " and on every output's contribution"
+        } else {
+            ""
+        };
+        let rule = format!("{index} on the objective{outputs} {below}");
+        let mut sentence = match fixable.len() {
             0 => format!("No parameter can be held fixed: none has a {rule}."),
             1 => format!(
                 "{} can be held fixed: its {rule} over the bounds.",
@@ -193,7 +238,21 @@ impl Sensitivity {
                 "{} can be held fixed: each has a {rule} over the bounds.",
                 fixable.join(", ")
             ),
+        };
+        for i in 0..self.parameters.len() {
+            if let Some(q) = self.kept_for(i) {
+                let (on_objective, there) = (self.score(0, i), self.score(q, i));
+                let relative = if sobol { "" } else { " of the largest" };
+                sentence.push_str(&format!(
+                    " {name} is kept for {output}: its {index} is {there:.3}{relative} there, \
+                     {on_objective:.3}{relative} on the objective; holding it fixed would lose \
+                     that output's fit.",
+                    name = self.parameters[i],
+                    output = self.quantities[q].name,
+                ));
+            }
         }
+        sentence
     }
 }
 

@@ -59,6 +59,11 @@ pub fn sensitivity_json(s: &Sensitivity) -> Value {
             p.insert("min".into(), json!(s.bounds[i].0));
             p.insert("max".into(), json!(s.bounds[i].1));
             p.insert("influential".into(), json!(s.influential(i)));
+            p.insert(
+                "kept_for".into(),
+                s.kept_for(i)
+                    .map_or(Value::Null, |q| json!(s.quantities[q].name)),
+            );
             if let Value::Object(stats) = statistics(s, 0, i) {
                 p.extend(stats);
             }
@@ -363,6 +368,35 @@ mod tests {
         assert!(b.get("total").is_none(), "{b}");
         assert_eq!(b["outputs"]["y/1"]["mu_star"], 0.005);
         assert_eq!(json["methods"], serde_json::json!(["morris"]));
+    }
+
+    #[test]
+    fn a_parameter_that_moves_one_output_is_kept_for_it_however_small_on_the_objective() {
+        let mut s = morris_only();
+        // On the output's contribution `b` has half the largest μ*.
+        s.quantities[1].morris = Some(MorrisEffects {
+            mu: vec![1.0, 0.5],
+            mu_star: vec![1.0, 0.5],
+            sigma: vec![0.1, 0.0],
+            effects: vec![4, 4],
+        });
+        assert!(!s.influential_on(0, 1));
+        assert!(s.influential_on(1, 1));
+        assert!(s.influential(1));
+        assert_eq!(s.kept_for(0), None, "influential on the objective itself");
+        assert_eq!(s.kept_for(1), Some(1));
+        assert!(s.fixable().is_empty());
+        let conclusion = s.conclusion();
+        assert!(
+            conclusion.starts_with("No parameter can be held fixed")
+                && conclusion.contains("b is kept for y/1: its μ* is 0.500 of the largest there"),
+            "{conclusion}"
+        );
+        assert_eq!(sensitivity_json(&s)["parameters"][1]["kept_for"], "y/1");
+        assert_eq!(
+            sensitivity_json(&s)["parameters"][0]["kept_for"],
+            Value::Null
+        );
     }
 
     #[test]
