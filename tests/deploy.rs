@@ -142,16 +142,23 @@ fn shell_invocations(dir: &Path) -> Vec<(PathBuf, Vec<String>)> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
         .unwrap()
         .map(|e| e.unwrap().path())
-        .filter(|p| matches!(p.extension().and_then(|e| e.to_str()), Some("sh" | "sbatch")))
+        .filter(|p| {
+            matches!(
+                p.extension().and_then(|e| e.to_str()),
+                Some("sh" | "sbatch")
+            )
+        })
         .collect();
     files.sort();
     for file in files {
         let text = std::fs::read_to_string(&file).unwrap().replace("\\\n", " ");
         for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
             let words: Vec<&str> = line.split_whitespace().collect();
-            let Some(at) = words.iter().position(|w| *w == "\"$calib\"") else {
+            // The command word of the line (`command -v "$calib"` runs nothing).
+            let at = usize::from(words.first() == Some(&"exec"));
+            if words.get(at) != Some(&"\"$calib\"") {
                 continue;
-            };
+            }
             let mut command = Vec::new();
             for word in &words[at + 1..] {
                 if matches!(*word, "&" | "|" | ";" | "&&" | "||" | ">" | ">>") {

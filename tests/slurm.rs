@@ -38,7 +38,13 @@ fn found(program: &str) -> bool {
 }
 
 const PROGRAMS: [&str; 7] = [
-    "slurmctld", "slurmd", "sbatch", "scancel", "squeue", "munged", "mungekey",
+    "slurmctld",
+    "slurmd",
+    "sbatch",
+    "scancel",
+    "squeue",
+    "munged",
+    "mungekey",
 ];
 
 fn is_root() -> bool {
@@ -54,9 +60,11 @@ fn install() -> Result<(), String> {
         return Ok(());
     }
     if !is_root() || !found("apt-get") {
-        return Err("Slurm is not installed and cannot be here (apt-get as root: \
+        return Err(
+            "Slurm is not installed and cannot be here (apt-get as root: \
                     slurmctld slurmd slurm-client munge)"
-            .into());
+                .into(),
+        );
     }
     eprintln!("installing slurmctld slurmd slurm-client munge with apt-get");
     let apt = |args: &[&str]| {
@@ -92,7 +100,9 @@ impl Slurm {
         }
         set_mode(&munge, 0o700);
         let key = munge.join("munge.key");
-        run(Command::new("mungekey").args(["-c", "-b", "1024", "-k"]).arg(&key));
+        run(Command::new("mungekey")
+            .args(["-c", "-b", "1024", "-k"])
+            .arg(&key));
         set_mode(&key, 0o600);
         let socket = munge.join("socket");
         let mut slurm = Slurm {
@@ -158,7 +168,9 @@ impl Slurm {
         let conf = slurm.conf.clone();
         slurm.spawn(
             "slurmctld",
-            Command::new("slurmctld").args(["-D", "-i", "-f"]).arg(&conf),
+            Command::new("slurmctld")
+                .args(["-D", "-i", "-f"])
+                .arg(&conf),
         );
         for n in 1..=nodes {
             slurm.spawn(
@@ -169,14 +181,10 @@ impl Slurm {
                     .args(["-N", &format!("n{n}")]),
             );
         }
-        await_condition(
-            "every slurmd node idle",
-            Duration::from_secs(60),
-            || {
-                let out = slurm.command("sinfo").args(["-h", "-o", "%D %t"]).output();
-                out.is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == format!("{nodes} idle"))
-            },
-        );
+        await_condition("every slurmd node idle", Duration::from_secs(60), || {
+            let out = slurm.command("sinfo").args(["-h", "-o", "%D %t"]).output();
+            out.is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == format!("{nodes} idle"))
+        });
         slurm
     }
 
@@ -206,7 +214,9 @@ impl Slurm {
             command.env(key, value);
         }
         let out = command.output().unwrap();
-        let id = String::from_utf8_lossy(&ok(out, "sbatch").stdout).trim().to_string();
+        let id = String::from_utf8_lossy(&ok(out, "sbatch").stdout)
+            .trim()
+            .to_string();
         id.split(';').next().unwrap().to_string()
     }
 
@@ -301,7 +311,10 @@ fn secrets(home: &Path, host: &str) -> PathBuf {
     let ca_key = KeyPair::generate().unwrap();
     let mut ca = CertificateParams::new(Vec::<String>::new()).unwrap();
     ca.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
-    ca.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::DigitalSignature];
+    ca.key_usages = vec![
+        KeyUsagePurpose::KeyCertSign,
+        KeyUsagePurpose::DigitalSignature,
+    ];
     let ca_cert = ca.self_signed(&ca_key).unwrap();
     let issuer = Issuer::new(ca, ca_key);
     let key = KeyPair::generate().unwrap();
@@ -336,10 +349,12 @@ fn evaluations(calib_dir: &Path, secrets: &Path, name: &str) -> Option<u64> {
         .arg(secrets.join("token"))
         .output()
         .ok()?;
-    String::from_utf8_lossy(&out.stdout).lines().find_map(|line| {
-        let words: Vec<&str> = line.split_whitespace().collect();
-        (words.get(2) == Some(&name)).then(|| words.get(3)?.parse().ok())?
-    })
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .find_map(|line| {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            (words.get(2) == Some(&name)).then(|| words.get(3)?.parse().ok())?
+        })
 }
 
 fn runs(result: &Value) -> Vec<Value> {
@@ -360,7 +375,13 @@ fn runs(result: &Value) -> Vec<Value> {
 }
 
 fn stored(db: &Path) -> u64 {
-    json_of(&calib(&["store", "stats", "--db", db.to_str().unwrap(), "--json"]))["evaluations"]
+    json_of(&calib(&[
+        "store",
+        "stats",
+        "--db",
+        db.to_str().unwrap(),
+        "--json",
+    ]))["evaluations"]
         .as_u64()
         .unwrap()
 }
@@ -378,7 +399,10 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     let started = Instant::now();
     let tmp = tempfile::tempdir().unwrap();
     let slurm = Slurm::start(&tmp.path().join("slurm"), 3);
-    eprintln!("slurm: 3 nodes up in {:.1} s", started.elapsed().as_secs_f64());
+    eprintln!(
+        "slurm: 3 nodes up in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 
     // The campaign: differential evolution from two starts, a few seconds of work.
     let search =
@@ -403,7 +427,9 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     );
 
     let home = tmp.path().join("home");
-    let host = read(Path::new("/proc/sys/kernel/hostname")).trim().to_string();
+    let host = read(Path::new("/proc/sys/kernel/hostname"))
+        .trim()
+        .to_string();
     let secrets = secrets(&home, &host);
     let calib_dir = submit_dir.join("calib");
     let deploy = repo().join("deploy/slurm");
@@ -417,7 +443,11 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     let job = slurm.sbatch(
         &submit_dir,
         &env,
-        &["--nodes=2", &script("calib.sbatch"), campaign.to_str().unwrap()],
+        &[
+            "--nodes=2",
+            &script("calib.sbatch"),
+            campaign.to_str().unwrap(),
+        ],
     );
     let array = slurm.sbatch(&submit_dir, &env, &["--array=0", &script("workers.sbatch")]);
     let logs = calib_dir.join("logs");
@@ -438,7 +468,11 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
             &format!("{goal} evaluations"),
             Duration::from_secs(120),
             || {
-                assert!(slurm.active(job), "job {job} ended early: {}", read(&submit_dir.join(format!("calib-{job}.out"))));
+                assert!(
+                    slurm.active(job),
+                    "job {job} ended early: {}",
+                    read(&submit_dir.join(format!("calib-{job}.out")))
+                );
                 at = evaluations(&calib_dir, &secrets, "clean").unwrap_or(0);
                 at >= goal
             },
@@ -486,7 +520,11 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     let again = slurm.sbatch(
         &submit_dir,
         &env,
-        &["--nodes=2", &script("calib.sbatch"), campaign.to_str().unwrap()],
+        &[
+            "--nodes=2",
+            &script("calib.sbatch"),
+            campaign.to_str().unwrap(),
+        ],
     );
     slurm.await_end(&again, Duration::from_secs(150));
     let output = read(&submit_dir.join(format!("calib-{again}.out")));
@@ -522,6 +560,10 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     assert_eq!(runs(&result), runs(&local));
     assert_eq!(result["best"], local["best"]);
     assert_eq!(evaluated, total);
-    assert_eq!(simulated, after - before, "simulations repeated after the resubmission");
+    assert_eq!(
+        simulated,
+        after - before,
+        "simulations repeated after the resubmission"
+    );
     assert_eq!(after, local_stored);
 }
