@@ -1,6 +1,7 @@
 //! `deploy/`: the compose file and the Kubernetes manifests parse, say what the deployment
 //! promises (a store on a volume, workers behind a headless Service, probes, limits,
-//! autoscaling, Secrets), and use only `calib` subcommands and flags that exist.
+//! autoscaling, Secrets), and use only `calib` subcommands and flags that exist; so do the
+//! Slurm batch scripts (deploy/slurm/, run for real by tests/slurm.rs).
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -119,6 +120,103 @@ fn every_calib_subcommand_and_flag_the_deployments_use_exists() {
         assert!(
             checked.contains(needed),
             "no deployment uses `{needed}`: {checked:?}"
+        );
+    }
+}
+
+/// The flags a shell array of deploy/slurm/env.sh holds (`serve+=(--tls-cert …)`).
+fn array_flags(env: &str, array: &str) -> Vec<String> {
+    env.lines()
+        .filter_map(|l| l.split_once(&format!("{array}+=(")))
+        .flat_map(|(_, rest)| rest.split_whitespace())
+        .filter(|w| w.starts_with("--"))
+        .map(|w| w.trim_end_matches(')').to_string())
+        .collect()
+}
+
+/// Every `"$calib" SUBCOMMAND …` command line of the Slurm scripts (continuation lines
+/// joined), as its words, with the arrays of security flags spelled out.
+fn shell_invocations(dir: &Path) -> Vec<(PathBuf, Vec<String>)> {
+    let env = std::fs::read_to_string(dir.join("env.sh")).unwrap();
+    let mut found = Vec::new();
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| {
+            matches!(
+                p.extension().and_then(|e| e.to_str()),
+                Some("sh" | "sbatch")
+            )
+        })
+        .collect();
+    files.sort();
+    for file in files {
+        let text = std::fs::read_to_string(&file).unwrap().replace("\\\n", " ");
+        for line in text.lines().filter(|l| !l.trim_start().starts_with('#')) {
+            let words: Vec<&str> = line.split_whitespace().collect();
+            // The command word of the line (`command -v "$calib"` runs nothing).
+            let at = usize::from(words.first() == Some(&"exec"));
+            if words.get(at) != Some(&"\"$calib\"") {
+                continue;
+            }
+            let mut command = Vec::new();
+            for word in &words[at + 1..] {
+                if matches!(*word, "&" | "|" | ";" | "&&" | "||" | ">" | ">>") {
+                    break;
+                }
+                match *word {
+                    "\"${serve[@]}\"" => command.extend(array_flags(&env, "serve")),
+                    "\"${dial[@]}\"" => command.extend(array_flags(&env, "dial")),
+                    w => command.push(w.to_string()),
+                }
+            }
+            found.push((file.clone(), command));
+        }
+    }
+    found
+}
+
+/// Whether `calib SUBCOMMAND --help` (`text`) shows `flag`.
+fn shown(text: &str, flag: &str) -> bool {
+    text.split(|c: char| c.is_whitespace() || c == ',')
+        .any(|w| w == flag)
+}
+
+#[test]
+fn every_calib_subcommand_and_flag_the_slurm_scripts_use_exists() {
+    let found = shell_invocations(&repo().join("deploy/slurm"));
+    let mut checked = BTreeSet::new();
+    for (file, words) in &found {
+        let subcommand = words
+            .first()
+            .unwrap_or_else(|| panic!("{}: empty", file.display()));
+        let text = help(subcommand);
+        for word in words.iter().filter(|w| w.starts_with("--")) {
+            let flag = word.split('=').next().unwrap();
+            assert!(
+                shown(&text, flag),
+                "{}: `calib {subcommand} {flag}` is not in `calib {subcommand} --help`",
+                file.display()
+            );
+            checked.insert(format!("{subcommand} {flag}"));
+        }
+    }
+    for needed in [
+        "coordinator --db",
+        "coordinator --out",
+        "coordinator --tls-cert",
+        "coordinator --token-file",
+        "worker --register",
+        "worker --slots",
+        "worker --tls-cert",
+        "worker --token-file",
+        "submit --coordinator",
+        "submit --tls-ca",
+        "submit --token-file",
+    ] {
+        assert!(
+            checked.contains(needed),
+            "no Slurm script uses `{needed}`: {checked:?}"
         );
     }
 }

@@ -111,7 +111,8 @@ impl RunningWorker {
     }
 
     /// Serve until the server fails, or until `stop` completes (a termination signal):
-    /// then stop accepting requests and finish those in flight.
+    /// then drain (stop registering, accept no new requests, finish those in flight) and
+    /// say so on standard error, with what was held and what was done.
     pub async fn serve_until(
         mut self,
         stop: impl std::future::Future<Output = ()>,
@@ -121,9 +122,33 @@ impl RunningWorker {
                 outcome.unwrap_or_else(|e| panic!("worker server task failed: {e}"))
             }
             () = stop => {
+                let service = self.service.clone();
+                let held = service.load();
+                eprintln!(
+                    "calib worker: draining: registration stopped, no new requests; \
+                     finishing {} simulations running and {} queued",
+                    held.running, held.queued
+                );
                 // Requests in flight get a few seconds; a stream that would outlive them
                 // (a client following a campaign) is cut, and reconnects elsewhere.
-                let _ = tokio::time::timeout(SHUTDOWN_GRACE, self.shutdown()).await;
+                let drained = tokio::time::timeout(SHUTDOWN_GRACE, self.shutdown())
+                    .await
+                    .is_ok();
+                let done = service.load();
+                if drained {
+                    eprintln!(
+                        "calib worker: drained: {} simulations completed since start",
+                        done.completed
+                    );
+                } else {
+                    eprintln!(
+                        "calib worker: drain cut after {} s with {} simulations running: \
+                         {} completed since start",
+                        SHUTDOWN_GRACE.as_secs(),
+                        done.running,
+                        done.completed
+                    );
+                }
                 Ok(())
             }
         }
