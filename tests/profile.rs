@@ -44,6 +44,15 @@ fn furuta_both_frictions_are_identifiable_and_agree_with_the_linearised_interval
         assert!(low < p.value && p.value < high, "{name}: [{low}, {high}]");
         let width = high - low;
         let linearised = p.linearised.ci_high - p.linearised.ci_low;
+        println!(
+            "{name}: profile [{low:e}, {high:e}], linearised [{:e}, {:e}]: ends {:.3e} and \
+             {:.3e} of the width apart, widths {:e}",
+            p.linearised.ci_low,
+            p.linearised.ci_high,
+            (low - p.linearised.ci_low).abs() / width,
+            (high - p.linearised.ci_high).abs() / width,
+            width / linearised - 1.0
+        );
         let ratio = width / linearised;
         assert!(
             (0.5..=2.0).contains(&ratio),
