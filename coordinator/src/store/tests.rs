@@ -257,72 +257,16 @@ fn export_and_import_carry_every_entry() {
 
 // ---- the stored evaluator ----
 
-/// Concurrent callers of an evaluator: a batch of the inner evaluator is held until every
-/// caller still running is inside `evaluate` (asking, waiting for a round, or in one), so
-/// that callers meet in rounds because they have all asked, not because a batch takes long
-/// enough on this machine. With no callers declared it holds nothing.
-#[derive(Default)]
-struct Gate {
-    /// Callers still running (they will ask again or have asked).
-    live: AtomicUsize,
-    /// Callers inside `evaluate`.
-    inside: AtomicUsize,
-    /// A batch waited 10 s without every caller inside: the gate is wrong, not the code.
-    stuck: AtomicBool,
-}
-
-impl Gate {
-    /// `callers` run from now on, each calling [`Gate::ask`] and then [`Gate::done`].
-    fn callers(&self, callers: usize) {
-        self.live.store(callers, Ordering::SeqCst);
-    }
-
-    /// One call of a caller to the evaluator.
-    fn ask<T>(&self, call: impl FnOnce() -> T) -> T {
-        self.inside.fetch_add(1, Ordering::SeqCst);
-        let answer = call();
-        self.inside.fetch_sub(1, Ordering::SeqCst);
-        answer
-    }
-
-    /// A caller has asked for the last time.
-    fn done(&self) {
-        self.live.fetch_sub(1, Ordering::SeqCst);
-    }
-
-    /// Hold a batch until every live caller is inside `evaluate` (10 s at most: a guard
-    /// against a hang, reported by [`Gate::assert_never_stuck`]).
-    fn hold(&self) {
-        let deadline = std::time::Instant::now() + Duration::from_secs(10);
-        while self.inside.load(Ordering::SeqCst) < self.live.load(Ordering::SeqCst) {
-            if std::time::Instant::now() > deadline {
-                self.stuck.store(true, Ordering::SeqCst);
-                return;
-            }
-            std::thread::sleep(Duration::from_micros(100));
-        }
-    }
-
-    fn assert_never_stuck(&self) {
-        assert!(
-            !self.stuck.load(Ordering::SeqCst),
-            "a batch waited for callers that never came"
-        );
-    }
-}
-
-/// Scores a point by the sum of its values, counting what it simulates; each batch waits
-/// at its [`Gate`] first.
+/// Scores a point by the sum of its values, slowly, counting what it simulates.
 #[derive(Default)]
 struct Counting {
     simulated: AtomicUsize,
     batches: AtomicUsize,
-    gate: Gate,
 }
 
 impl Evaluator for Counting {
     fn evaluate(&self, _: &Objective, points: &[Vec<f64>]) -> Result<Vec<Evaluation>, Fault> {
-        self.gate.hold();
+        std::thread::sleep(Duration::from_millis(20));
         self.simulated.fetch_add(points.len(), Ordering::SeqCst);
         self.batches.fetch_add(1, Ordering::SeqCst);
         Ok(points
@@ -376,24 +320,20 @@ fn concurrent_requests_for_one_point_simulate_it_once() {
     let evaluator = StoredEvaluator::new(&inner, &store);
     let objective = objective(false);
     let points: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 * 0.1]).collect();
-    // Every thread has asked before a point is simulated: they overlap in flight.
-    inner.gate.callers(4);
     std::thread::scope(|scope| {
         for t in 0..4 {
-            let (evaluator, objective, points, gate) = (&evaluator, &objective, &points, &inner.gate);
+            let (evaluator, objective, points) = (&evaluator, &objective, &points);
             scope.spawn(move || {
                 // Each thread asks for an overlapping window, one point twice.
                 let mut batch = points[t..t + 3].to_vec();
                 batch.push(points[t].clone());
-                let answers = gate.ask(|| evaluator.evaluate(objective, &batch)).unwrap();
-                gate.done();
+                let answers = evaluator.evaluate(objective, &batch).unwrap();
                 for (p, a) in batch.iter().zip(answers) {
                     assert_eq!(a.objective, p[0]);
                 }
             });
         }
     });
-    inner.gate.assert_never_stuck();
     assert_eq!(inner.simulated.load(Ordering::SeqCst), 6);
     let stats = evaluator.stats();
     assert_eq!(
@@ -535,16 +475,10 @@ fn a_fault_stores_nothing_and_the_points_are_simulated_once_workers_are_back() {
 }
 
 /// Eight runs on threads of their own, each asking five times for `per_ask` new points
-/// (`x`, `x + 0.5`, …) and checking the answers ([`Counting`] scores a point by its sum),
-/// every call through `gate`; returns the number of asks.
-fn ask_from_runs(
-    evaluator: &impl Evaluator,
-    objective: &Objective,
-    per_ask: usize,
-    gate: &Gate,
-) -> usize {
+/// (`x`, `x + 0.5`, …) and checking the answers ([`Counting`] scores a point by its sum);
+/// returns the number of asks.
+fn ask_from_runs(evaluator: &impl Evaluator, objective: &Objective, per_ask: usize) -> usize {
     let (runs, calls) = (8, 5);
-    gate.callers(runs);
     std::thread::scope(|scope| {
         for r in 0..runs {
             scope.spawn(move || {
@@ -552,17 +486,15 @@ fn ask_from_runs(
                     let x = (r * 100 + c) as f64;
                     let points: Vec<Vec<f64>> =
                         (0..per_ask).map(|k| vec![x + 0.5 * k as f64]).collect();
-                    let answers = gate.ask(|| evaluator.evaluate(objective, &points)).unwrap();
+                    let answers = evaluator.evaluate(objective, &points).unwrap();
                     assert_eq!(answers.len(), per_ask);
                     for (point, answer) in points.iter().zip(&answers) {
                         assert_eq!(answer.objective, point[0]);
                     }
                 }
-                gate.done();
             });
         }
     });
-    gate.assert_never_stuck();
     runs * calls
 }
 
@@ -574,7 +506,7 @@ fn concurrent_runs_share_one_durable_write_per_round() {
     let evaluator = StoredEvaluator::new(&inner, &store);
     let objective = objective(false);
     let flushes_before = store.flushes();
-    let asks = ask_from_runs(&evaluator, &objective, 2, &inner.gate);
+    let asks = ask_from_runs(&evaluator, &objective, 2);
     assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
     let batches = inner.batches.load(Ordering::SeqCst);
     let flushes = store.flushes() - flushes_before;
@@ -736,7 +668,7 @@ fn rounds_still_gather_when_durable_writes_are_slow() {
     let inner = Counting::default();
     let evaluator = StoredEvaluator::new(&inner, &store);
     let objective = objective(false);
-    let asks = ask_from_runs(&evaluator, &objective, 1, &inner.gate);
+    let asks = ask_from_runs(&evaluator, &objective, 1);
     assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
     let batches = inner.batches.load(Ordering::SeqCst);
     assert!(batches < asks / 2, "{batches} batches for {asks} asks");
@@ -755,7 +687,7 @@ impl Evaluator for UnavailableFor {
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
         if objective.fingerprint() == self.fingerprint {
-            self.inner.gate.hold();
+            std::thread::sleep(Duration::from_millis(20));
             return Err(Fault::unavailable("no worker for this one"));
         }
         self.inner.evaluate(objective, points)
@@ -771,23 +703,19 @@ fn a_round_of_two_objectives_stores_the_answered_one_and_faults_only_the_other()
         inner: Counting::default(),
     };
     let evaluator = StoredEvaluator::new(&inner, &store);
-    // Every caller has asked before a batch goes: rounds hold both objectives.
-    let gate = &inner.inner.gate;
-    gate.callers(6);
     let (answered, faulted) = std::thread::scope(|scope| {
         let callers: Vec<_> = (0..6)
             .map(|c| {
                 let (evaluator, objective) = (&evaluator, if c % 2 == 0 { &good } else { &bad });
                 scope.spawn(move || {
-                    let results = (0..4)
+                    (0..4)
                         .map(|r| {
                             let x = f64::from(c * 10 + r);
-                            gate.ask(|| evaluator.evaluate(objective, &[vec![x]]))
+                            evaluator
+                                .evaluate(objective, &[vec![x]])
                                 .map(|a| (a[0].objective, x))
                         })
-                        .collect::<Vec<_>>();
-                    gate.done();
-                    results
+                        .collect::<Vec<_>>()
                 })
             })
             .collect();
@@ -810,7 +738,6 @@ fn a_round_of_two_objectives_stores_the_answered_one_and_faults_only_the_other()
         }
         (answered, faulted)
     });
-    gate.assert_never_stuck();
     assert_eq!((answered, faulted), (12, 12));
     // Only the answered objective's points were stored.
     assert_eq!(store.stats().unwrap().evaluations, 12);
