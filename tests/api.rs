@@ -471,7 +471,11 @@ fn a_cancelled_campaign_stops_dispatching() {
         .into_inner()
         .id;
     let next_last = watch(&coordinator, &next_id).pop().unwrap();
-    assert_eq!(next_last.phase(), pb::CampaignPhase::Finished, "{next_last:?}");
+    assert_eq!(
+        next_last.phase(),
+        pb::CampaignPhase::Finished,
+        "{next_last:?}"
+    );
     let next_result: Value = serde_json::from_str(&next_last.result_json).unwrap();
     let next_simulated = next_result["simulated"].as_u64().unwrap();
     assert!(next_simulated > 0, "{next_result}");

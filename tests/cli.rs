@@ -828,7 +828,10 @@ fn bench_runs_on_a_fresh_clone_and_prints_its_table() {
     assert!(furuta.contains("seed: 300 ms"), "{furuta}");
     let faster = number_after(furuta, "->");
     assert!((faster - (300.0 / median).round()).abs() <= 1.0, "{furuta}");
-    assert_eq!(figures["furuta_ms"].as_f64().map(|v| (v * 1e3).round()), Some((median * 1e3).round()));
+    assert_eq!(
+        figures["furuta_ms"].as_f64().map(|v| (v * 1e3).round()),
+        Some((median * 1e3).round())
+    );
     // Each heat exchanger: its median against its target, the ratio and the verdict.
     assert!(line("heat exchanger, one 300 s simulation").contains("301 output points"));
     for (name, target) in [("hx_lowfi", 2.0), ("hx_highfi", 15.0)] {
@@ -854,7 +857,10 @@ fn bench_runs_on_a_fresh_clone_and_prints_its_table() {
     let fitted = number_after(nm, "->");
     assert!(fitted < nominal / 100.0, "{nm}");
     let faster = number_after(nm, "seed: 25 s  ->");
-    assert!((faster - (25e3 / number_after(nm, "median")).round()).abs() <= 1.0, "{nm}");
+    assert!(
+        (faster - (25e3 / number_after(nm, "median")).round()).abs() <= 1.0,
+        "{nm}"
+    );
     let multi = after("furuta: full multistart (3 methods x 4 starts)");
     let evaluations = number_after(multi, "(");
     let simulated = number_after(multi, "evaluations,");
@@ -868,7 +874,10 @@ fn bench_runs_on_a_fresh_clone_and_prints_its_table() {
         "multistart_calibration_ms",
     ] {
         let value = figures[key].as_f64();
-        assert!(value.is_some_and(f64::is_finite), "{key} is {value:?} in {figures}");
+        assert!(
+            value.is_some_and(f64::is_finite),
+            "{key} is {value:?} in {figures}"
+        );
     }
 }
 

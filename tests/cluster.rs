@@ -726,9 +726,11 @@ fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
                 .collect();
             let (evaluator, objective) = (&evaluator, &objective);
             let running = scope.spawn(move || evaluator.evaluate(objective, &points).unwrap());
-            await_condition("the batch to occupy both slots", Duration::from_secs(10), || {
-                busy() >= 2 || running.is_finished()
-            });
+            await_condition(
+                "the batch to occupy both slots",
+                Duration::from_secs(10),
+                || busy() >= 2 || running.is_finished(),
+            );
             let before = busy();
             let room = evaluator.has_room();
             if before >= 2 && busy() >= 2 {

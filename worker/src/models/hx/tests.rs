@@ -63,13 +63,28 @@ fn nominal_point_is_the_documented_one() {
         y[out("p_ref_in")],
     );
     assert!(rounds_to(q, 3273.0, 1.0), "Q {q} W, documented 3.273 kW");
-    assert!(rounds_to(dp, 38.20e3, 10.0), "dp {dp} Pa, documented 38.20 kPa");
-    assert!(rounds_to(sh, 9.7, 0.1), "superheat {sh} K, documented 9.7 K");
-    assert!(rounds_to(p_in, 3.08, 0.01), "p_in {p_in} bar, documented 3.08 bar");
+    assert!(
+        rounds_to(dp, 38.20e3, 10.0),
+        "dp {dp} Pa, documented 38.20 kPa"
+    );
+    assert!(
+        rounds_to(sh, 9.7, 0.1),
+        "superheat {sh} K, documented 9.7 K"
+    );
+    assert!(
+        rounds_to(p_in, 3.08, 0.01),
+        "p_in {p_in} bar, documented 3.08 bar"
+    );
     let y = steady(&lowfi(), &lowfi().info().default_vector());
     let (dp, q) = (y[out("dp_ref")], y[out("Qdot_refTotal")]);
-    assert!(rounds_to(dp, 38.20e3, 10.0), "hx_lowfi dp {dp} Pa, documented 38.20 kPa");
-    assert!(rounds_to(q, 3226.0, 1.0), "hx_lowfi Q {q} W, documented 3.226 kW");
+    assert!(
+        rounds_to(dp, 38.20e3, 10.0),
+        "hx_lowfi dp {dp} Pa, documented 38.20 kPa"
+    );
+    assert!(
+        rounds_to(q, 3226.0, 1.0),
+        "hx_lowfi Q {q} W, documented 3.226 kW"
+    );
 }
 
 #[test]
