@@ -777,50 +777,139 @@ fn a_repeated_diagnosis_is_served_from_the_store() {
 /// `calib bench --json` and `calib bench --cluster --json` print one JSON object whose named
 /// figures are all there and finite (their values are the benchmark's business, not the
 /// tests').
+/// The number that follows `before` in `line` (up to the next space, `x` or `)`).
+fn number_after(line: &str, before: &str) -> f64 {
+    let rest = line
+        .split_once(before)
+        .unwrap_or_else(|| panic!("no {before:?} in {line:?}"))
+        .1
+        .trim_start();
+    let end = rest
+        .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == '-' || c == 'e'))
+        .unwrap_or(rest.len());
+    rest[..end]
+        .parse()
+        .unwrap_or_else(|_| panic!("no number after {before:?} in {line:?}"))
+}
+
+/// `calib bench` as a fresh clone runs it: from the repository, on its default campaign (no
+/// `--campaign`, nothing beside the repository), here once per measurement. It prints its
+/// table (the Furuta simulation against the seed, both heat exchangers against their
+/// targets, a Nelder–Mead calibration and the full multistart), every ratio the one its
+/// medians give, and names the same figures in JSON. Timings are printed, never asserted.
+#[test]
+fn bench_runs_on_a_fresh_clone_and_prints_its_table() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
+        .args(["bench", "--repeat", "1", "--json"])
+        .current_dir(repo())
+        .output()
+        .expect("run calib");
+    let figures = json_of(&out);
+    let table = String::from_utf8_lossy(&out.stderr).into_owned();
+    println!("{table}");
+    let line = |starts: &str| -> &str {
+        table
+            .lines()
+            .find(|l| l.trim_start().starts_with(starts))
+            .unwrap_or_else(|| panic!("no line starting {starts:?} in:\n{table}"))
+    };
+    let lines: Vec<&str> = table.lines().collect();
+    let after = |heading: &str| -> &str {
+        let i = lines
+            .iter()
+            .position(|l| l.starts_with(heading))
+            .unwrap_or_else(|| panic!("no {heading:?} in:\n{table}"));
+        lines.get(i + 1).copied().unwrap_or_default()
+    };
+    // The Furuta simulation: its median, and how many times faster than the seed's 300 ms.
+    let furuta = after("furuta, one 40 s simulation");
+    let median = number_after(furuta, "median");
+    assert!(median > 0.0, "{furuta}");
+    assert!(furuta.contains("seed: 300 ms"), "{furuta}");
+    let faster = number_after(furuta, "->");
+    assert!((faster - (300.0 / median).round()).abs() <= 1.0, "{furuta}");
+    assert_eq!(
+        figures["furuta_ms"].as_f64().map(|v| (v * 1e3).round()),
+        Some((median * 1e3).round())
+    );
+    // Each heat exchanger: its median against its target, the ratio and the verdict.
+    assert!(line("heat exchanger, one 300 s simulation").contains("301 output points"));
+    for (name, target) in [("hx_lowfi", 2.0), ("hx_highfi", 15.0)] {
+        let row = line(name);
+        let median = number_after(row, "median");
+        assert_eq!(number_after(row, "target:"), target, "{row}");
+        let ratio = number_after(row, "->");
+        assert!((ratio - median / target).abs() <= 0.006, "{row}");
+        // The verdict is the unrounded median's: read it only where rounding cannot flip it.
+        if (median - target).abs() > 0.005 {
+            let met = median <= target;
+            assert!(row.ends_with(if met { "met" } else { "missed" }), "{row}");
+        }
+        assert!(row.ends_with("met") || row.ends_with("missed"), "{row}");
+        assert_eq!(figures[format!("{name}_target_ms")].as_f64(), Some(target));
+        let figure = figures[format!("{name}_ratio_to_target")].as_f64().unwrap();
+        assert!((figure - ratio).abs() <= 0.006, "{figure} vs {row}");
+    }
+    // One Nelder–Mead calibration of the default campaign, and the full multistart.
+    let nm = after("furuta: one Nelder-Mead calibration from the nominal point, one core");
+    assert!(nm.contains("seed: 25 s"), "{nm}");
+    let nominal = number_after(nm, "objective");
+    let fitted = number_after(nm, "->");
+    assert!(fitted < nominal / 100.0, "{nm}");
+    let faster = number_after(nm, "seed: 25 s  ->");
+    assert!(
+        (faster - (25e3 / number_after(nm, "median")).round()).abs() <= 1.0,
+        "{nm}"
+    );
+    let multi = after("furuta: full multistart (3 methods x 4 starts)");
+    let evaluations = number_after(multi, "(");
+    let simulated = number_after(multi, "evaluations,");
+    assert!(simulated > 0.0 && simulated <= evaluations, "{multi}");
+    assert!(number_after(multi, "best objective") <= fitted, "{multi}");
+    for key in [
+        "furuta_speedup_vs_seed",
+        "hx_lowfi_ms",
+        "hx_highfi_ms",
+        "nelder_mead_calibration_ms",
+        "multistart_calibration_ms",
+    ] {
+        let value = figures[key].as_f64();
+        assert!(
+            value.is_some_and(f64::is_finite),
+            "{key} is {value:?} in {figures}"
+        );
+    }
+}
+
 #[test]
 fn bench_json_names_every_figure() {
+    // The default benchmarks' figures: `bench_runs_on_a_fresh_clone_and_prints_its_table`.
     let campaign = repo().join("examples/furuta.toml");
     let campaign = campaign.to_str().unwrap();
-    let runs: [(&[&str], &[&str]); 2] = [
-        (
-            &["bench", "--repeat", "1", "--json", "--campaign", campaign],
-            &[
-                "furuta_ms",
-                "hx_highfi_ms",
-                "hx_lowfi_ms",
-                "hx_highfi_ratio_to_target",
-            ],
-        ),
-        (
-            &[
-                "bench",
-                "--cluster",
-                "--repeat",
-                "1",
-                "--json",
-                "--campaign",
-                campaign,
-            ],
-            &[
-                "coordinator_cpu_us_per_eval",
-                "coordinator_cpu_ratio_to_evaluation",
-                "grpc_overhead_ratio",
-                "furuta_in_process_us",
-                "dispatch_efficiency_100",
-                "dispatch_rate_100",
-            ],
-        ),
+    let args = [
+        "bench",
+        "--cluster",
+        "--repeat",
+        "1",
+        "--json",
+        "--campaign",
+        campaign,
     ];
-    for (args, keys) in runs {
-        let figures = json_of(&calib(args));
-        for key in keys {
-            let value = figures[key].as_f64();
-            assert!(
-                value.is_some_and(f64::is_finite),
-                "`calib {args:?}`: {key} is {:?} in {figures}",
-                figures.get(key)
-            );
-        }
+    let figures = json_of(&calib(&args));
+    for key in [
+        "coordinator_cpu_us_per_eval",
+        "coordinator_cpu_ratio_to_evaluation",
+        "grpc_overhead_ratio",
+        "furuta_in_process_us",
+        "dispatch_efficiency_100",
+        "dispatch_rate_100",
+    ] {
+        let value = figures[key].as_f64();
+        assert!(
+            value.is_some_and(f64::is_finite),
+            "`calib {args:?}`: {key} is {:?} in {figures}",
+            figures.get(key)
+        );
     }
 }
 

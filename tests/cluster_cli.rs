@@ -30,19 +30,14 @@ fn calibrate_on(campaign: &Path, extra: &[&str]) -> (Option<i32>, String) {
     )
 }
 
-/// An address where nothing listens: a port just bound and let go.
-fn closed_port() -> String {
-    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
-    let url = format!("http://{}", listener.local_addr().unwrap());
-    drop(listener);
-    url
-}
-
 #[test]
 fn a_worker_address_where_nothing_listens_fails_at_once_and_says_so() {
     let dir = tempfile::tempdir().unwrap();
     let campaign = small_campaign(dir.path());
-    let url = closed_port();
+    // A port this test holds without listening: refused for as long as `_held` lives,
+    // whatever else runs on the machine (a port bound and let go may be taken meanwhile).
+    let (_held, refusing) = refusing_address();
+    let url = format!("http://{refusing}");
     // The default wait is 300 s: a refused connection ends it long before.
     let (code, stderr) = calibrate_on(&campaign, &["--workers", &url]);
     assert_eq!(code, Some(1), "{stderr}");

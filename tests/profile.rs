@@ -44,11 +44,32 @@ fn furuta_both_frictions_are_identifiable_and_agree_with_the_linearised_interval
         assert!(low < p.value && p.value < high, "{name}: [{low}, {high}]");
         let width = high - low;
         let linearised = p.linearised.ci_high - p.linearised.ci_low;
+        println!(
+            "{name}: profile [{low:e}, {high:e}], linearised [{:e}, {:e}]: ends {:.3e} and \
+             {:.3e} of the width apart, widths {:e}",
+            p.linearised.ci_low,
+            p.linearised.ci_high,
+            (low - p.linearised.ci_low).abs() / width,
+            (high - p.linearised.ci_high).abs() / width,
+            width / linearised - 1.0
+        );
         let ratio = width / linearised;
         assert!(
             (0.5..=2.0).contains(&ratio),
             "{name}: widths {width} vs {linearised}"
         );
+        // Both profiles are parabolas: the widths agree within 1e-3 (7.2e-5 and 2.4e-4
+        // measured), each end within 0.5% of the width (0.13% to 0.29% measured).
+        assert!(
+            (ratio - 1.0).abs() < 1e-3,
+            "{name}: widths {width} vs {linearised}"
+        );
+        for (end, linear) in [(low, p.linearised.ci_low), (high, p.linearised.ci_high)] {
+            assert!(
+                (end - linear).abs() < 5e-3 * width,
+                "{name}: end {end} vs {linear}"
+            );
+        }
         // The record's simulator is not calib's: widened to twice its width about its
         // middle, the interval holds the true value.
         let middle = 0.5 * (low + high);
@@ -59,6 +80,49 @@ fn furuta_both_frictions_are_identifiable_and_agree_with_the_linearised_interval
             middle + width
         );
     }
+    // docs/profiles.md's rows and docs/results.md's best point, to their printed digits.
+    let ends = |name: &str| {
+        let p = named(&s, name);
+        let (low, high) = interval(p);
+        (
+            p.value,
+            low,
+            high,
+            p.linearised.ci_low,
+            p.linearised.ci_high,
+        )
+    };
+    for (name, printed) in [
+        (
+            "armFriction",
+            [
+                "0.0101239",
+                "0.01012273",
+                "0.01012505",
+                "0.01012274",
+                "0.01012506",
+            ],
+        ),
+        (
+            "pendulumFriction",
+            [
+                "0.00117005",
+                "0.001169955",
+                "0.001170145",
+                "0.001169954",
+                "0.001170144",
+            ],
+        ),
+    ] {
+        let (value, low, high, lin_low, lin_high) = ends(name);
+        for (got, printed) in [value, low, high, lin_low, lin_high]
+            .into_iter()
+            .zip(printed)
+        {
+            assert_reads_as(got, printed, name);
+        }
+    }
+    assert_reads_as(s.best_objective, "0.03275", "best objective");
     assert!(s.conclusions().is_empty());
     // No profile point beats the calibration's best by a meaningful amount.
     assert!(s.lowest > s.best_objective - 0.1 * s.threshold.delta);

@@ -403,14 +403,17 @@ fn a_failed_simulation_is_a_typed_answer() {
 #[test]
 fn a_flood_beyond_the_queue_is_refused() {
     // One slot, two waiting. Requests keep coming, each sent once the worker has taken in
-    // (or answered) the one before, until one finds the slot and the queue full: however
-    // fast the simulations run, that one is refused and nothing else is.
+    // (or answered) the one before, until one finds the slot and the queue full: that one is
+    // refused and nothing else is. No duration is assumed: a request answered before the
+    // next arrives only means the flood goes on, until one finds the queue full (the 60 s
+    // bound guards against a hang). The heat exchanger's fine model over 300 s is a
+    // simulation many round trips long, so the flood fills the queue within a few requests.
     let worker = TestWorker::start(1, 2);
     runtime().block_on(async {
         let c = client(&worker).await;
         let long = proto::SimulateRequest {
             protocol_version: V,
-            model: "hx_lowfi".into(),
+            model: "hx_highfi".into(),
             parameters: Vec::new(),
             times: grid(300.0, 1.0),
             outputs: Vec::new(),

@@ -88,6 +88,32 @@ pub fn real_record() -> Option<PathBuf> {
     }
 }
 
+/// Whether `value` reads `printed` when rounded to as many digits as `printed` shows
+/// ("0.944": within 0.0005 of 0.944; "2.091e8": within 5e5 of 2.091e8): the test of a
+/// figure the documentation prints, at the tolerance its digits state.
+pub fn reads_as(value: f64, printed: &str) -> bool {
+    let expected: f64 = printed
+        .parse()
+        .unwrap_or_else(|_| panic!("{printed:?} is not a number"));
+    let (mantissa, exponent) = match printed.split_once(['e', 'E']) {
+        Some((m, e)) => (m, e.parse::<i32>().expect("an exponent")),
+        None => (printed, 0),
+    };
+    let decimals = mantissa.split_once('.').map_or(0, |(_, d)| d.len()) as i32;
+    let unit = 10f64.powi(exponent - decimals);
+    // Half a unit of the last digit, and a hair for the decimal form of the bounds.
+    (value - expected).abs() <= 0.5 * unit * (1.0 + 1e-9)
+}
+
+/// Assert that `value` reads `printed` at its digits (see [`reads_as`]).
+#[track_caller]
+pub fn assert_reads_as(value: f64, printed: &str, what: &str) {
+    assert!(
+        reads_as(value, printed),
+        "{what}: {value} does not read as the documented {printed}"
+    );
+}
+
 /// Noise floor of the synthetic records: outputs × samples × (σ² + q²/12), q = 2π/4096.
 pub fn synthetic_noise_floor(outputs: usize, samples: usize) -> f64 {
     let q = 2.0 * std::f64::consts::PI / 4096.0;
