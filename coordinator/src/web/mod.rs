@@ -135,6 +135,7 @@ impl WebApp {
             .route("/api/v1/Describe", post(describe))
             .route("/api/v1/Simulate", post(simulate))
             .route("/ui/plot", post(plots::plot))
+            .route("/ui/compare", post(plots::compare))
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
             .route(
                 "/ui/datasets/{id}/column/{column}",
