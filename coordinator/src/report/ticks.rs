@@ -169,10 +169,7 @@ pub fn log(lo: f64, hi: f64) -> Ticks {
     let mut labels = Vec::new();
     if decades.len() >= 2 {
         let every = decades.len().div_ceil(8).max(1);
-        for &k in decades
-            .iter()
-            .filter(|k| (*k - decades[0]) as usize % every == 0)
-        {
+        for &k in decades.iter().step_by(every) {
             values.push(10f64.powi(k));
             labels.push(log_label(1.0, k));
         }
