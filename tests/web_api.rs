@@ -349,3 +349,123 @@ fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
     assert_eq!(result["simulated"], 0, "replayed from the store");
     runtime.block_on(ui.shutdown());
 }
+
+/// Submit `text` on dataset `dataset` over HTTP and wait until the campaign ends: its id.
+fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
+    let campaign = calib_coordinator::api::spec::campaign_message(text, dataset).unwrap();
+    let (code, body) = post(
+        c.http(),
+        "SubmitCampaign",
+        serde_json::to_value(pb::SubmitCampaignRequest {
+            campaign: Some(campaign),
+            idempotency_key: String::new(),
+        })
+        .unwrap(),
+    );
+    assert_eq!(code, 200, "{body}");
+    let id = serde_json::from_str::<pb::SubmitCampaignResponse>(&body)
+        .unwrap()
+        .id;
+    let (code, body) = http(c.http(), "GET", &format!("/api/v1/WatchCampaign/{id}"), b"");
+    assert_eq!(code, 200);
+    let last = body
+        .lines()
+        .filter_map(|l| l.strip_prefix("data: "))
+        .last()
+        .unwrap();
+    let state: pb::CampaignState = serde_json::from_str(last).unwrap();
+    assert_eq!(state.phase, pb::CampaignPhase::Finished as i32, "{state:?}");
+    id
+}
+
+#[test]
+fn two_campaigns_fits_are_drawn_over_the_measured_data_once() {
+    use calib_coordinator::report::chart::anatomy;
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 2);
+    let c = Coordinator::start(dir.path(), &cluster.urls());
+    let web = c.http();
+    let bytes = std::fs::read(repo().join("examples/data/furuta_clean.csv")).unwrap();
+    let (code, body) = http(
+        web,
+        "POST",
+        "/api/v1/UploadDataset?file_name=record.csv&time_column=time_s",
+        &bytes,
+    );
+    assert_eq!(code, 200, "{body}");
+    let dataset: pb::Dataset = serde_json::from_str(&body).unwrap();
+    // A short search and a longer one, both called "clean".
+    let short = run_campaign(
+        &c,
+        &clean_campaign("methods = [\"powell\"]\nstarts = 1\nmax_evaluations = 12\nseed = 3"),
+        &dataset.id,
+    );
+    let long = run_campaign(
+        &c,
+        &clean_campaign("methods = [\"nelder-mead\"]\nstarts = 2\nmax_evaluations = 80\nseed = 3"),
+        &dataset.id,
+    );
+
+    let request = serde_json::json!({"campaigns": [short, long], "output": "armJoint.phi"});
+    let (code, svg) = http(
+        web,
+        "POST",
+        "/ui/compare",
+        &serde_json::to_vec(&request).unwrap(),
+    );
+    assert_eq!(code, 200, "{svg}");
+    let a = anatomy(&svg);
+    assert!(a.faults().is_empty(), "{:?}", a.faults());
+    // The measured data once, each campaign's fit labelled by its name (the second one's
+    // id added, the names being equal), the output's unit on the axis.
+    assert_eq!(svg.matches(">measured</text>").count(), 1, "{svg}");
+    assert!(svg.contains("clean: objective"), "{svg}");
+    assert!(
+        svg.contains(&format!("clean ({}): objective", &long[..8])),
+        "{svg}"
+    );
+    assert!(svg.contains("armJoint.phi [rad]"), "{svg}");
+
+    // Refusals name the field.
+    for (request, field) in [
+        (
+            serde_json::json!({"campaigns": [short], "output": "armJoint.phi"}),
+            "campaigns:",
+        ),
+        (
+            serde_json::json!({"campaigns": [short, long], "output": "nowhere"}),
+            "output:",
+        ),
+    ] {
+        let (code, body) = http(
+            web,
+            "POST",
+            "/ui/compare",
+            &serde_json::to_vec(&request).unwrap(),
+        );
+        assert_eq!(code, 400, "{body}");
+        let error: serde_json::Value = serde_json::from_str(&body).unwrap();
+        assert!(
+            error["message"].as_str().unwrap().starts_with(field),
+            "{body}"
+        );
+    }
+    let (code, _) = http(
+        web,
+        "POST",
+        "/ui/compare",
+        &serde_json::to_vec(
+            &serde_json::json!({"campaigns": [short, "b".repeat(64)], "output": "armJoint.phi"}),
+        )
+        .unwrap(),
+    );
+    assert_eq!(code, 404);
+
+    // The waterfall the campaign left names each run by method and start.
+    let (_, body) = post(web, "GetCampaign", serde_json::json!({"id": long}));
+    let state: pb::CampaignState = serde_json::from_str(&body).unwrap();
+    let waterfall = anatomy(&state.plots["waterfall.svg"]);
+    let mut runs = waterfall.x_ticks.clone();
+    runs.sort();
+    assert_eq!(runs, ["nelder-mead #1", "nelder-mead #2"]);
+}

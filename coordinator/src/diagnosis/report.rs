@@ -4,8 +4,9 @@
 
 use super::{verdict, Diagnosis, Fit, Verdict};
 use crate::error::{Error, Result};
+use crate::report::chart;
 use crate::report::evidence::{self, bound_hits, bound_sentence};
-use crate::report::plot::{line_plot, sanitize, time_plot, Series};
+use crate::report::plot::{self, line_plot, sanitize, time_plot, Dash, Series};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write;
@@ -381,20 +382,15 @@ fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
             &format!("residual of {}: measured − model", o.model),
             &format!("residual [{unit}]"),
             &[
-                Series {
-                    label: "baseline",
-                    time: grid,
-                    values: &d.baseline.residual_series[i],
-                    color: BEFORE,
-                    width: 1,
-                },
-                Series {
-                    label: &after_label,
-                    time: grid,
-                    values: &d.final_fit.residual_series[i],
-                    color: AFTER,
-                    width: 1,
-                },
+                Series::new("baseline", grid, &d.baseline.residual_series[i], BEFORE, 1)
+                    .dashed(Dash::Dashed),
+                Series::new(
+                    &after_label,
+                    grid,
+                    &d.final_fit.residual_series[i],
+                    AFTER,
+                    1,
+                ),
             ],
             None,
         )?;
@@ -415,29 +411,12 @@ fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
         time_plot(
             &path,
             &format!("{}: measured and model before and after", o.model),
-            &format!("{} [{unit}]", o.model),
+            &plot::with_unit(&o.model, unit),
             &[
-                Series {
-                    label: "measured",
-                    time: grid,
-                    values: measured,
-                    color: MEASURED,
-                    width: 1,
-                },
-                Series {
-                    label: "baseline model",
-                    time: grid,
-                    values: &baseline,
-                    color: BEFORE,
-                    width: 1,
-                },
-                Series {
-                    label: &after_label,
-                    time: grid,
-                    values: &fin,
-                    color: AFTER,
-                    width: 2,
-                },
+                // The models first, the measured data last: drawn above them.
+                Series::new("baseline model", grid, &baseline, BEFORE, 2).dashed(Dash::Dashed),
+                Series::new(&after_label, grid, &fin, AFTER, 3),
+                Series::new("measured", grid, measured, plot::MEASURED, 1),
             ],
             None,
         )?;
@@ -463,39 +442,37 @@ fn write_plots(d: &Diagnosis, dir: &Path) -> Result<Vec<PathBuf>> {
         .collect();
     let mut series = Vec::new();
     for (i, (before, after)) in labels.iter().enumerate() {
-        series.push(Series {
-            label: before,
-            time: &lags,
-            values: &d.baseline.residual[i].autocorrelation,
-            color: BEFORE,
-            width: 1 + i as u32,
-        });
-        series.push(Series {
-            label: after,
-            time: &lags,
-            values: &d.final_fit.residual[i].autocorrelation,
-            color: AFTER,
-            width: 1 + i as u32,
-        });
+        // Outputs told apart by dash pattern, baseline and after by colour.
+        let (_, dash) = chart::style(i * chart::PALETTE.len());
+        series.push(
+            Series::new(
+                before,
+                &lags,
+                &d.baseline.residual[i].autocorrelation,
+                BEFORE,
+                1,
+            )
+            .dashed(dash),
+        );
+        series.push(
+            Series::new(
+                after,
+                &lags,
+                &d.final_fit.residual[i].autocorrelation,
+                AFTER,
+                2,
+            )
+            .dashed(dash),
+        );
     }
     // The band within which the autocorrelation of white noise stays 95% of the time.
     let n = d.baseline.residual.first().map_or(1, |r| r.samples).max(1) as f64;
     let band = vec![1.96 / n.sqrt(); lags.len()];
     let minus_band: Vec<f64> = band.iter().map(|b| -b).collect();
-    series.push(Series {
-        label: "white-noise band (95%)",
-        time: &lags,
-        values: &band,
-        color: MEASURED,
-        width: 1,
-    });
-    series.push(Series {
-        label: "",
-        time: &lags,
-        values: &minus_band,
-        color: MEASURED,
-        width: 1,
-    });
+    series.push(
+        Series::new("white-noise band (95%)", &lags, &band, MEASURED, 1).dashed(Dash::Dotted),
+    );
+    series.push(Series::new("", &lags, &minus_band, MEASURED, 1).dashed(Dash::Dotted));
     let path = dir.join("autocorrelation.svg");
     line_plot(
         &path,

@@ -251,6 +251,8 @@ pub struct Profiles {
     pub campaign: String,
     /// Every free parameter, in campaign order.
     pub names: Vec<String>,
+    /// Their units as the model states them (empty when it states none).
+    pub units: Vec<String>,
     pub best: Vec<f64>,
     pub best_objective: f64,
     pub best_from: BestFrom,
@@ -567,6 +569,19 @@ pub fn profile<E: Evaluator + Simulator>(
     Ok(Profiles {
         campaign: campaign.name.clone(),
         names: campaign.free.iter().map(|p| p.name.clone()).collect(),
+        units: campaign
+            .free
+            .iter()
+            .map(|p| {
+                campaign
+                    .model
+                    .info()
+                    .parameters
+                    .get(p.index)
+                    .map(|s| s.unit.clone())
+                    .unwrap_or_default()
+            })
+            .collect(),
         best: point,
         best_objective,
         best_from,

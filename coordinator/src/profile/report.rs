@@ -4,7 +4,8 @@
 
 use super::{ParameterProfile, Profiles, SideProfile};
 use crate::error::{Error, Result};
-use crate::report::plot::{line_plot, sanitize, Series};
+use crate::report::chart::{self, Chart};
+use crate::report::plot::{sanitize, with_unit, Dash, Series};
 use plotters::style::RGBColor;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
@@ -222,8 +223,6 @@ fn plot(s: &Profiles, p: &ParameterProfile, path: &Path) -> Result<()> {
             }
         })
         .collect();
-    let threshold_x = [x0, x1];
-    let threshold_y = [delta, delta];
     let title = format!(
         "{}: profile of {} ({})",
         s.campaign,
@@ -235,34 +234,78 @@ fn plot(s: &Profiles, p: &ParameterProfile, path: &Path) -> Result<()> {
         }
     );
     let shade = (p.ci_low().unwrap_or(x0), p.ci_high().unwrap_or(x1));
-    line_plot(
-        path,
+    let unit = s
+        .names
+        .iter()
+        .position(|n| *n == p.name)
+        .and_then(|i| s.units.get(i))
+        .map_or("", |u| u.as_str());
+    let text = profile_svg(
         &title,
-        &p.name,
-        "objective − best objective",
-        &[
-            Series {
-                label: "linearised (Jacobian)",
-                time: &grid,
-                values: &parabola,
-                color: RGBColor(150, 150, 150),
-                width: 1,
-            },
-            Series {
-                label: "95% threshold",
-                time: &threshold_x,
-                values: &threshold_y,
-                color: RGBColor(220, 50, 47),
-                width: 1,
-            },
-            Series {
-                label: "profile (others re-optimised)",
-                time: &xs,
-                values: &rises,
-                color: RGBColor(38, 139, 210),
-                width: 2,
-            },
-        ],
-        Some(shade),
-    )
+        &with_unit(&p.name, unit),
+        (&xs, &rises),
+        (&grid, &parabola),
+        delta,
+        shade,
+    );
+    std::fs::write(path, text).map_err(|source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// The SVG of a profile plot: the profile's points `(values, rises)`, the linearised
+/// parabola over `(grid, values)`, the threshold `delta` across, the interval `shade`
+/// shaded.
+pub fn profile_svg(
+    title: &str,
+    x_label: &str,
+    profile: (&[f64], &[f64]),
+    parabola: (&[f64], &[f64]),
+    delta: f64,
+    shade: (f64, f64),
+) -> String {
+    let (x0, x1) = profile
+        .0
+        .iter()
+        .chain(parabola.0)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+            (a.min(*x), b.max(*x))
+        });
+    let threshold_x = [x0, x1];
+    let threshold_y = [delta, delta];
+    let series = [
+        Series::new(
+            "linearised (Jacobian)",
+            parabola.0,
+            parabola.1,
+            RGBColor(150, 150, 150),
+            1,
+        )
+        .dashed(Dash::Dashed),
+        Series::new(
+            "95% threshold",
+            &threshold_x,
+            &threshold_y,
+            RGBColor(220, 50, 47),
+            1,
+        )
+        .dashed(Dash::DashDot),
+        Series::new(
+            "profile (others re-optimised)",
+            profile.0,
+            profile.1,
+            RGBColor(38, 139, 210),
+            2,
+        ),
+        Series::new("", profile.0, profile.1, RGBColor(38, 139, 210), 1).dots(3.0),
+    ];
+    chart::render(&Chart {
+        title,
+        x_label,
+        y_label: "objective − best objective",
+        series: &series,
+        shades: &[shade],
+        ..Chart::default()
+    })
 }

@@ -1,8 +1,12 @@
 //! What a calibration leaves behind: `result.json`, a table for the terminal, SVG plots.
 
+pub mod chart;
 pub mod evidence;
 pub mod plot;
+#[cfg(test)]
+mod readable;
 pub mod table;
+pub mod ticks;
 
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};

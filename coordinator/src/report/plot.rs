@@ -1,22 +1,46 @@
 //! SVG plots: measured, nominal and calibrated over time, one file per output, as the
 //! seed's figures show them. The fitted window is shaded.
 
+use super::chart::{self, Chart, Scale};
 use super::evidence::{best_threshold, BEST_TOLERANCE};
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
-use plotters::prelude::*;
+use plotters::style::RGBColor;
 use std::path::{Path, PathBuf};
+
+pub use super::chart::{Dash, Series};
 
 /// Points per simulated curve.
 const CURVE_POINTS: usize = 2000;
 
-/// One series of a time plot.
-pub struct Series<'a> {
-    pub label: &'a str,
-    pub time: &'a [f64],
-    pub values: &'a [f64],
-    pub color: RGBColor,
-    pub width: u32,
+/// Measured data: a thin near-black line drawn above the models, so it never disappears
+/// under a thicker coloured model curve.
+pub const MEASURED: RGBColor = RGBColor(25, 25, 25);
+/// The nominal model: red, dashed.
+pub const NOMINAL: RGBColor = RGBColor(220, 50, 47);
+/// The calibrated model: a thick blue line.
+pub const CALIBRATED: RGBColor = RGBColor(38, 139, 210);
+
+/// How a run is named in every plot and table: its method and its start counted from 1
+/// (`nelder-mead #3`).
+pub fn run_label(method: &str, start: usize) -> String {
+    format!("{method} #{}", start + 1)
+}
+
+/// An axis label with its unit, `name [unit]`, or the name alone when the unit is unknown.
+pub fn with_unit(name: &str, unit: &str) -> String {
+    if unit.trim().is_empty() {
+        name.to_string()
+    } else {
+        format!("{name} [{unit}]")
+    }
+}
+
+fn write_svg(path: &Path, text: &str) -> Result<()> {
+    std::fs::write(path, text).map_err(|source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 /// A time plot of several series, the window `shade` (start, stop) shaded.
@@ -28,24 +52,6 @@ pub fn time_plot(
     shade: Option<(f64, f64)>,
 ) -> Result<()> {
     line_plot(path, title, "time [s]", y_label, series, shade)
-}
-
-/// A time plot of several series, each fitted interval of `windows` shaded.
-fn time_plot_windows(
-    path: &Path,
-    title: &str,
-    y_label: &str,
-    series: &[Series],
-    windows: &[(f64, f64)],
-) -> Result<()> {
-    let text = plot_svg(title, "time [s]", y_label, series, windows).map_err(|e| Error::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e),
-    })?;
-    std::fs::write(path, text).map_err(|source| Error::Write {
-        path: path.to_path_buf(),
-        source,
-    })
 }
 
 /// A plot of several series against a common abscissa (their `time`), the range `shade`
@@ -62,10 +68,7 @@ pub fn line_plot(
         path: path.to_path_buf(),
         source: std::io::Error::other(e),
     })?;
-    std::fs::write(path, text).map_err(|source| Error::Write {
-        path: path.to_path_buf(),
-        source,
-    })
+    write_svg(path, &text)
 }
 
 /// The SVG text of [`line_plot`], or why it could not be drawn: the web app serves it
@@ -78,96 +81,99 @@ pub fn line_plot_svg(
     shade: Option<(f64, f64)>,
 ) -> std::result::Result<String, String> {
     let shades: Vec<(f64, f64)> = shade.into_iter().collect();
-    plot_svg(title, x_label, y_label, series, &shades)
+    Ok(chart::render(&Chart {
+        title,
+        x_label,
+        y_label,
+        series,
+        shades: &shades,
+        ..Chart::default()
+    }))
 }
 
-/// [`line_plot_svg`] with any number of shaded ranges.
-fn plot_svg(
+/// The SVG of a fit plot: the model curves `models` (label, times, values), the first
+/// dashed red (the nominal model), the next thick blue (the calibrated one) and further ones
+/// in the palette's colours, with the measured data drawn last, thin and dark, above them;
+/// the fitted intervals `windows` shaded.
+pub fn fit_svg(
     title: &str,
-    x_label: &str,
     y_label: &str,
-    series: &[Series],
-    shades: &[(f64, f64)],
-) -> std::result::Result<String, String> {
-    let (mut x0, mut x1, mut y0, mut y1) = (
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-        f64::INFINITY,
-        f64::NEG_INFINITY,
-    );
-    for s in series {
-        for (&t, &v) in s.time.iter().zip(s.values) {
-            if t.is_finite() && v.is_finite() {
-                x0 = x0.min(t);
-                x1 = x1.max(t);
-                y0 = y0.min(v);
-                y1 = y1.max(v);
+    measured: (&[f64], &[f64]),
+    models: &[(&str, &[f64], &[f64])],
+    windows: &[(f64, f64)],
+) -> String {
+    let mut series: Vec<Series> = models
+        .iter()
+        .enumerate()
+        .map(|(k, &(label, t, v))| match k {
+            0 => Series::new(label, t, v, NOMINAL, 2).dashed(Dash::Dashed),
+            1 => Series::new(label, t, v, CALIBRATED, 3),
+            _ => {
+                let (color, dash) = chart::style(k + 1);
+                Series::new(label, t, v, color, 2).dashed(dash)
             }
-        }
-    }
-    if !x0.is_finite() {
-        (x0, x1, y0, y1) = (0.0, 1.0, 0.0, 1.0);
-    }
-    if x0 >= x1 {
-        x1 = x0 + 1.0;
-    }
-    if y0 >= y1 {
-        y0 -= 0.5;
-        y1 += 0.5;
-    }
-    let pad = 0.05 * (y1 - y0);
-    let (y0, y1) = (y0 - pad, y1 + pad);
-    let mut text = String::new();
-    let draw = |text: &mut String| -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = SVGBackend::with_string(text, (1000, 500)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(x0..x1, y0..y1)?;
-        chart
-            .configure_mesh()
-            .x_desc(x_label)
-            .y_desc(y_label)
-            .light_line_style(WHITE.mix(0.0))
-            .draw()?;
-        for &(a, b) in shades {
-            chart.draw_series(std::iter::once(Rectangle::new(
-                [(a.max(x0), y0), (b.min(x1), y1)],
-                RGBColor(235, 242, 250).filled(),
-            )))?;
-        }
-        for s in series {
-            let color = s.color;
-            let width = s.width;
-            let drawn = chart.draw_series(LineSeries::new(
-                s.time
-                    .iter()
-                    .zip(s.values)
-                    .filter(|(t, v)| t.is_finite() && v.is_finite())
-                    .map(|(&t, &v)| (t, v)),
-                color.stroke_width(width),
-            ))?;
-            // Series without a label (a second band edge, say) stay out of the legend.
-            if !s.label.is_empty() {
-                drawn.label(s.label).legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                });
-            }
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
-        root.present()?;
-        Ok(())
-    };
-    draw(&mut text).map_err(|e| e.to_string())?;
-    Ok(text)
+        })
+        .collect();
+    series.push(Series::new("measured", measured.0, measured.1, MEASURED, 1));
+    chart::render(&Chart {
+        title,
+        x_label: "time [s]",
+        y_label,
+        series: &series,
+        shades: windows,
+        ..Chart::default()
+    })
+}
+
+/// The SVG of a comparison of several fits of one output: the measured data once, drawn
+/// last, and each fit (`fits`: label, times, values) in its own colour and dash pattern.
+pub fn comparison_svg(
+    title: &str,
+    y_label: &str,
+    measured: (&[f64], &[f64]),
+    fits: &[(String, Vec<f64>, Vec<f64>)],
+    windows: &[(f64, f64)],
+) -> String {
+    let mut series: Vec<Series> = fits
+        .iter()
+        .enumerate()
+        .map(|(k, (label, t, v))| {
+            let (color, dash) = chart::style(k);
+            Series::new(label, t, v, color, 2).dashed(dash)
+        })
+        .collect();
+    series.push(Series::new("measured", measured.0, measured.1, MEASURED, 1));
+    chart::render(&Chart {
+        title,
+        x_label: "time [s]",
+        y_label,
+        series: &series,
+        shades: windows,
+        ..Chart::default()
+    })
+}
+
+/// The SVG of an input plot: the signal a model is driven by, the fitted intervals shaded.
+pub fn input_svg(
+    title: &str,
+    y_label: &str,
+    signal: (&[f64], &[f64]),
+    windows: &[(f64, f64)],
+) -> String {
+    chart::render(&Chart {
+        title,
+        x_label: "time [s]",
+        y_label,
+        series: &[Series::new(
+            "as the model is driven",
+            signal.0,
+            signal.1,
+            RGBColor(133, 153, 0),
+            2,
+        )],
+        shades: windows,
+        ..Chart::default()
+    })
 }
 
 /// `points` evenly spaced times over `[start, stop]`.
@@ -253,34 +259,18 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
                 .collect();
             let unit = &info.outputs[o.model_index].unit;
             let path = dir.join(format!("{prefix}{}.svg", sanitize(&o.model)));
-            time_plot_windows(
+            write_svg(
                 &path,
-                &format!("{title}: {} vs measured {}", o.model, o.measured),
-                &format!("{} [{unit}]", o.model),
-                &[
-                    Series {
-                        label: "measured",
-                        time: &measured_time,
-                        values: &measured,
-                        color: RGBColor(120, 120, 120),
-                        width: 1,
-                    },
-                    Series {
-                        label: "nominal",
-                        time: &grid,
-                        values: &nominal[j],
-                        color: RGBColor(220, 50, 47),
-                        width: 1,
-                    },
-                    Series {
-                        label: "calibrated",
-                        time: &grid,
-                        values: &calibrated[j],
-                        color: RGBColor(38, 139, 210),
-                        width: 2,
-                    },
-                ],
-                &experiment.windows,
+                &fit_svg(
+                    &format!("{title}: {} vs measured {}", o.model, o.measured),
+                    &with_unit(&o.model, unit),
+                    (&measured_time, &measured),
+                    &[
+                        ("nominal model", &grid, &nominal[j]),
+                        ("calibrated model", &grid, &calibrated[j]),
+                    ],
+                    &experiment.windows,
+                ),
             )?;
             written.push(path);
         }
@@ -288,22 +278,18 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
             let spec = &info.inputs[signal.input];
             let values: Vec<f64> = grid.iter().map(|&t| signal.at(t)).collect();
             let path = dir.join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
-            time_plot_windows(
+            write_svg(
                 &path,
-                &format!(
-                    "{title}: input {} ({})",
-                    spec.name,
-                    signal.interpolation.as_str()
+                &input_svg(
+                    &format!(
+                        "{title}: input {} ({})",
+                        spec.name,
+                        signal.interpolation.as_str()
+                    ),
+                    &with_unit(&spec.name, &spec.unit),
+                    (&grid, &values),
+                    &experiment.windows,
                 ),
-                &format!("{} [{}]", spec.name, spec.unit),
-                &[Series {
-                    label: "as the model is driven",
-                    time: &grid,
-                    values: &values,
-                    color: RGBColor(133, 153, 0),
-                    width: 1,
-                }],
-                &experiment.windows,
             )?;
             written.push(path);
         }
@@ -311,9 +297,14 @@ pub fn write_fit_plots(c: &Calibration, dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(written)
 }
 
-/// The waterfall plot of a calibration (`waterfall.svg`): every run's final objective.
+/// The waterfall plot of a calibration (`waterfall.svg`): every run's final objective,
+/// each run named by its method and start.
 pub fn write_waterfall(c: &Calibration, dir: &Path) -> Result<PathBuf> {
-    let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
+    let runs: Vec<(String, f64)> = c
+        .runs
+        .iter()
+        .map(|r| (run_label(r.method.name(), r.start), r.objective))
+        .collect();
     let path = dir.join("waterfall.svg");
     waterfall_plot(
         &path,
@@ -321,7 +312,7 @@ pub fn write_waterfall(c: &Calibration, dir: &Path) -> Result<PathBuf> {
             "{}: final objective of each run, best first",
             c.campaign.name
         ),
-        &objectives,
+        &runs,
     )?;
     Ok(path)
 }
@@ -347,81 +338,60 @@ pub fn waterfall_values(objectives: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// A waterfall plot, as pyPESTO draws one: the runs' final objectives sorted ascending on a
-/// log scale, those within [`BEST_TOLERANCE`] of the best highlighted. Many runs on the
-/// first step are the evidence that the best was found; one alone is a warning.
-pub fn waterfall_plot(path: &Path, title: &str, objectives: &[f64]) -> Result<()> {
-    let values = waterfall_values(objectives);
+/// A waterfall plot, as pyPESTO draws one: the runs' final objectives (`runs`: each run's
+/// name and objective) sorted ascending on a log scale, those within [`BEST_TOLERANCE`] of
+/// the best highlighted, each named below the axis. Many runs on the first step are the
+/// evidence that the best was found; one alone is a warning.
+pub fn waterfall_plot(path: &Path, title: &str, runs: &[(String, f64)]) -> Result<()> {
+    write_svg(path, &waterfall_svg(title, runs))
+}
+
+/// The SVG text of [`waterfall_plot`].
+pub fn waterfall_svg(title: &str, runs: &[(String, f64)]) -> String {
+    let objectives: Vec<f64> = runs.iter().map(|r| r.1).collect();
+    let values = waterfall_values(&objectives);
     let best = objectives.iter().copied().fold(f64::INFINITY, f64::min);
     let threshold = best_threshold(best);
-    let mut sorted = objectives.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let at_best: Vec<bool> = sorted.iter().map(|v| *v <= threshold).collect();
+    let mut order: Vec<usize> = (0..runs.len()).collect();
+    order.sort_by(|&a, &b| objectives[a].total_cmp(&objectives[b]));
+    let names: Vec<String> = order.iter().map(|&i| runs[i].0.clone()).collect();
+    let at_best: Vec<bool> = order.iter().map(|&i| objectives[i] <= threshold).collect();
     let count = at_best.iter().filter(|b| **b).count();
     let n = values.len();
-    let lowest = values.iter().copied().fold(f64::INFINITY, f64::min);
-    let highest = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let (y0, y1) = if lowest.is_finite() {
-        (lowest / 2.0, highest * 2.0)
-    } else {
-        (0.1, 10.0)
+    let rank: Vec<f64> = (1..=n).map(|k| k as f64).collect();
+    let pick = |mark: bool| -> Vec<f64> {
+        values
+            .iter()
+            .zip(&at_best)
+            .map(|(&v, &b)| if b == mark { v } else { f64::NAN })
+            .collect()
     };
-    let highlight = RGBColor(38, 139, 210);
-    let other = RGBColor(150, 150, 150);
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = SVGBackend::new(path, (800, 450)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(80)
-            .build_cartesian_2d(0.5..(n.max(1) as f64 + 0.5), (y0..y1).log_scale())?;
-        chart
-            .configure_mesh()
-            .x_desc("run, sorted by final objective")
-            .y_desc("final objective")
-            .x_labels(n.clamp(1, 20))
-            .x_label_formatter(&|x| format!("{x:.0}"))
-            .y_label_formatter(&|y| format!("{y:.2e}"))
-            .light_line_style(WHITE.mix(0.0))
-            .draw()?;
-        chart.draw_series(LineSeries::new(
-            values.iter().enumerate().map(|(i, &v)| (i as f64 + 1.0, v)),
-            other.stroke_width(1),
-        ))?;
-        let label = format!(
-            "within {:.0}% of the best ({count} of {n})",
-            100.0 * BEST_TOLERANCE
-        );
-        for (mark, color, label) in [
-            (true, highlight, label),
-            (false, other, "other runs".into()),
-        ] {
-            chart
-                .draw_series(
-                    values
-                        .iter()
-                        .zip(&at_best)
-                        .enumerate()
-                        .filter(|(_, (_, b))| **b == mark)
-                        .map(|(i, (&v, _))| Circle::new((i as f64 + 1.0, v), 5, color.filled())),
-                )?
-                .label(label)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 5, color.filled()));
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
-        root.present()?;
-        Ok(())
-    };
-    draw().map_err(|e| Error::Write {
-        path: path.to_path_buf(),
-        source: std::io::Error::other(e.to_string()),
+    let (best_values, other_values) = (pick(true), pick(false));
+    let label = format!(
+        "within {:.0}% of the best ({count} of {n})",
+        100.0 * BEST_TOLERANCE
+    );
+    let series = [
+        Series::new("", &rank, &values, RGBColor(150, 150, 150), 1),
+        Series::new(&label, &rank, &best_values, CALIBRATED, 1).dots(5.0),
+        Series::new(
+            "other runs",
+            &rank,
+            &other_values,
+            RGBColor(150, 150, 150),
+            1,
+        )
+        .dots(5.0),
+    ];
+    chart::render(&Chart {
+        title,
+        x_label: "run, sorted by final objective",
+        y_label: "final objective",
+        series: &series,
+        y_scale: Scale::Log,
+        categories: &names,
+        size: (900, 480),
+        ..Chart::default()
     })
 }
 
@@ -464,11 +434,30 @@ mod tests {
     fn a_waterfall_plot_marks_the_runs_at_the_best() {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("waterfall.svg");
-        waterfall_plot(&path, "runs", &[1.0, 1.005, 40.0, 2.0e3, 0.9999]).unwrap();
+        let runs: Vec<(String, f64)> = [1.0, 1.005, 40.0, 2.0e3, 0.9999]
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| (run_label("nelder-mead", i), v))
+            .collect();
+        waterfall_plot(&path, "runs", &runs).unwrap();
         let svg = std::fs::read_to_string(&path).unwrap();
         assert!(svg.contains("within 1% of the best (3 of 5)"), "{svg}");
         assert!(svg.contains("other runs"));
         // One circle per run and one per legend entry.
         assert_eq!(svg.matches("<circle").count(), 5 + 2);
+        // Each run named by method and start, best first.
+        let a = chart::anatomy(&svg);
+        assert_eq!(
+            a.x_ticks,
+            [
+                "nelder-mead #5",
+                "nelder-mead #1",
+                "nelder-mead #2",
+                "nelder-mead #3",
+                "nelder-mead #4"
+            ]
+        );
+        assert_eq!(a.y_scale, "log");
+        assert!(a.faults().is_empty(), "{:?}", a.faults());
     }
 }

@@ -4,8 +4,9 @@
 use super::Sensitivity;
 use crate::campaign::Scale;
 use crate::error::{Error, Result};
+use crate::report::chart::{self, Bars as BarSet, Chart};
 use crate::report::plot::sanitize;
-use plotters::prelude::*;
+use plotters::style::RGBColor;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -191,7 +192,6 @@ pub fn write(s: &Sensitivity, dir: &Path) -> Result<Vec<PathBuf>> {
 /// else μ* with σ as whisker.
 fn bar_chart(s: &Sensitivity, q: usize, path: &Path) -> std::result::Result<(), String> {
     let quantity = &s.quantities[q];
-    let n = s.parameters.len();
     let title = if quantity.name == "objective" {
         format!("{}: sensitivity of the objective", s.campaign)
     } else {
@@ -235,75 +235,30 @@ fn bar_chart(s: &Sensitivity, q: usize, path: &Path) -> std::result::Result<(), 
         ),
         (None, None) => return Ok(()),
     };
-    let finite = |v: f64| if v.is_finite() { v } else { 0.0 };
-    let top = series
+    let bars: Vec<BarSet> = series
         .iter()
-        .flat_map(|(_, v, ci, _)| v.iter().copied().chain(ci.iter().map(|c| c.1)))
-        .map(finite)
-        .fold(0.0, f64::max);
-    let bottom = series
-        .iter()
-        .flat_map(|(_, v, ci, _)| v.iter().copied().chain(ci.iter().map(|c| c.0)))
-        .map(finite)
-        .fold(0.0, f64::min);
-    let top = if top > 0.0 { top * 1.1 } else { 1.0 };
-    let bottom = bottom * 1.1;
-    let names = s.parameters.clone();
-    let k = series.len() as f64;
-    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
-        let root = SVGBackend::new(path, (900, 450)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let mut chart = ChartBuilder::on(&root)
-            .caption(&title, ("sans-serif", 20))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(70)
-            .build_cartesian_2d(-0.5..(n as f64 - 0.5), bottom..top)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 && (i as usize) < names.len() {
-                    names[i as usize].clone()
-                } else {
-                    String::new()
-                }
-            })
-            .y_desc(y_desc)
-            .draw()?;
-        let width = 0.8 / k;
-        for (b, (label, values, intervals, color)) in series.iter().enumerate() {
-            let color = *color;
-            let offset = -0.4 + width * b as f64;
-            chart
-                .draw_series(values.iter().enumerate().map(|(i, &v)| {
-                    let x0 = i as f64 + offset;
-                    Rectangle::new([(x0, 0.0), (x0 + width, finite(v))], color.filled())
-                }))?
-                .label(label.as_str())
-                .legend(move |(x, y)| {
-                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], color.filled())
-                });
-            chart.draw_series(intervals.iter().enumerate().map(|(i, &(lo, hi))| {
-                let x = i as f64 + offset + width / 2.0;
-                PathElement::new(
-                    vec![(x, finite(lo)), (x, finite(hi))],
-                    BLACK.stroke_width(1),
-                )
-            }))?;
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .draw()?;
-        root.present()?;
-        Ok(())
-    };
-    draw().map_err(|e| e.to_string())
+        .map(|(label, values, intervals, color)| BarSet {
+            label,
+            values,
+            intervals,
+            color: *color,
+        })
+        .collect();
+    let text = bar_chart_svg(&title, y_desc, &s.parameters, &bars);
+    std::fs::write(path, text).map_err(|e| e.to_string())
+}
+
+/// The SVG of a bar chart: one group of bars per parameter, named below the axis, the
+/// legend beside the data area.
+pub fn bar_chart_svg(title: &str, y_label: &str, names: &[String], bars: &[BarSet]) -> String {
+    chart::render(&Chart {
+        title,
+        y_label,
+        categories: names,
+        bars,
+        size: (900, 450),
+        ..Chart::default()
+    })
 }
 
 #[cfg(test)]

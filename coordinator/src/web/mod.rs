@@ -8,7 +8,8 @@
 //! `{"code", "message"}`. Server streams (`WatchCampaign`, `Diagnose`) are Server-Sent
 //! Events, one whole message per event. HTTP JSON rather than gRPC-web: the page would need a
 //! protobuf codec in JavaScript, and without npm it would be hand-written. Routes under
-//! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]), the
+//! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]; `/ui/compare`
+//! draws several finished campaigns' fits of one output over its measured data), the
 //! campaign file of a campaign, and a column of an uploaded dataset with its times (which
 //! the Model tab drives a model's input with, through `Simulate`'s `inputs`).
 //!
@@ -135,6 +136,7 @@ impl WebApp {
             .route("/api/v1/Describe", post(describe))
             .route("/api/v1/Simulate", post(simulate))
             .route("/ui/plot", post(plots::plot))
+            .route("/ui/compare", post(plots::compare))
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
             .route(
                 "/ui/datasets/{id}/column/{column}",

@@ -2,32 +2,32 @@
 //! ([`crate::report::plot::line_plot_svg`]), the one code path of every plot calib draws.
 
 use super::{ApiError, WebApp};
+use crate::campaign::Campaign;
 use crate::measurement::Measurement;
-use crate::report::plot::{line_plot_svg, Series};
+use crate::report::chart::{self, style, Chart, Dash, Scale};
+use crate::report::plot::{
+    comparison_svg, line_plot_svg, uniform_grid, with_unit, Series, MEASURED,
+};
 use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
-use plotters::style::RGBColor;
 use serde::Deserialize;
 use tonic::Status;
-
-/// Colours of successive series; the legend names each one, so a plot reads without them.
-const PALETTE: [RGBColor; 8] = [
-    RGBColor(38, 139, 210),
-    RGBColor(220, 50, 47),
-    RGBColor(133, 153, 0),
-    RGBColor(108, 113, 196),
-    RGBColor(181, 137, 0),
-    RGBColor(42, 161, 152),
-    RGBColor(211, 54, 130),
-    RGBColor(88, 110, 117),
-];
 
 /// Most points drawn per series.
 const MAX_POINTS: usize = 20_000;
 
+/// Most series (overlays included) in one plot.
+const MAX_SERIES: usize = 200;
+
+/// Most campaigns in one comparison.
+const MAX_COMPARED: usize = 8;
+
+/// Points per simulated curve of a comparison.
+const CURVE_POINTS: usize = 2000;
+
 /// What `POST /ui/plot` draws.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Default, Deserialize)]
 pub struct PlotRequest {
     #[serde(default)]
     pub title: String,
@@ -39,15 +39,37 @@ pub struct PlotRequest {
     /// A range of the abscissa to shade (the fitted window).
     #[serde(default)]
     pub shade: Option<(f64, f64)>,
+    /// `"linear"` (the default), `"log"`, or `"auto"`: log when the values are positive
+    /// and span more than two decades.
+    #[serde(default)]
+    pub x_scale: String,
+    #[serde(default)]
+    pub y_scale: String,
+    /// Earlier sets of series drawn under `series`, oldest first (a previous simulation
+    /// under the new one): each in its series' colours, dashed, labelled
+    /// `<set label>: <series label>`.
+    #[serde(default)]
+    pub overlays: Vec<SeriesSet>,
+    /// Name each line at its end, right of the data area (many runs).
+    #[serde(default)]
+    pub direct_labels: bool,
 }
 
 /// One series; `null` values (an objective not known yet) are left out.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Default, Deserialize)]
 pub struct PlotSeries {
     #[serde(default)]
     pub label: String,
     pub x: Vec<Option<f64>>,
     pub y: Vec<Option<f64>>,
+}
+
+/// One set of series: a simulation, a campaign's fit.
+#[derive(Debug, Default, Deserialize)]
+pub struct SeriesSet {
+    #[serde(default)]
+    pub label: String,
+    pub series: Vec<PlotSeries>,
 }
 
 fn svg(text: String) -> Response {
@@ -65,48 +87,94 @@ fn invalid(message: String) -> ApiError {
     ApiError(Status::invalid_argument(message))
 }
 
+/// The abscissae and values of `s`, `null` as NaN, checked; `place` names it in errors.
+fn columns(place: &str, s: &PlotSeries) -> Result<(Vec<f64>, Vec<f64>), ApiError> {
+    if s.x.len() != s.y.len() {
+        return Err(invalid(format!(
+            "{place}: {} abscissae for {} values",
+            s.x.len(),
+            s.y.len()
+        )));
+    }
+    if s.x.len() > MAX_POINTS {
+        return Err(invalid(format!(
+            "{place}: {} points, at most {MAX_POINTS} are drawn",
+            s.x.len()
+        )));
+    }
+    let x = s.x.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
+    let y = s.y.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
+    Ok((x, y))
+}
+
+fn scale(field: &str, text: &str) -> Result<Scale, ApiError> {
+    Scale::parse(text).ok_or_else(|| {
+        invalid(format!(
+            "{field}: `{text}` is not a scale; use linear, log or auto"
+        ))
+    })
+}
+
 /// The SVG of `request`.
 pub fn draw(request: &PlotRequest) -> Result<String, ApiError> {
-    let mut columns = Vec::with_capacity(request.series.len());
-    for (i, s) in request.series.iter().enumerate() {
-        if s.x.len() != s.y.len() {
-            return Err(invalid(format!(
-                "series[{i}]: {} abscissae for {} values",
-                s.x.len(),
-                s.y.len()
-            )));
-        }
-        if s.x.len() > MAX_POINTS {
-            return Err(invalid(format!(
-                "series[{i}]: {} points, at most {MAX_POINTS} are drawn",
-                s.x.len()
-            )));
-        }
-        let x: Vec<f64> = s.x.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
-        let y: Vec<f64> = s.y.iter().map(|v| v.unwrap_or(f64::NAN)).collect();
-        columns.push((x, y));
+    let x_scale = scale("x_scale", &request.x_scale)?;
+    let y_scale = scale("y_scale", &request.y_scale)?;
+    let count = request.series.len()
+        + request
+            .overlays
+            .iter()
+            .map(|o| o.series.len())
+            .sum::<usize>();
+    if count > MAX_SERIES {
+        return Err(invalid(format!(
+            "series: {count} series, at most {MAX_SERIES} are drawn"
+        )));
     }
-    let series: Vec<Series> = request
-        .series
+    // Overlays first (under the new series), each series in the colour of the new series
+    // it stands for, dashed.
+    let mut data = Vec::with_capacity(count);
+    let mut labels = Vec::with_capacity(count);
+    let mut looks = Vec::with_capacity(count);
+    for (k, set) in request.overlays.iter().enumerate() {
+        for (i, s) in set.series.iter().enumerate() {
+            data.push(columns(&format!("overlays[{k}].series[{i}]"), s)?);
+            labels.push(match (set.label.is_empty(), s.label.is_empty()) {
+                (false, false) => format!("{}: {}", set.label, s.label),
+                (false, true) => set.label.clone(),
+                (true, _) => s.label.clone(),
+            });
+            let dash = [Dash::Dashed, Dash::Dotted, Dash::DashDot, Dash::LongDash]
+                [(request.overlays.len() - 1 - k) % 4];
+            looks.push((style(i).0, dash, 1));
+        }
+    }
+    let many = request.series.len() > 4;
+    for (i, s) in request.series.iter().enumerate() {
+        data.push(columns(&format!("series[{i}]"), s)?);
+        labels.push(s.label.clone());
+        let (color, dash) = style(i);
+        looks.push((color, dash, if many { 1 } else { 2 }));
+    }
+    let series: Vec<Series> = data
         .iter()
-        .zip(&columns)
-        .enumerate()
-        .map(|(i, (s, (x, y)))| Series {
-            label: &s.label,
-            time: x,
-            values: y,
-            color: PALETTE[i % PALETTE.len()],
-            width: if i == 0 { 2 } else { 1 },
+        .zip(&labels)
+        .zip(&looks)
+        .map(|(((x, y), label), &(color, dash, width))| {
+            Series::new(label, x, y, color, width).dashed(dash)
         })
         .collect();
-    line_plot_svg(
-        &request.title,
-        &request.x_label,
-        &request.y_label,
-        &series,
-        request.shade,
-    )
-    .map_err(|e| ApiError(Status::internal(format!("cannot draw the plot: {e}"))))
+    let shades: Vec<(f64, f64)> = request.shade.into_iter().collect();
+    Ok(chart::render(&Chart {
+        title: &request.title,
+        x_label: &request.x_label,
+        y_label: &request.y_label,
+        series: &series,
+        shades: &shades,
+        x_scale,
+        y_scale,
+        direct_labels: request.direct_labels,
+        ..Chart::default()
+    }))
 }
 
 /// `POST /ui/plot`: series the page holds (a simulation, a campaign's progress) as SVG.
@@ -137,19 +205,159 @@ pub async fn dataset_plot(
             &format!("{}: {column}", info.file_name),
             &format!("{} [s]", info.time_column),
             &column,
-            &[Series {
-                label: "measured",
-                time: &m.time,
-                values,
-                color: RGBColor(120, 120, 120),
-                width: 1,
-            }],
+            &[Series::new("measured", &m.time, values, MEASURED, 1)],
             None,
         )
         .map_err(|e| ApiError(Status::internal(format!("cannot draw the plot: {e}"))))
     })
     .await
     .map_err(|e| ApiError(Status::internal(e.to_string())))??;
+    Ok(svg(text))
+}
+
+/// What `POST /ui/compare` draws: the fits of one output by several finished campaigns.
+#[derive(Debug, Default, Deserialize)]
+pub struct CompareRequest {
+    /// The campaigns' ids, two or more; the first one's measured data and fitted windows
+    /// are drawn.
+    pub campaigns: Vec<String>,
+    /// A model output every campaign compares with measured data (`armJoint.phi`).
+    pub output: String,
+}
+
+/// The measured data of `output` and each campaign's calibrated model of it, as SVG.
+pub fn compare_svg(
+    campaigns: &crate::campaigns::Campaigns,
+    request: &CompareRequest,
+) -> Result<String, ApiError> {
+    if request.campaigns.len() < 2 || request.campaigns.len() > MAX_COMPARED {
+        return Err(invalid(format!(
+            "campaigns: {} ids; a comparison takes 2 to {MAX_COMPARED}",
+            request.campaigns.len()
+        )));
+    }
+    let public = |e: crate::error::Error| campaigns.public(&e.to_string());
+    let mut fits = Vec::new();
+    let mut measured: Option<(Vec<f64>, Vec<f64>)> = None;
+    let mut windows = Vec::new();
+    let mut unit = String::new();
+    let mut names: Vec<String> = Vec::new();
+    for (k, id) in request.campaigns.iter().enumerate() {
+        let place = format!("campaigns[{k}]");
+        let key = crate::store::unhex32(id).ok_or_else(|| {
+            ApiError(Status::not_found(format!(
+                "{place}: no campaign `{id}` here"
+            )))
+        })?;
+        let campaign: Campaign = campaigns
+            .finished(&key, id, "compare")
+            .map_err(|e| invalid(format!("{place}: {}", public(e))))?
+            .ok_or_else(|| {
+                ApiError(Status::not_found(format!(
+                    "{place}: no campaign `{id}` here"
+                )))
+            })?;
+        let snapshot = campaigns
+            .get(id)
+            .map_err(|e| ApiError(Status::internal(public(e))))?
+            .ok_or_else(|| {
+                ApiError(Status::not_found(format!(
+                    "{place}: no campaign `{id}` here"
+                )))
+            })?;
+        let result = snapshot
+            .result
+            .ok_or_else(|| invalid(format!("{place}: campaign `{id}` has no result to compare")))?;
+        let Some(j) = campaign
+            .outputs
+            .iter()
+            .position(|o| o.model == request.output)
+        else {
+            let known: Vec<&str> = campaign.outputs.iter().map(|o| o.model.as_str()).collect();
+            return Err(invalid(format!(
+                "output: campaign {} does not compare `{}` with measured data (it compares {})",
+                campaign.name,
+                request.output,
+                known.join(", ")
+            )));
+        };
+        let best = &result["best"]["parameters"];
+        let point: Vec<f64> = campaign
+            .free
+            .iter()
+            .map(|p| best[&p.name].as_f64().unwrap_or(p.nominal))
+            .collect();
+        let measurement = crate::calibration::load_measurement(&campaign)
+            .map_err(|e| invalid(format!("{place}: {}", public(e))))?;
+        let objective = crate::objective::Objective::new(&campaign, &measurement)
+            .map_err(|e| invalid(format!("{place}: {}", campaigns.public(&e.to_string()))))?;
+        let grid = uniform_grid(campaign.solver.start_time, campaign.stop_time, CURVE_POINTS);
+        let values = campaign
+            .model
+            .simulate_driven(
+                &objective.full_parameters(&point),
+                &grid,
+                &objective.outputs,
+                &objective.solver,
+                &objective.inputs,
+            )
+            .map(|t| t.values.into_iter().nth(j).unwrap_or_default())
+            .map_err(|e| {
+                invalid(format!(
+                    "{place}: the calibrated model does not simulate: {e}"
+                ))
+            })?;
+        if measured.is_none() {
+            let o = &campaign.outputs[j];
+            let column = measurement.column(&o.measured).unwrap_or(&[]);
+            let shown: Vec<usize> = (0..measurement.time.len())
+                .filter(|&i| {
+                    (campaign.solver.start_time..=campaign.stop_time).contains(&measurement.time[i])
+                })
+                .collect();
+            measured = Some((
+                shown.iter().map(|&i| measurement.time[i]).collect(),
+                shown
+                    .iter()
+                    .filter_map(|&i| column.get(i).copied())
+                    .collect(),
+            ));
+            windows = campaign.windows.clone();
+            unit = campaign.model.info().outputs[o.model_index].unit.clone();
+        }
+        let mut label = snapshot.name.clone();
+        if names.contains(&label) {
+            label = format!("{label} ({})", &id[..id.len().min(8)]);
+        }
+        names.push(label.clone());
+        let objective_value = result["best"]["objective"].as_f64().unwrap_or(f64::NAN);
+        fits.push((
+            format!("{label}: objective {objective_value:.4e}"),
+            grid,
+            values,
+        ));
+    }
+    let (t, v) = measured.unwrap_or_default();
+    Ok(comparison_svg(
+        &format!("{}: {}", request.output, names.join(" vs ")),
+        &with_unit(&request.output, &unit),
+        (&t, &v),
+        &fits,
+        &windows,
+    ))
+}
+
+/// `POST /ui/compare`: the fits of one output by two or more finished campaigns over the
+/// measured data, as SVG ([`CompareRequest`]).
+pub async fn compare(
+    State(app): State<WebApp>,
+    body: axum::body::Bytes,
+) -> Result<Response, ApiError> {
+    let request: CompareRequest = super::decode(&body)?;
+    let campaigns = app.campaigns.clone();
+    let text = tokio::task::spawn_blocking(move || compare_svg(&campaigns, &request))
+        .await
+        .map_err(|e| ApiError(Status::internal(e.to_string())))??;
     Ok(svg(text))
 }
 
@@ -209,7 +417,7 @@ mod tests {
                     vec![Some(5.0), Some(4.0)],
                 ),
             ],
-            shade: None,
+            ..PlotRequest::default()
         };
         let svg = draw(&request).unwrap_or_else(|e| panic!("{}", e.0.message()));
         assert!(svg.starts_with("<svg") && svg.contains("best objective of each run"));
@@ -219,14 +427,11 @@ mod tests {
     #[test]
     fn series_of_unequal_lengths_are_refused_naming_the_series() {
         let request = PlotRequest {
-            title: String::new(),
-            x_label: String::new(),
-            y_label: String::new(),
             series: vec![
                 series("ok", vec![Some(0.0)], vec![Some(1.0)]),
                 series("bad", vec![Some(0.0), Some(1.0)], vec![Some(1.0)]),
             ],
-            shade: None,
+            ..PlotRequest::default()
         };
         let refused = draw(&request).expect_err("refused");
         assert_eq!(refused.0.code(), tonic::Code::InvalidArgument);
