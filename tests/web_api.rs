@@ -116,8 +116,8 @@ fn the_coordinators_json_routes_answer_what_its_grpc_methods_answer() {
     // The page itself, compiled in.
     let (code, page) = http(web, "GET", "/", b"");
     assert_eq!(code, 200);
-    assert!(page.contains("<title>calib</title>") && page.contains("/app.js"));
-    assert_eq!(http(web, "GET", "/app.js", b"").0, 200);
+    assert!(page.contains("<title>calib</title>") && page.contains("/js/main.js"));
+    assert_eq!(http(web, "GET", "/js/common.js", b"").0, 200);
 
     // Upload over HTTP: the dataset gRPC names for the same bytes.
     let bytes = std::fs::read(repo().join("examples/data/furuta_clean.csv")).unwrap();

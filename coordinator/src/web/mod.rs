@@ -12,9 +12,10 @@
 //! campaign file of a campaign, and a column of an uploaded dataset with its times (which
 //! the Model tab drives a model's input with, through `Simulate`'s `inputs`).
 //!
-//! The page (`assets/`) is hand-written HTML, CSS and JavaScript compiled into the binary:
-//! nothing is loaded from elsewhere. Every route is behind the [`door`]: the Host check, the
-//! same-origin check and, on a server with a token, the login.
+//! The page (`assets/`) is hand-written HTML, CSS and JavaScript (ES modules, one per tab,
+//! no build step) compiled into the binary: nothing is loaded from elsewhere. Every route
+//! is behind the [`door`]: the Host check, the same-origin check and, on a server with a
+//! token, the login.
 
 pub mod door;
 #[cfg(test)]
@@ -48,7 +49,18 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Code, Request, Status};
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
-const APP_JS: &str = include_str!("assets/app.js");
+/// The page's ES modules (`<script type="module">`, no build step): `main.js` wires the
+/// page, one module per tab over `common.js`. Served as `/js/<name>`.
+const SCRIPTS: &[(&str, &str)] = &[
+    ("main.js", include_str!("assets/js/main.js")),
+    ("common.js", include_str!("assets/js/common.js")),
+    ("model.js", include_str!("assets/js/model.js")),
+    ("measurement.js", include_str!("assets/js/measurement.js")),
+    ("calibration.js", include_str!("assets/js/calibration.js")),
+    ("experiments.js", include_str!("assets/js/experiments.js")),
+    ("analysis.js", include_str!("assets/js/analysis.js")),
+    ("diagnosis.js", include_str!("assets/js/diagnosis.js")),
+];
 const APP_CSS: &str = include_str!("assets/app.css");
 
 /// Shortest interval between two events of a stream: a campaign changes with every batch,
@@ -105,10 +117,7 @@ impl WebApp {
                 "/",
                 get(|| async { asset("text/html; charset=utf-8", INDEX_HTML) }),
             )
-            .route(
-                "/app.js",
-                get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
-            )
+            .route("/js/{name}", get(script))
             .route(
                 "/app.css",
                 get(|| async { asset("text/css; charset=utf-8", APP_CSS) }),
@@ -167,6 +176,14 @@ fn asset(content_type: &'static str, body: &'static str) -> Response {
         body,
     )
         .into_response()
+}
+
+/// `GET /js/{name}`: one of the page's modules.
+async fn script(Path(name): Path<String>) -> Response {
+    match SCRIPTS.iter().find(|(n, _)| *n == name) {
+        Some((_, body)) => asset("text/javascript; charset=utf-8", body),
+        None => StatusCode::NOT_FOUND.into_response(),
+    }
 }
 
 /// An RPC's failure as an HTTP answer.
