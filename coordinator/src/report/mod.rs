@@ -2,6 +2,7 @@
 
 pub mod evidence;
 pub mod plot;
+pub mod runs;
 pub mod table;
 
 use crate::calibration::Calibration;

@@ -232,6 +232,9 @@ mod tests {
                 objective: 0.1 + 0.2,
                 sse: vec![1e-300, -0.0, 3.5],
                 failure: None,
+                message: None,
+                free: Vec::new(),
+                history: Vec::new(),
             },
             Evaluation::failed(2, "step limit (200000) reached at t = 3.2 s".into()),
             Evaluation {
@@ -312,6 +315,9 @@ mod tests {
             runs: vec![],
             result: None,
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         };
         let bytes = encode_campaign(&record);
         assert_eq!(bytes[0], 1);
@@ -345,6 +351,9 @@ mod tests {
             }],
             result: Some(serde_json::json!({ "values": values })),
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         };
         let back = decode_campaign(&encode_campaign(&record)).unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

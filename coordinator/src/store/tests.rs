@@ -20,6 +20,9 @@ fn evaluation(i: u64) -> Evaluation {
             objective: i as f64 * 0.1,
             sse: vec![i as f64, 1.0 / (i as f64 + 1.0)],
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         }
     }
 }
@@ -41,6 +44,9 @@ fn record(name: &str, status: CampaignStatus) -> CampaignRecord {
         runs: vec![],
         result: None,
         failure: None,
+        message: None,
+        free: Vec::new(),
+        history: Vec::new(),
     }
 }
 
