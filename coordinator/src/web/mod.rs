@@ -9,7 +9,7 @@
 //! Events, one whole message per event. HTTP JSON rather than gRPC-web: the page would need a
 //! protobuf codec in JavaScript, and without npm it would be hand-written. Routes under
 //! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]), the
-//! campaign file of a campaign, and a column of an uploaded dataset with its times (which
+//! campaign file of a campaign, what is kept of an uploaded dataset, and a column of an uploaded dataset with its times (which
 //! the Model tab drives a model's input with, through `Simulate`'s `inputs`).
 //!
 //! The page (`assets/`) is hand-written HTML, CSS and JavaScript (ES modules, one per tab,
@@ -60,6 +60,9 @@ const SCRIPTS: &[(&str, &str)] = &[
     ("experiments.js", include_str!("assets/js/experiments.js")),
     ("analysis.js", include_str!("assets/js/analysis.js")),
     ("diagnosis.js", include_str!("assets/js/diagnosis.js")),
+    ("route.js", include_str!("assets/js/route.js")),
+    ("runs.js", include_str!("assets/js/runs.js")),
+    ("reopen.js", include_str!("assets/js/reopen.js")),
 ];
 const APP_CSS: &str = include_str!("assets/app.css");
 
@@ -144,6 +147,7 @@ impl WebApp {
             .route("/api/v1/Describe", post(describe))
             .route("/api/v1/Simulate", post(simulate))
             .route("/ui/plot", post(plots::plot))
+            .route("/ui/datasets/{id}", get(dataset_info))
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
             .route(
                 "/ui/datasets/{id}/column/{column}",
@@ -461,6 +465,29 @@ where
         }
     });
     Sse::new(ReceiverStream::new(rx)).keep_alive(KeepAlive::default())
+}
+
+/// `GET /ui/datasets/{id}`: what is kept of an uploaded dataset (its file's name, time
+/// column, columns, samples, first and last time), for a page that names it in its URL or
+/// reopens a campaign on it.
+async fn dataset_info(
+    State(app): State<WebApp>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let campaigns = app.campaigns.clone();
+    let found = {
+        let id = id.clone();
+        tokio::task::spawn_blocking(move || campaigns.datasets().get(&id))
+            .await
+            .map_err(|e| ApiError(Status::internal(e.to_string())))?
+            .map_err(|e| ApiError(Status::invalid_argument(e.to_string())))?
+    };
+    match found {
+        Some(info) => Ok(json(&info)),
+        None => Err(ApiError(Status::not_found(format!(
+            "id: no dataset `{id}` here: upload the file again"
+        )))),
+    }
 }
 
 /// `GET /ui/campaigns/{id}/campaign.toml`: the campaign file a campaign was run from.

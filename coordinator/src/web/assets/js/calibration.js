@@ -3,8 +3,9 @@ import { clearProfiles } from "./analysis.js";
 import { $, PHASES, app, bound, call, el, figure, fmt, follow, modelInputs, number, plot, showError } from "./common.js";
 import { experimentName, inputMessages, inputRows, renderExperiments } from "./experiments.js";
 import { modelValue } from "./model.js";
-
-export const BEST_TOLERANCE = 0.01; // a run within 1% of the best objective has reached it
+import { fillForm } from "./reopen.js";
+import { writeRoute } from "./route.js";
+import { showRuns } from "./runs.js";
 
 // ---- Calibration tab --------------------------------------------------------------------
 
@@ -147,28 +148,41 @@ export async function start() {
   }
 }
 
-export function runsAtBest(runBest) {
-  const finite = runBest.filter((v) => Number.isFinite(v));
-  if (!finite.length) return [0, runBest.length];
-  const best = Math.min(...finite);
-  const threshold = best + BEST_TOLERANCE * Math.abs(best);
-  return [finite.filter((v) => v <= threshold).length, runBest.length];
-}
-
+// The campaign's state in a line: phase, evaluations, best objective, runs at the best (the
+// server flags them, by the rule of result.json's runs_at_best).
 export function describeState(s) {
-  const runBest = (s.run_best || []).map((v) => (v === null ? Infinity : v));
-  const [k, n] = runsAtBest(runBest);
+  const runs = s.runs || [];
   let text = `${s.name}: ${PHASES[s.phase] || s.phase}, ${s.evaluations} evaluations, best objective ${fmt(s.best_objective)}`;
-  if (n) text += `, ${k} of ${n} runs at the best`;
+  if (runs.length) text += `, ${runs.filter((r) => r.at_best).length} of ${runs.length} runs at the best`;
   if (s.failure) text += ` (${s.failure})`;
   return text;
+}
+
+// Show campaign state `s`: its status, progress history, runs and, once it has ended, its
+// result or what it had found.
+function showState(s) {
+  app.campaign = s;
+  $("calibration-status").textContent = describeState(s);
+  if ((s.history || []).length) drawProgress();
+  showRuns(s, parameterNames(s));
+  $("campaign-actions").hidden = s.phase === 1 || !s.campaign;
+  $("use-values").hidden = !Object.keys(s.best_parameters || {}).length;
+  showBestSoFar(s);
+}
+
+// The free parameters' names in the campaign's order.
+function parameterNames(s) {
+  if (s.result_json) return JSON.parse(s.result_json).free_parameters.map((p) => p.name);
+  const c = s.campaign || {};
+  return [...(c.parameters || []), ...(c.effects || [])].map((p) => p.name);
 }
 
 export function watch(id) {
   if (app.watching) app.watching.abort();
   app.campaignId = id;
-  app.history = [];
+  writeRoute({ campaign: id });
   $("result").hidden = true;
+  $("best-so-far").hidden = true;
   clearProfiles();
   $("progress-plot").replaceChildren();
   $("cancel").disabled = false;
@@ -176,12 +190,7 @@ export function watch(id) {
   const controller = new AbortController();
   app.watching = controller;
   follow(`/api/v1/WatchCampaign/${id}`, (s) => {
-    app.campaign = s;
-    $("calibration-status").textContent = describeState(s);
-    if (s.phase === 1 || app.history.length) {
-      app.history.push({ evaluations: s.evaluations, run_best: s.run_best || [] });
-      drawProgress();
-    }
+    showState(s);
     if (s.phase !== 1) finish(s);
   }, controller.signal).catch((e) => {
     if (e.name !== "AbortError") showError("calibration-error", e.message);
@@ -193,19 +202,23 @@ export function watch(id) {
   });
 }
 
-// Best objective per run over the campaign's evaluations, redrawn at most one at a time.
+// Best objective per run over the campaign's evaluations (the history the server keeps),
+// each run named by its label; redrawn at most one at a time.
 export async function drawProgress() {
   if (app.plotting) { app.plotDue = true; return; }
   app.plotting = true;
   try {
-    const runs = Math.max(0, ...app.history.map((h) => h.run_best.length));
-    const x = app.history.map((h) => h.evaluations);
+    const s = app.campaign;
+    const history = s.history || [];
+    const runs = Math.max(0, ...history.map((h) => (h.run_best || []).length));
+    const x = history.map((h) => h.evaluations);
     const series = [];
     for (let r = 0; r < runs; r++) {
+      const run = (s.runs || [])[r];
       series.push({
-        label: `run ${r + 1}`, x,
-        y: app.history.map((h) => {
-          const v = h.run_best[r];
+        label: run ? run.label : `run ${r + 1}`, x,
+        y: history.map((h) => {
+          const v = (h.run_best || [])[r];
           return v === null || v === undefined || !(v > 0) ? null : Math.log10(v);
         }),
       });
@@ -214,13 +227,66 @@ export async function drawProgress() {
       title: "best objective of each run", x_label: "evaluations (all runs)",
       y_label: "log10 of the best objective", series,
     });
-    $("progress-plot").replaceChildren(figure(svg, "progress: best objective of each run over the evaluations"));
+    if (app.campaign && app.campaign.id === s.id) {
+      $("progress-plot").replaceChildren(figure(svg, "progress: best objective of each run over the evaluations"));
+    }
   } catch (e) {
     showError("calibration-error", e.message);
   } finally {
     app.plotting = false;
     if (app.plotDue) { app.plotDue = false; drawProgress(); }
   }
+}
+
+// What a campaign that stopped before its end had found: each free parameter's best value
+// so far.
+function showBestSoFar(s) {
+  const best = s.best_parameters || {};
+  const names = parameterNames(s).filter((n) => n in best);
+  const show = s.phase !== 1 && s.phase !== 2 && names.length > 0;
+  $("best-so-far").hidden = !show;
+  if (!show) return;
+  $("best-so-far-note").textContent =
+    `${s.name} was ${PHASES[s.phase] || s.phase} after ${s.evaluations} evaluations; ` +
+    `the best point any run had found, objective ${fmt(s.best_objective)}:`;
+  const body = $("best-so-far-parameters").tBodies[0];
+  body.replaceChildren();
+  for (const n of names) {
+    body.append(el("tr", { "data-parameter": n },
+      el("th", { scope: "row", text: n }),
+      el("td", { class: "num", "data-value": String(best[n]), text: fmt(best[n], 8) })));
+  }
+}
+
+// "Edit and re-run": the form holds the shown campaign's spec; it is brought into view to
+// be changed and started as a new campaign (the shown one stays as it was).
+export async function editAndRerun() {
+  const s = app.campaign;
+  if (!s || !s.campaign) return;
+  showError("calibration-error", "");
+  try {
+    await fillForm(s.campaign);
+    $("calibration-status").textContent =
+      `The form holds the spec of ${s.name} (${s.id.slice(0, 8)}): change it and start a new campaign.`;
+    const table = $("parameter-pick");
+    table.scrollIntoView({ block: "start" });
+    const first = table.querySelector('input[id^="min-"]');
+    if (first) first.focus();
+  } catch (e) {
+    showError("calibration-error", e.message);
+  }
+}
+
+// "Use these values": the calibrated (or best so far) values as the Model tab's values.
+export function useValues() {
+  const best = (app.campaign && app.campaign.best_parameters) || {};
+  for (const [name, value] of Object.entries(best)) {
+    const field = $(`value-${name}`);
+    if (!field) continue;
+    field.value = String(value);
+    field.dispatchEvent(new Event("change"));
+  }
+  $("tab-model").click();
 }
 
 export function finish(s) {
@@ -236,7 +302,7 @@ export function showResult(s) {
   $("result-summary").textContent =
     `objective ${fmt(r.nominal_objective)} at the nominal point, ${fmt(best.objective)} calibrated ` +
     `(${best.method}, start ${best.start}); ${r.runs_at_best.count} of ${r.runs_at_best.of} runs reached the best; ` +
-    `${r.evaluations} evaluations (${r.simulated} simulated, ${r.cached} from the store).`;
+    `${r.evaluations} evaluations (${s.simulated} simulated, ${s.from_store} from the store).`;
   const body = $("result-parameters").tBodies[0];
   body.replaceChildren();
   for (const p of r.free_parameters) {
@@ -338,17 +404,21 @@ export async function refreshCampaigns() {
   }
 }
 
+// Open campaign `id`: the form filled with its spec (and its dataset), its progress
+// history, runs and result as the server keeps them; followed on if it is running.
 export async function openCampaign(id) {
   showError("calibration-error", "");
   try {
     const s = await call("GetCampaign", { id });
+    if (s.campaign) await fillForm(s.campaign);
     if (s.phase === 1) { watch(id); return; }
     if (app.watching) app.watching.abort();
     app.campaignId = id;
-    app.campaign = s;
+    writeRoute({ campaign: id });
     $("progress-plot").replaceChildren();
-    $("calibration-status").textContent = describeState(s);
     $("result").hidden = true;
+    clearProfiles();
+    showState(s);
     if (s.phase === 2 && s.result_json) showResult(s);
     $("result").scrollIntoView({ block: "nearest" });
   } catch (e) {

@@ -8,8 +8,7 @@ export const app = {
   fmus: {},           // uploaded FMUs' models by name: {id, model: ModelDescription}
   dataset: null,      // Dataset answered by UploadDataset (with file_name)
   campaignId: null,   // the campaign shown on the Calibration tab
-  campaign: null,     // its CampaignState
-  history: [],        // [{evaluations, run_best}] while it is watched
+  campaign: null,     // its CampaignState (its progress history and runs the server's)
   watching: null,     // AbortController of the watch
   plotting: false,
   plotDue: false,

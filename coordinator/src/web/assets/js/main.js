@@ -4,12 +4,13 @@
 // (model.js, measurement.js, calibration.js with experiments.js and analysis.js,
 // diagnosis.js) over common.js; this one wires them to the page.
 import { analyse, profileParameters } from "./analysis.js";
-import { cancel, refreshCampaigns, start } from "./calibration.js";
+import { cancel, editAndRerun, openCampaign, refreshCampaigns, start, useValues } from "./calibration.js";
 import { $, app, showError, showLogin } from "./common.js";
 import { diagnose } from "./diagnosis.js";
 import { addExperiment } from "./experiments.js";
-import { plotColumns, upload } from "./measurement.js";
+import { plotColumns, restoreDataset, upload } from "./measurement.js";
 import { loadModels, setUpFmuDrop, simulate } from "./model.js";
+import { readRoute, writeRoute } from "./route.js";
 
 // ---- the login --------------------------------------------------------------------------
 // A server with a token (calib coordinator --token-file) asks for it once: POST /login
@@ -51,8 +52,19 @@ async function begin() {
     return;
   }
   app.started = true;
-  loadModels();
   refreshCampaigns();
+  await loadModels();
+  await restore();
+}
+
+// What the URL names, again: its tab, its campaign (the form filled with its spec, its
+// dataset, its progress and result) or its dataset.
+async function restore() {
+  const route = readRoute();
+  selectTab($(`tab-${route.tab}`));
+  if (route.campaign) await openCampaign(route.campaign);
+  else if (route.dataset) await restoreDataset(route.dataset);
+  writeRoute({ tab: route.tab });
 }
 
 // ---- tabs -------------------------------------------------------------------------------
@@ -65,6 +77,7 @@ function selectTab(tab, focus = false) {
     $(t.getAttribute("aria-controls")).hidden = !on;
   }
   if (focus) tab.focus();
+  writeRoute({ tab: tab.id.replace(/^tab-/, "") });
   if (tab.id === "tab-diagnosis") refreshCampaigns();
 }
 
@@ -101,4 +114,8 @@ $("diagnose").addEventListener("click", diagnose);
 $("analyse").addEventListener("click", analyse);
 $("profile").addEventListener("click", profileParameters);
 $("login-form").addEventListener("submit", signIn);
+$("edit-rerun").addEventListener("click", editAndRerun);
+$("use-values").addEventListener("click", useValues);
+// A link to another campaign or dataset followed within the page.
+window.addEventListener("hashchange", () => { if (app.started) restore(); });
 begin();

@@ -27,16 +27,9 @@ export async function uploadFmu(file) {
       headers: { "Content-Type": "application/octet-stream" },
       body: await file.arrayBuffer(),
     });
-    const select = $("model-select");
-    for (const m of fmu.models) {
-      app.fmus[m.name] = { id: fmu.id, model: m };
-      if (![...select.options].some((o) => o.value === m.name)) {
-        select.append(el("option", { value: m.name, text: `${m.name} (${fmu.file_name})` }));
-      }
-    }
+    addFmuModels(fmu);
     const first = fmu.models[0];
-    select.value = first.name;
-    await describe(first.name);
+    await chooseModel(first.name);
     $("fmu-status").textContent =
       `${fmu.file_name}: FMU ${fmu.id.slice(0, 12)}…, ${first.parameters.length} parameters, ` +
       `${first.outputs.length} outputs; models ${fmu.models.map((m) => m.name).join(", ")}`;
@@ -44,6 +37,23 @@ export async function uploadFmu(file) {
     $("fmu-status").textContent = "";
     showError("model-error", e.message);
   }
+}
+
+// The models of an uploaded FMU (UploadFmu's or GetFmu's answer) in the list.
+export function addFmuModels(fmu) {
+  const select = $("model-select");
+  for (const m of fmu.models) {
+    app.fmus[m.name] = { id: fmu.id, model: m };
+    if (![...select.options].some((o) => o.value === m.name)) {
+      select.append(el("option", { value: m.name, text: `${m.name} (${fmu.file_name})` }));
+    }
+  }
+}
+
+// The model `name` chosen, as if picked in the list.
+export async function chooseModel(name) {
+  $("model-select").value = name;
+  await describe(name);
 }
 
 export function setUpFmuDrop() {
