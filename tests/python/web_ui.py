@@ -612,6 +612,13 @@ def get_campaign(driver, id_):
           .then(r => r.text()).then(done, e => done(String(e)));""", id_)
 
 
+def sort_by(driver, key):
+    """Choose the heading of the runs table's column `key`, clear of the sticky header."""
+    button = driver.find_element(By.CSS_SELECTOR, f'#runs-table th[data-key="{key}"] button')
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", button)
+    button.click()
+
+
 def campaign_id(driver):
     hash_ = driver.execute_script("return location.hash")
     parts = hash_.split("/")
@@ -648,7 +655,7 @@ def workbench(url, data, shot, out):
         type_into(driver, "window-start", "0")
         type_into(driver, "window-stop", "40")
         type_into(driver, "starts", "2")
-        type_into(driver, "max-evaluations", "400")
+        type_into(driver, "max-evaluations", "2500")
         type_into(driver, "seed", "1")
         submitted = form_state(driver)
 
@@ -684,12 +691,12 @@ def workbench(url, data, shot, out):
         state = json.loads(get_campaign(driver, first))
 
         # The table of runs, sorted by a column's heading.
-        driver.find_element(By.CSS_SELECTOR, '#runs-table th[data-key="evaluations"] button').click()
+        sort_by(driver, "evaluations")
         by_evaluations = [r["evaluations"] for r in runs_table(driver)]
-        driver.find_element(By.CSS_SELECTOR, '#runs-table th[data-key="evaluations"] button').click()
+        sort_by(driver, "evaluations")
         by_evaluations_down = [r["evaluations"] for r in runs_table(driver)]
         sort_state = driver.find_element(By.CSS_SELECTOR, '#runs-table th[data-key="evaluations"]').get_attribute("aria-sort")
-        driver.find_element(By.CSS_SELECTOR, '#runs-table th[data-key="objective"] button').click()
+        sort_by(driver, "objective")
         by_objective = [float(r["objective"]) for r in runs_table(driver)]
         table = by_id(driver, "runs")
         driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", table)
@@ -705,6 +712,7 @@ def workbench(url, data, shot, out):
         # Edit and re-run: the form holds the spec; a narrower bound makes a new campaign.
         tab(driver, "calibration")
         press(driver, "edit-rerun")
+        wait(driver).until(lambda d: "holds the spec" in by_id(d, "calibration-status").text)
         type_into(driver, "max-armFriction", "0.5")
         press(driver, "start")
         wait(driver, LONG).until(lambda d: campaign_id(d) not in ("", first))
