@@ -632,7 +632,7 @@ impl Campaigns {
         Ok(self
             .store
             .campaign(&key)?
-            .map(|record| Watched::Stored(self.stored(&key, &record))))
+            .map(|record| Watched::Stored(Box::new(self.stored(&key, &record)))))
     }
 
     /// Every campaign known, in id order.
@@ -679,7 +679,7 @@ impl Campaigns {
 /// A campaign followed: live, or as the store holds it.
 pub enum Watched {
     Live(watch::Receiver<Snapshot>),
-    Stored(Snapshot),
+    Stored(Box<Snapshot>),
 }
 
 /// Counts a live campaign's evaluations and each run's best into its state.
