@@ -232,9 +232,6 @@ mod tests {
                 objective: 0.1 + 0.2,
                 sse: vec![1e-300, -0.0, 3.5],
                 failure: None,
-                message: None,
-                free: Vec::new(),
-                history: Vec::new(),
             },
             Evaluation::failed(2, "step limit (200000) reached at t = 3.2 s".into()),
             Evaluation {

@@ -20,9 +20,6 @@ fn evaluation(i: u64) -> Evaluation {
             objective: i as f64 * 0.1,
             sse: vec![i as f64, 1.0 / (i as f64 + 1.0)],
             failure: None,
-            message: None,
-            free: Vec::new(),
-            history: Vec::new(),
         }
     }
 }
