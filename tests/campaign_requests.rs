@@ -464,6 +464,9 @@ fn a_stored_campaign_beyond_the_limits_is_closed_as_failed_when_the_coordinator_
             runs: Vec::new(),
             result: None,
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         };
         store.put_campaign(&id, &record).unwrap();
     }

@@ -116,8 +116,8 @@ fn the_coordinators_json_routes_answer_what_its_grpc_methods_answer() {
     // The page itself, compiled in.
     let (code, page) = http(web, "GET", "/", b"");
     assert_eq!(code, 200);
-    assert!(page.contains("<title>calib</title>") && page.contains("/app.js"));
-    assert_eq!(http(web, "GET", "/app.js", b"").0, 200);
+    assert!(page.contains("<title>calib</title>") && page.contains("/js/main.js"));
+    assert_eq!(http(web, "GET", "/js/common.js", b"").0, 200);
 
     // Upload over HTTP: the dataset gRPC names for the same bytes.
     let bytes = std::fs::read(repo().join("examples/data/furuta_clean.csv")).unwrap();
@@ -177,17 +177,27 @@ fn the_coordinators_json_routes_answer_what_its_grpc_methods_answer() {
     let request = pb::GetCampaignRequest { id: id.clone() };
     let (code, body) = post(web, "GetCampaign", serde_json::to_value(&request).unwrap());
     assert_eq!(code, 200, "{body}");
-    let over_http: pb::CampaignState = serde_json::from_str(&body).unwrap();
+    // (As JSON: a run's best before its first point is +inf in the progress history, null
+    // in JSON, which no JSON decoder reads back as a number.)
+    let over_http: serde_json::Value = serde_json::from_str(&body).unwrap();
     let over_grpc = c.grpc(async |mut client| client.get_campaign(request.clone()).await);
-    assert_eq!(over_http, over_grpc);
-    assert!(over_http.plots.contains_key("waterfall.svg"));
+    assert_eq!(over_http, serde_json::to_value(&over_grpc).unwrap());
+    assert!(over_grpc.plots.contains_key("waterfall.svg"));
     let (_, body) = post(
         web,
         "ListCampaigns",
         serde_json::to_value(pb::ListCampaignsRequest::default()).unwrap(),
     );
-    let listed: pb::ListCampaignsResponse = serde_json::from_str(&body).unwrap();
-    assert_eq!(listed.campaigns, vec![over_grpc.clone()]);
+    // Lists leave each campaign's progress history out.
+    let listed: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let without_history = pb::CampaignState {
+        history: Vec::new(),
+        ..over_grpc.clone()
+    };
+    assert_eq!(
+        listed["campaigns"],
+        serde_json::to_value(vec![without_history]).unwrap()
+    );
 
     // WatchCampaign as Server-Sent Events: the finished state, then the stream ends.
     let (code, body) = http(web, "GET", &format!("/api/v1/WatchCampaign/{id}"), b"");
@@ -197,8 +207,8 @@ fn the_coordinators_json_routes_answer_what_its_grpc_methods_answer() {
         .filter_map(|l| l.strip_prefix("data: "))
         .collect();
     assert_eq!(data.len(), 1, "{body}");
-    let watched: pb::CampaignState = serde_json::from_str(data[0]).unwrap();
-    assert_eq!(watched, over_grpc);
+    let watched: serde_json::Value = serde_json::from_str(data[0]).unwrap();
+    assert_eq!(watched, serde_json::to_value(&over_grpc).unwrap());
 
     // The campaign file it ran from.
     let (code, toml) = http(
@@ -467,5 +477,5 @@ fn two_campaigns_fits_are_drawn_over_the_measured_data_once() {
     let waterfall = anatomy(&state.plots["waterfall.svg"]);
     let mut runs = waterfall.x_ticks.clone();
     runs.sort();
-    assert_eq!(runs, ["nelder-mead #1", "nelder-mead #2"]);
+    assert_eq!(runs, ["nelder-mead #0", "nelder-mead #1"]);
 }

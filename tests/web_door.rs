@@ -103,7 +103,7 @@ fn other_web_pages_and_other_host_names_are_refused_and_the_page_works() {
     let page = request(web, "GET", "/", &[], b"");
     assert_eq!(page.code, 200);
     assert!(page.body.contains("<title>calib</title>"));
-    assert_eq!(request(web, "GET", "/app.js", &[], b"").code, 200);
+    assert_eq!(request(web, "GET", "/js/main.js", &[], b"").code, 200);
     let same = [
         ("Origin", own.as_str()),
         ("Sec-Fetch-Site", "same-origin"),

@@ -203,6 +203,8 @@ fn calibrate_measured<E: Evaluator>(
         store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
     }
     let id = campaign.identity(&dataset);
+    // What a client submitted it with stays with it, and its progress until this run's.
+    let earlier = store.campaign(&id)?;
     let mut record = CampaignRecord {
         name: campaign.name.clone(),
         spec: campaign.spec.clone(),
@@ -212,6 +214,9 @@ fn calibrate_measured<E: Evaluator>(
         runs: Vec::new(),
         result: None,
         failure: None,
+        message: earlier.as_ref().and_then(|r| r.message.clone()),
+        free: campaign.free.iter().map(|p| p.name.clone()).collect(),
+        history: earlier.map(|r| r.history).unwrap_or_default(),
     };
     store.put_campaign(&id, &record)?;
     tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
@@ -312,6 +317,12 @@ fn search(
     )?;
     starts.extend(further);
     let plan = multistart::plan(&campaign.search.methods, &starts, campaign.search.seed);
+    progress.planned(
+        &plan
+            .iter()
+            .map(|r| (r.method.name().to_string(), r.start))
+            .collect::<Vec<_>>(),
+    );
     // Tolerances are relative to the nominal objective; a perfect nominal fit keeps 1.
     let scale = if nominal.objective > 0.0 && nominal.failure.is_none() {
         nominal.objective

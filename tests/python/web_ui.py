@@ -5,6 +5,7 @@
     python3 web_ui.py login URL TOKEN_FILE DATA.csv OUT.json
     python3 web_ui.py fmu URL MODEL.fmu RECORD.csv DROPPED.fmu OUT.json
     python3 web_ui.py experiments URL SWING.csv DRIVEN.csv SCREENSHOTS_DIR OUT.json
+    python3 web_ui.py workbench URL DATA.csv RUNS_TABLE.png OUT.json
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
@@ -23,6 +24,11 @@ calibrated values, the status and the plots' captions read off the page; screens
 mapping and of the result. On the Model tab, the model simulated with its armTorque input
 driven by the uploaded torque column: the captions of the plots, and whether the arm angle
 differs from the undriven simulation.
+`workbench`: a small Furuta campaign started on the page, the page reloaded while it runs
+and after it finished (the tab, the form, the dataset, the progress plot, the runs and the
+result read each time); the table of runs read and sorted, a picture of it; "use these
+values" and "edit and re-run" with a narrower bound, and what the server keeps of both
+campaigns.
 Writes what it read as JSON to OUT.json; exits non-zero when a step fails.
 """
 
@@ -540,6 +546,207 @@ def experiments(url, swing, driven, shots, out):
         driver.quit()
 
 
+def form_state(driver):
+    """Every field of the Model and Calibration tabs that a campaign's spec sets, by id:
+    numbers as numbers, boxes as booleans."""
+    return driver.execute_script("""
+        const out = {};
+        for (const f of document.querySelectorAll(
+            '#panel-model input, #panel-model select, #panel-calibration input, #panel-calibration select')) {
+          if (!f.id || f.type === 'file' || f.closest('#sensitivity')) continue;
+          out[f.id] = f.type === 'checkbox' ? f.checked
+            : f.type === 'number' ? (f.value === '' ? null : Number(f.value)) : f.value;
+        }
+        for (const m of document.querySelectorAll('input[name="method"]')) out['method:' + m.value] = m.checked;
+        return out;""")
+
+
+def page_state(driver):
+    """What a reload must find again: the tab, the URL, the form, the dataset, the status,
+    the progress plot, the runs and the result."""
+    selected = driver.find_element(By.CSS_SELECTOR, '[role="tab"][aria-selected="true"]').get_attribute("id")
+    return {
+        "tab": selected,
+        "hash": driver.execute_script("return location.hash"),
+        "form": form_state(driver),
+        "dataset": by_id(driver, "measurement-status").text,
+        "columns": [e.get_attribute("value") for e in
+                    driver.find_elements(By.CSS_SELECTOR, 'input[name="measured-column"]')],
+        "progress_plots": len(driver.find_elements(By.CSS_SELECTOR, "#progress-plot svg")),
+        "runs": runs_table(driver),
+        "calibrated": {row.get_attribute("data-parameter"):
+                       row.find_element(By.CSS_SELECTOR, "td.calibrated").get_attribute("data-value")
+                       for row in driver.find_elements(By.CSS_SELECTOR, "#result-parameters tbody tr")},
+        "result_shown": by_id(driver, "result").is_displayed(),
+        "summary": by_id(driver, "result-summary").text,
+    }
+
+
+def runs_table(driver):
+    """The table of runs as shown, row by row: label, method, start, evaluations,
+    objective (its exact value) and each parameter's exact value."""
+    rows = []
+    for row in driver.find_elements(By.CSS_SELECTOR, "#runs-table tbody tr"):
+        cells = row.find_elements(By.CSS_SELECTOR, "th, td")
+        rows.append({
+            "label": cells[0].text,
+            "method": cells[1].text,
+            "start": int(cells[2].text),
+            "evaluations": int(cells[3].text),
+            "iterations": cells[4].text,
+            "termination": cells[5].text,
+            "objective": cells[6].get_attribute("data-value"),
+            "at_best": cells[7].text == "at the best",
+            "parameters": {c.get_attribute("data-parameter"): c.get_attribute("data-value")
+                           for c in row.find_elements(By.CSS_SELECTOR, "td[data-parameter]")},
+        })
+    return rows
+
+
+def get_campaign(driver, id_):
+    """GetCampaign over the page's own origin, as the page calls it."""
+    return driver.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        fetch('/api/v1/GetCampaign', {method: 'POST', headers: {'Content-Type': 'application/json'},
+              body: JSON.stringify({id: arguments[0]})})
+          .then(r => r.text()).then(done, e => done(String(e)));""", id_)
+
+
+def sort_by(driver, key):
+    """Choose the heading of the runs table's column `key`, clear of the sticky header."""
+    button = driver.find_element(By.CSS_SELECTOR, f'#runs-table th[data-key="{key}"] button')
+    driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", button)
+    button.click()
+
+
+def campaign_id(driver):
+    hash_ = driver.execute_script("return location.hash")
+    parts = hash_.split("/")
+    return parts[parts.index("campaign") + 1] if "campaign" in parts else ""
+
+
+def workbench(url, data, shot, out):
+    """Reloads mid-campaign and after it, the runs table, edit and re-run, use the values."""
+    driver = browser()
+    driver.set_script_timeout(60)
+    try:
+        driver.get(url)
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        Select(by_id(driver, "model-select")).select_by_value("furuta")
+        wait(driver).until(lambda d: d.find_elements(By.ID, "value-theta0"))
+        type_into(driver, "value-theta0", THETA0)
+        type_into(driver, "model-stop", "40")
+        upload(driver, data, "time_s")
+        wait(driver).until(lambda d: "samples" in by_id(d, "measurement-status").text
+                           or by_id(d, "measurement-error").is_displayed())
+        no_error(driver, "measurement-error")
+
+        tab(driver, "calibration")
+        Select(by_id(driver, "measured-armJoint.phi")).select_by_value("arm_angle_rad")
+        Select(by_id(driver, "measured-pendulumJoint.phi")).select_by_value("pendulum_angle_rad")
+        for name, nominal in (("armFriction", "0.012"), ("pendulumFriction", "0.002")):
+            press(driver, f"free-{name}")
+            type_into(driver, f"nominal-{name}", nominal)
+            type_into(driver, f"min-{name}", "0.0001")
+            type_into(driver, f"max-{name}", "0.9")
+            Select(by_id(driver, f"pscale-{name}")).select_by_value("log10")
+        driver.find_element(By.CSS_SELECTOR, 'input[name="method"][value="powell"]').click()
+        type_into(driver, "campaign-name", "bench")
+        type_into(driver, "window-start", "0")
+        type_into(driver, "window-stop", "40")
+        type_into(driver, "starts", "2")
+        type_into(driver, "max-evaluations", "2500")
+        type_into(driver, "seed", "1")
+        submitted = form_state(driver)
+
+        # Started, then reloaded while it runs: the same tab, form, dataset, and the
+        # progress kept by the server.
+        press(driver, "start")
+        wait(driver, LONG).until(lambda d: ("running" in by_id(d, "calibration-status").text
+                                            and d.find_elements(By.CSS_SELECTOR, "#progress-plot svg"))
+                                 or by_id(d, "result").is_displayed()
+                                 or by_id(d, "calibration-error").is_displayed())
+        no_error(driver, "calibration-error")
+        first = campaign_id(driver)
+        before_reload = json.loads(get_campaign(driver, first))
+        mid = {"running_when_reloaded": before_reload["phase"] == 1,
+               "history_before": len(before_reload["history"]),
+               "evaluations_before": before_reload["evaluations"]}
+        driver.refresh()
+        wait(driver, LONG).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#progress-plot svg")
+                                 and "bench" in by_id(d, "calibration-status").text)
+        mid["after"] = page_state(driver)
+        mid["history_after"] = len(json.loads(get_campaign(driver, first))["history"])
+
+        # Finished, then reloaded again: the same again, with the result.
+        wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
+                                 or by_id(d, "calibration-error").is_displayed())
+        no_error(driver, "calibration-error")
+        finished = page_state(driver)
+        driver.refresh()
+        wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
+                                 and d.find_elements(By.CSS_SELECTOR, "#progress-plot svg")
+                                 and d.find_elements(By.CSS_SELECTOR, "#runs-table tbody tr"))
+        reloaded = page_state(driver)
+        state = json.loads(get_campaign(driver, first))
+
+        # The table of runs, sorted by a column's heading.
+        sort_by(driver, "evaluations")
+        by_evaluations = [r["evaluations"] for r in runs_table(driver)]
+        sort_by(driver, "evaluations")
+        by_evaluations_down = [r["evaluations"] for r in runs_table(driver)]
+        sort_state = driver.find_element(By.CSS_SELECTOR, '#runs-table th[data-key="evaluations"]').get_attribute("aria-sort")
+        sort_by(driver, "objective")
+        by_objective = [float(r["objective"]) for r in runs_table(driver)]
+        table = by_id(driver, "runs")
+        driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", table)
+        table.screenshot(shot)
+
+        # Use these values: the calibrated values become the Model tab's.
+        press(driver, "use-values")
+        wait(driver).until(EC.visibility_of_element_located((By.ID, "panel-model")))
+        model_values = {n: by_id(driver, f"value-{n}").get_attribute("value")
+                        for n in ("armFriction", "pendulumFriction")}
+        model_tab_hash = driver.execute_script("return location.hash")
+
+        # Edit and re-run: the form holds the spec; a narrower bound makes a new campaign.
+        tab(driver, "calibration")
+        press(driver, "edit-rerun")
+        wait(driver).until(lambda d: "holds the spec" in by_id(d, "calibration-status").text)
+        type_into(driver, "max-armFriction", "0.5")
+        press(driver, "start")
+        wait(driver, LONG).until(lambda d: campaign_id(d) not in ("", first))
+        second = campaign_id(driver)
+        wait(driver, LONG).until(lambda d: (by_id(d, "result").is_displayed()
+                                            and "finished" in by_id(d, "calibration-status").text)
+                                 or by_id(d, "calibration-error").is_displayed())
+        no_error(driver, "calibration-error")
+        rerun = json.loads(get_campaign(driver, second))
+        first_again = json.loads(get_campaign(driver, first))
+
+        with open(out, "w") as f:
+            json.dump({
+                "submitted_form": submitted,
+                "first": first,
+                "mid": mid,
+                "finished": finished,
+                "reloaded": reloaded,
+                "state": {k: state[k] for k in ("phase", "evaluations", "simulated", "from_store",
+                                                "result_json", "campaign", "history", "runs")},
+                "by_evaluations": by_evaluations,
+                "by_evaluations_down": by_evaluations_down,
+                "sort_state": sort_state,
+                "by_objective": by_objective,
+                "model_values": model_values,
+                "model_tab_hash": model_tab_hash,
+                "second": second,
+                "rerun": {k: rerun[k] for k in ("phase", "campaign", "result_json")},
+                "first_again": {k: first_again[k] for k in ("phase", "campaign")},
+            }, f, indent=2)
+    finally:
+        driver.quit()
+
+
 if __name__ == "__main__":
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "workflow":
@@ -552,5 +759,7 @@ if __name__ == "__main__":
         fmu(*args)
     elif mode == "experiments":
         experiments(*args)
+    elif mode == "workbench":
+        workbench(*args)
     else:
         raise SystemExit(f"unknown mode {mode}")

@@ -11,6 +11,7 @@ use crate::campaigns::fmus::FmuInfo;
 use crate::campaigns::{Campaigns, Phase, Snapshot, Watched};
 use crate::error::Error;
 use crate::limits::{MAX_DATASET_BYTES, MAX_FMU_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
+use crate::report;
 use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
@@ -396,7 +397,57 @@ fn phase(p: Phase) -> pb::CampaignPhase {
 }
 
 fn state(s: &Snapshot) -> pb::CampaignState {
+    let runs = match &s.result {
+        Some(result) => report::runs::rows(result),
+        None => report::runs::rows_so_far(&s.runs, &s.free),
+    };
+    let best_parameters = match s
+        .result
+        .as_ref()
+        .and_then(|r| r["best"]["parameters"].as_object())
+    {
+        Some(best) => best
+            .iter()
+            .filter_map(|(k, v)| v.as_f64().map(|v| (k.clone(), v)))
+            .collect(),
+        None => report::runs::best_parameters(&runs).into_iter().collect(),
+    };
+    let counts = s.result.as_ref().map(report::runs::counts);
     pb::CampaignState {
+        campaign: s
+            .message
+            .clone()
+            .and_then(|m| serde_json::from_value(m).ok()),
+        history: s
+            .history
+            .points()
+            .iter()
+            .map(|p| pb::ProgressPoint {
+                evaluations: p.evaluations,
+                run_best: p
+                    .run_best
+                    .iter()
+                    .map(|v| v.unwrap_or(f64::INFINITY))
+                    .collect(),
+            })
+            .collect(),
+        runs: runs
+            .into_iter()
+            .map(|r| pb::Run {
+                label: r.label,
+                method: r.method,
+                start: r.start as u64,
+                evaluations: r.evaluations,
+                iterations: r.iterations,
+                termination: r.termination,
+                objective: r.objective,
+                parameters: r.parameters.into_iter().collect(),
+                at_best: r.at_best,
+            })
+            .collect(),
+        simulated: counts.map(|c| c.simulated).unwrap_or_default(),
+        from_store: counts.map(|c| c.from_store).unwrap_or_default(),
+        best_parameters,
         id: s.id.clone(),
         name: s.name.clone(),
         phase: phase(s.phase).into(),
@@ -600,8 +651,9 @@ impl Calibration for CalibrationApi {
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
+        let message = serde_json::to_value(&campaign).ok();
         let (id, started) = self
-            .blocking(move || campaigns.submit(&text, key.as_deref()))
+            .blocking(move || campaigns.submit_message(&text, key.as_deref(), message))
             .await?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
     }
@@ -683,7 +735,16 @@ impl Calibration for CalibrationApi {
         };
         let campaigns = self.campaigns.clone();
         let all = self.blocking(move || campaigns.list()).await?;
-        let page: Vec<pb::CampaignState> = all.iter().skip(from).take(size).map(state).collect();
+        // Lists are for choosing: each campaign's progress history is GetCampaign's.
+        let page: Vec<pb::CampaignState> = all
+            .iter()
+            .skip(from)
+            .take(size)
+            .map(|s| pb::CampaignState {
+                history: Vec::new(),
+                ..state(s)
+            })
+            .collect();
         let next = from + page.len();
         Ok(Response::new(pb::ListCampaignsResponse {
             campaigns: page,

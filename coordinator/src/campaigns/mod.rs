@@ -20,6 +20,7 @@ pub mod analyses;
 pub mod datasets;
 pub mod diagnoses;
 pub mod fmus;
+pub mod history;
 
 use crate::calibration::{self, Calibration};
 use crate::campaign::Campaign;
@@ -28,9 +29,10 @@ use crate::evaluator::{Evaluator, Fault, FaultKind, Simulator};
 use crate::objective::{Evaluation, Objective};
 use crate::optim::problem::Progress;
 use crate::report;
-use crate::store::{hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, Store};
+use crate::store::{hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, RunBest, Store};
 use datasets::Datasets;
 use fmus::Fmus;
+use history::History;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -72,6 +74,15 @@ pub struct Snapshot {
     pub result: Option<serde_json::Value>,
     /// The plots `calib calibrate` writes, by file name (SVG text), once finished here.
     pub plots: Vec<(String, String)>,
+    /// The API's `Campaign` message it was submitted with (JSON), when it was.
+    pub message: Option<serde_json::Value>,
+    /// Names of the free parameters, in the order of a run's point.
+    pub free: Vec<String>,
+    /// Each run's method, start, best point and objective so far and evaluations, in plan
+    /// order (runs yet to evaluate a point have an empty point and `+∞`).
+    pub runs: Vec<RunBest>,
+    /// Its progress over time.
+    pub history: History,
 }
 
 impl Snapshot {
@@ -86,6 +97,10 @@ impl Snapshot {
             failure: None,
             result: None,
             plots: Vec::new(),
+            message: None,
+            free: Vec::new(),
+            runs: Vec::new(),
+            history: History::default(),
         }
     }
 
@@ -102,7 +117,18 @@ impl Snapshot {
         s.result = record.result.clone();
         s.run_best = record.runs.iter().map(|r| r.objective).collect();
         s.best_objective = s.run_best.iter().copied().fold(f64::INFINITY, f64::min);
-        s.evaluations = record.runs.iter().map(|r| r.evaluations as u64).sum();
+        s.history = History::from_points(record.history.clone());
+        // The result's count (the nominal point and the screening included), else the
+        // last the campaign's progress told.
+        s.evaluations = record
+            .result
+            .as_ref()
+            .and_then(|r| r["evaluations"].as_u64())
+            .or_else(|| record.history.last().map(|p| p.evaluations))
+            .unwrap_or_else(|| record.runs.iter().map(|r| r.evaluations as u64).sum());
+        s.message = record.message.clone();
+        s.free = record.free.clone();
+        s.runs = record.runs.clone();
         s
     }
 }
@@ -130,6 +156,8 @@ pub struct Campaigns {
     results: PathBuf,
     live: Mutex<HashMap<CampaignId, Arc<Live>>>,
     keys: Mutex<HashMap<String, CampaignId>>,
+    /// Held while a record is read, changed and written back here.
+    records: Mutex<()>,
     diagnoses: Mutex<HashMap<CampaignId, watch::Sender<diagnoses::DiagnosisSnapshot>>>,
     analyses: Mutex<HashMap<[u8; 32], watch::Sender<analyses::AnalysisSnapshot>>>,
 }
@@ -149,6 +177,7 @@ impl Campaigns {
             results,
             live: Mutex::new(HashMap::new()),
             keys: Mutex::new(HashMap::new()),
+            records: Mutex::new(()),
             diagnoses: Mutex::new(HashMap::new()),
             analyses: Mutex::new(HashMap::new()),
         }
@@ -237,6 +266,17 @@ impl Campaigns {
         spec: &str,
         idempotency_key: Option<&str>,
     ) -> Result<(String, bool)> {
+        self.submit_message(spec, idempotency_key, None)
+    }
+
+    /// [`Campaigns::submit`], keeping with the campaign the API's `message` (JSON) it was
+    /// written from, unless the campaign has one already: what a client reopening it edits.
+    pub fn submit_message(
+        self: &Arc<Self>,
+        spec: &str,
+        idempotency_key: Option<&str>,
+        message: Option<serde_json::Value>,
+    ) -> Result<(String, bool)> {
         let mut keys = self.keys.lock().expect("keys lock");
         if let Some(id) = idempotency_key.and_then(|k| keys.get(k)) {
             return Ok((hex(id), false));
@@ -250,6 +290,11 @@ impl Campaigns {
             keys.insert(k.to_string(), id);
         }
         drop(keys);
+        let dataset = measurement.content_hash();
+        let keep = |message: Option<serde_json::Value>| match message {
+            Some(m) => self.keep_message(&id, &campaign, &dataset, m),
+            None => Ok(()),
+        };
         let mut live = self.live.lock().expect("live lock");
         if let Some(running) = live.get(&id) {
             let phase = running.state.borrow().phase;
@@ -262,6 +307,7 @@ impl Campaigns {
                 )));
             }
             if !Self::runs_again(phase) {
+                keep(message)?;
                 return Ok((hex(&id), false));
             }
         } else if let Some(record) = self.store.campaign(&id)? {
@@ -269,11 +315,50 @@ impl Campaigns {
             // `resume_submitted` started again when this one started.
             let phase = Snapshot::from_record(&id, &record).phase;
             if !Self::runs_again(phase) {
+                keep(message)?;
                 return Ok((hex(&id), false));
             }
         }
+        keep(message)?;
         self.start(&mut live, id, campaign)?;
         Ok((hex(&id), true))
+    }
+
+    /// Record `message` as what campaign `id` was submitted with, unless its record has one.
+    fn keep_message(
+        &self,
+        id: &CampaignId,
+        campaign: &Campaign,
+        dataset: &CampaignId,
+        message: serde_json::Value,
+    ) -> Result<()> {
+        let _guard = self.records.lock().expect("records lock");
+        let record = match self.store.campaign(id)? {
+            Some(record) if record.message.is_some() => return Ok(()),
+            Some(record) => record,
+            // Not run yet: recorded as running, as the calibration records it when it starts.
+            None => CampaignRecord {
+                name: campaign.name.clone(),
+                spec: campaign.spec.clone(),
+                source: campaign.source.clone().unwrap_or_default(),
+                dataset: hex(dataset),
+                status: CampaignStatus::Running,
+                runs: Vec::new(),
+                result: None,
+                failure: None,
+                message: None,
+                free: campaign.free.iter().map(|p| p.name.clone()).collect(),
+                history: Vec::new(),
+            },
+        };
+        self.store.put_campaign(
+            id,
+            &CampaignRecord {
+                message: Some(message),
+                ..record
+            },
+        )?;
+        Ok(())
     }
 
     /// Whether a campaign submitted again in `phase` starts again: a cancelled or failed
@@ -323,7 +408,10 @@ impl Campaigns {
         id: CampaignId,
         campaign: Campaign,
     ) -> Result<()> {
-        let (state, _) = watch::channel(Snapshot::running(&hex(&id), &campaign.name));
+        let mut first = Snapshot::running(&hex(&id), &campaign.name);
+        first.free = campaign.free.iter().map(|p| p.name.clone()).collect();
+        first.message = self.store.campaign(&id)?.and_then(|r| r.message);
+        let (state, _) = watch::channel(first);
         let entry = Arc::new(Live {
             cancel: AtomicBool::new(false),
             state,
@@ -350,6 +438,12 @@ impl Campaigns {
         let mut pause = Duration::from_secs(1);
         let outcome = loop {
             progress.evaluations.store(0, Ordering::SeqCst);
+            // A run again replays the store from the start: so does its progress.
+            live.state.send_modify(|s| {
+                s.history = History::default();
+                s.runs.clear();
+                s.run_best.clear();
+            });
             match calibration::calibrate_with_store(&campaign, &evaluator, &*self.store, &progress)
             {
                 Err(Error::Fault(fault)) if fault.kind == FaultKind::Unavailable => {
@@ -372,17 +466,36 @@ impl Campaigns {
             Ok(c) => {
                 let (result, plots) = self.report(&id, &c);
                 live.state.send_modify(|s| {
-                    s.phase = Phase::Finished;
-                    s.failure = None;
                     s.run_best = c.runs.iter().map(|r| r.objective).collect();
                     s.best_objective = c.best_run().objective;
                     s.evaluations = c.evaluations() as u64;
+                    s.history.record(s.evaluations, &s.run_best);
+                    s.runs = c
+                        .runs
+                        .iter()
+                        .map(|r| RunBest {
+                            method: r.method.name().into(),
+                            start: r.start,
+                            point: r.point.clone(),
+                            objective: r.objective,
+                            evaluations: r.evaluations,
+                        })
+                        .collect();
                     s.result = Some(result);
                     s.plots = plots;
                 });
+                let kept = live.state.borrow().clone();
+                if let Err(e) = self.close(&id, None, &kept) {
+                    tracing::error!(error = %e, "cannot record the campaign's progress");
+                }
+                live.state.send_modify(|s| {
+                    s.phase = Phase::Finished;
+                    s.failure = None;
+                });
             }
             Err(Error::Fault(fault)) if fault.kind == FaultKind::Cancelled => {
-                if let Err(e) = self.mark(&id, CampaignStatus::Cancelled, None) {
+                let kept = live.state.borrow().clone();
+                if let Err(e) = self.close(&id, Some((CampaignStatus::Cancelled, None)), &kept) {
                     tracing::error!(error = %e, "cannot record the cancellation");
                 }
                 live.state.send_modify(|s| {
@@ -394,13 +507,49 @@ impl Campaigns {
             Err(e) => {
                 tracing::error!(campaign = %campaign.name, error = %e, "campaign failed");
                 let failure = self.public(&e.to_string());
-                let _ = self.mark(&id, CampaignStatus::Failed, Some(failure.clone()));
+                let kept = live.state.borrow().clone();
+                let _ = self.close(
+                    &id,
+                    Some((CampaignStatus::Failed, Some(failure.clone()))),
+                    &kept,
+                );
                 live.state.send_modify(|s| {
                     s.phase = Phase::Failed;
                     s.failure = Some(failure);
                 });
             }
         }
+    }
+
+    /// Keep in the record of a live campaign that ended what it knows: its progress
+    /// history and, when it did not finish (a finished calibration wrote its runs), each
+    /// run's best so far; with its new `status` and failure when one is given.
+    fn close(
+        &self,
+        id: &CampaignId,
+        status: Option<(CampaignStatus, Option<String>)>,
+        s: &Snapshot,
+    ) -> Result<()> {
+        let _guard = self.records.lock().expect("records lock");
+        if let Some(mut record) = self.store.campaign(id)? {
+            record.history = s.history.points().to_vec();
+            if record.free.is_empty() {
+                record.free = s.free.clone();
+            }
+            if let Some((status, failure)) = status {
+                record.status = status;
+                record.failure = failure;
+                // Runs that evaluated nothing have no point to keep.
+                record.runs = s
+                    .runs
+                    .iter()
+                    .filter(|r| r.objective.is_finite())
+                    .cloned()
+                    .collect();
+            }
+            self.store.put_campaign(id, &record)?;
+        }
+        Ok(())
     }
 
     /// Write the finished campaign's result.json and plots to `<results>/<id>/`; the result
@@ -429,6 +578,7 @@ impl Campaigns {
     }
 
     fn mark(&self, id: &CampaignId, status: CampaignStatus, failure: Option<String>) -> Result<()> {
+        let _guard = self.records.lock().expect("records lock");
         if let Some(mut record) = self.store.campaign(id)? {
             record.status = status;
             record.failure = failure;
@@ -482,7 +632,7 @@ impl Campaigns {
         Ok(self
             .store
             .campaign(&key)?
-            .map(|record| Watched::Stored(self.stored(&key, &record))))
+            .map(|record| Watched::Stored(Box::new(self.stored(&key, &record)))))
     }
 
     /// Every campaign known, in id order.
@@ -529,7 +679,7 @@ impl Campaigns {
 /// A campaign followed: live, or as the store holds it.
 pub enum Watched {
     Live(watch::Receiver<Snapshot>),
-    Stored(Snapshot),
+    Stored(Box<Snapshot>),
 }
 
 /// Counts a live campaign's evaluations and each run's best into its state.
@@ -544,6 +694,7 @@ impl Progress for LiveProgress<'_> {
         self.live.state.send_modify(|s| {
             s.evaluations = total;
             s.best_objective = s.best_objective.min(best_objective);
+            s.history.record(total, &s.run_best);
         });
     }
 
@@ -556,6 +707,36 @@ impl Progress for LiveProgress<'_> {
             }
             s.run_best[run] = s.run_best[run].min(run_best_objective);
             s.best_objective = s.best_objective.min(run_best_objective);
+            if let Some(r) = s.runs.get_mut(run) {
+                r.evaluations += count;
+            }
+            s.history.record(total, &s.run_best);
+        });
+    }
+
+    fn planned(&self, runs: &[(String, usize)]) {
+        self.live.state.send_modify(|s| {
+            s.runs = runs
+                .iter()
+                .map(|(method, start)| RunBest {
+                    method: method.clone(),
+                    start: *start,
+                    point: Vec::new(),
+                    objective: f64::INFINITY,
+                    evaluations: 0,
+                })
+                .collect();
+        });
+    }
+
+    fn run_improved(&self, run: usize, point: &[f64], objective: f64) {
+        self.live.state.send_modify(|s| {
+            if let Some(r) = s.runs.get_mut(run) {
+                if objective < r.objective {
+                    r.objective = objective;
+                    r.point = point.to_vec();
+                }
+            }
         });
     }
 }

@@ -17,6 +17,19 @@ pub trait Progress: Sync {
         let _ = run;
         self.evaluated(count, run_best_objective);
     }
+
+    /// The campaign's runs, before any starts: each one's method and start index, in plan
+    /// order. By default, nothing.
+    fn planned(&self, runs: &[(String, usize)]) {
+        let _ = runs;
+    }
+
+    /// A run's best point so far (physical values of the free parameters) and its
+    /// objective, each time it improves; told before [`Progress::run_evaluated`] of the
+    /// batch that found it. By default, nothing.
+    fn run_improved(&self, run: usize, point: &[f64], objective: f64) {
+        let _ = (run, point, objective);
+    }
 }
 
 /// Progress that goes nowhere.
@@ -103,11 +116,16 @@ impl<'a> RunProblem<'a> {
         }
         let mut log = self.log.lock().expect("run log lock");
         log.evaluations += points.len();
+        let was = log.best_objective;
         for (point, e) in points.iter().zip(&evaluations) {
             if e.objective < log.best_objective {
                 log.best_objective = e.objective;
                 log.best_point = point.clone();
             }
+        }
+        if log.best_objective < was {
+            self.progress
+                .run_improved(self.run, &log.best_point, log.best_objective);
         }
         self.progress
             .run_evaluated(self.run, points.len(), log.best_objective);

@@ -5,6 +5,7 @@ pub mod evidence;
 pub mod plot;
 #[cfg(test)]
 mod readable;
+pub mod runs;
 pub mod table;
 pub mod ticks;
 

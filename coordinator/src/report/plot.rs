@@ -21,11 +21,7 @@ pub const NOMINAL: RGBColor = RGBColor(220, 50, 47);
 /// The calibrated model: a thick blue line.
 pub const CALIBRATED: RGBColor = RGBColor(38, 139, 210);
 
-/// How a run is named in every plot and table: its method and its start counted from 1
-/// (`nelder-mead #3`).
-pub fn run_label(method: &str, start: usize) -> String {
-    format!("{method} #{}", start + 1)
-}
+pub use super::runs::run_label;
 
 /// An axis label with its unit, `name [unit]`, or the name alone when the unit is unknown.
 pub fn with_unit(name: &str, unit: &str) -> String {
@@ -451,8 +447,8 @@ mod tests {
             a.x_ticks,
             [
                 "nelder-mead #5",
+                "nelder-mead #0",
                 "nelder-mead #1",
-                "nelder-mead #2",
                 "nelder-mead #3",
                 "nelder-mead #4"
             ]

@@ -176,7 +176,7 @@ fn waterfall_plots_read_at_every_range() {
         let a = look("waterfall", range, &svg);
         assert_eq!(a.y_scale, "log");
         assert_eq!(a.x_ticks.len(), 9);
-        assert_eq!(a.x_ticks[0], "powell #1");
+        assert_eq!(a.x_ticks[0], "powell #0");
     }
 }
 

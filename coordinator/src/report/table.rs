@@ -196,17 +196,16 @@ pub fn summary_of(result: &Value) -> String {
             let _ = write!(stalls, ", {n} {words}");
         }
     }
-    let evaluations = count(&result["evaluations"]);
-    let simulated = count(&result["simulated"]);
+    let counted = super::runs::counts(result);
     let _ = writeln!(
         s,
         "{} distinct minima found by {} runs{stalls}; {} evaluations, {} simulated, {} from \
          cache, {:.2} s",
         minima,
         runs.len(),
-        evaluations,
-        simulated,
-        evaluations.saturating_sub(simulated),
+        counted.evaluations,
+        counted.simulated,
+        counted.from_store,
         number(&result["elapsed_seconds"])
     );
     for k in clusters

@@ -312,6 +312,9 @@ mod tests {
             runs: vec![],
             result: None,
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         };
         let bytes = encode_campaign(&record);
         assert_eq!(bytes[0], 1);
@@ -345,6 +348,9 @@ mod tests {
             }],
             result: Some(serde_json::json!({ "values": values })),
             failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
         };
         let back = decode_campaign(&encode_campaign(&record)).unwrap();
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

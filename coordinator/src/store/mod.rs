@@ -105,6 +105,25 @@ pub struct CampaignRecord {
     /// Why it failed, when it did.
     #[serde(default)]
     pub failure: Option<String>,
+    /// The Calibration API's `Campaign` message it was submitted with (JSON, the proto's
+    /// field names), when it came through the API: what a client edits to run it again.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub message: Option<serde_json::Value>,
+    /// Names of the free parameters, in the order of each run's point.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub free: Vec<String>,
+    /// Its progress over time (thinned to a bounded number of points), for plots of a
+    /// campaign reopened after the fact.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub history: Vec<ProgressPoint>,
+}
+
+/// One moment of a campaign's progress: evaluations so far and each run's best objective.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ProgressPoint {
+    pub evaluations: u64,
+    /// Best objective per run, in plan order; `None` before a run's first point.
+    pub run_best: Vec<Option<f64>>,
 }
 
 /// What a store holds and how it has been used.

@@ -41,6 +41,9 @@ fn record(name: &str, status: CampaignStatus) -> CampaignRecord {
         runs: vec![],
         result: None,
         failure: None,
+        message: None,
+        free: Vec::new(),
+        history: Vec::new(),
     }
 }
 

@@ -14,7 +14,7 @@
 //!   token. The cookie holds a key drawn at random when the server starts, never the token;
 //!   it is `HttpOnly` (no script reads it) and `SameSite=Strict`, and the same-origin check
 //!   above keeps other pages from using it. Without a token everything passes (`calib ui`
-//!   on its own machine). The page itself (`/`, `/app.js`, `/app.css`) needs no login.
+//!   on its own machine). The page itself (`/`, `/js/…`, `/app.css`) needs no login.
 
 use super::ApiError;
 use axum::extract::{Request, State};

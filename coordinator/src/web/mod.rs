@@ -10,12 +10,14 @@
 //! protobuf codec in JavaScript, and without npm it would be hand-written. Routes under
 //! `/ui/` only draw: SVG plots through the report's plotting code ([`plots`]; `/ui/compare`
 //! draws several finished campaigns' fits of one output over its measured data), the
-//! campaign file of a campaign, and a column of an uploaded dataset with its times (which
+//! campaign file of a campaign, what is kept of an uploaded dataset, and a column of an
+//! uploaded dataset with its times (which
 //! the Model tab drives a model's input with, through `Simulate`'s `inputs`).
 //!
-//! The page (`assets/`) is hand-written HTML, CSS and JavaScript compiled into the binary:
-//! nothing is loaded from elsewhere. Every route is behind the [`door`]: the Host check, the
-//! same-origin check and, on a server with a token, the login.
+//! The page (`assets/`) is hand-written HTML, CSS and JavaScript (ES modules, one per tab,
+//! no build step) compiled into the binary: nothing is loaded from elsewhere. Every route
+//! is behind the [`door`]: the Host check, the same-origin check and, on a server with a
+//! token, the login.
 
 pub mod door;
 #[cfg(test)]
@@ -49,7 +51,21 @@ use tokio_stream::{Stream, StreamExt};
 use tonic::{Code, Request, Status};
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
-const APP_JS: &str = include_str!("assets/app.js");
+/// The page's ES modules (`<script type="module">`, no build step): `main.js` wires the
+/// page, one module per tab over `common.js`. Served as `/js/<name>`.
+const SCRIPTS: &[(&str, &str)] = &[
+    ("main.js", include_str!("assets/js/main.js")),
+    ("common.js", include_str!("assets/js/common.js")),
+    ("model.js", include_str!("assets/js/model.js")),
+    ("measurement.js", include_str!("assets/js/measurement.js")),
+    ("calibration.js", include_str!("assets/js/calibration.js")),
+    ("experiments.js", include_str!("assets/js/experiments.js")),
+    ("analysis.js", include_str!("assets/js/analysis.js")),
+    ("diagnosis.js", include_str!("assets/js/diagnosis.js")),
+    ("route.js", include_str!("assets/js/route.js")),
+    ("runs.js", include_str!("assets/js/runs.js")),
+    ("reopen.js", include_str!("assets/js/reopen.js")),
+];
 const APP_CSS: &str = include_str!("assets/app.css");
 
 /// Shortest interval between two events of a stream: a campaign changes with every batch,
@@ -106,10 +122,7 @@ impl WebApp {
                 "/",
                 get(|| async { asset("text/html; charset=utf-8", INDEX_HTML) }),
             )
-            .route(
-                "/app.js",
-                get(|| async { asset("text/javascript; charset=utf-8", APP_JS) }),
-            )
+            .route("/js/{name}", get(script))
             .route(
                 "/app.css",
                 get(|| async { asset("text/css; charset=utf-8", APP_CSS) }),
@@ -137,6 +150,7 @@ impl WebApp {
             .route("/api/v1/Simulate", post(simulate))
             .route("/ui/plot", post(plots::plot))
             .route("/ui/compare", post(plots::compare))
+            .route("/ui/datasets/{id}", get(dataset_info))
             .route("/ui/datasets/{id}/plot/{column}", get(plots::dataset_plot))
             .route(
                 "/ui/datasets/{id}/column/{column}",
@@ -169,6 +183,14 @@ fn asset(content_type: &'static str, body: &'static str) -> Response {
         body,
     )
         .into_response()
+}
+
+/// `GET /js/{name}`: one of the page's modules.
+async fn script(Path(name): Path<String>) -> Response {
+    match SCRIPTS.iter().find(|(n, _)| *n == name) {
+        Some((_, body)) => asset("text/javascript; charset=utf-8", body),
+        None => StatusCode::NOT_FOUND.into_response(),
+    }
 }
 
 /// An RPC's failure as an HTTP answer.
@@ -446,6 +468,29 @@ where
         }
     });
     Sse::new(ReceiverStream::new(rx)).keep_alive(KeepAlive::default())
+}
+
+/// `GET /ui/datasets/{id}`: what is kept of an uploaded dataset (its file's name, time
+/// column, columns, samples, first and last time), for a page that names it in its URL or
+/// reopens a campaign on it.
+async fn dataset_info(
+    State(app): State<WebApp>,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let campaigns = app.campaigns.clone();
+    let found = {
+        let id = id.clone();
+        tokio::task::spawn_blocking(move || campaigns.datasets().get(&id))
+            .await
+            .map_err(|e| ApiError(Status::internal(e.to_string())))?
+            .map_err(|e| ApiError(Status::invalid_argument(e.to_string())))?
+    };
+    match found {
+        Some(info) => Ok(json(&info)),
+        None => Err(ApiError(Status::not_found(format!(
+            "id: no dataset `{id}` here: upload the file again"
+        )))),
+    }
 }
 
 /// `GET /ui/campaigns/{id}/campaign.toml`: the campaign file a campaign was run from.

@@ -1,0 +1,161 @@
+// What every tab uses: the app's state, DOM helpers, number formatting, the APIs over
+// HTTP JSON (/api/v1/<Method>) and plots drawn by the server (/ui/plot).
+
+export const PHASES = { 0: "unknown", 1: "running", 2: "finished", 3: "failed", 4: "cancelled" };
+
+export const app = {
+  model: null,        // ModelDescription of the chosen model
+  fmus: {},           // uploaded FMUs' models by name: {id, model: ModelDescription}
+  dataset: null,      // Dataset answered by UploadDataset (with file_name)
+  campaignId: null,   // the campaign shown on the Calibration tab
+  campaign: null,     // its CampaignState (its progress history and runs the server's)
+  watching: null,     // AbortController of the watch
+  plotting: false,
+  plotDue: false,
+  started: false,     // the tabs' contents are loaded (after the login, if one is asked)
+  experiments: [],    // further records: {key, prefix, dataset, card, fixed}
+  nextExperiment: 0,  // key of the next experiment added
+};
+
+export const $ = (id) => document.getElementById(id);
+
+export function el(tag, attrs = {}, ...children) {
+  const node = document.createElement(tag);
+  for (const [k, v] of Object.entries(attrs)) {
+    if (k === "class") node.className = v;
+    else if (k === "text") node.textContent = v;
+    else if (v !== undefined && v !== null && v !== false) node.setAttribute(k, v === true ? "" : v);
+  }
+  for (const c of children) node.append(c);
+  return node;
+}
+
+export function fmt(v, digits = 6) {
+  if (v === null || v === undefined || !Number.isFinite(v)) return "—";
+  if (v === 0) return "0";
+  const a = Math.abs(v);
+  const rounded = Number(v.toPrecision(digits));
+  return a >= 1e-3 && a < 1e6 ? String(rounded) : rounded.toExponential();
+}
+
+export function showError(id, message) {
+  const box = $(id);
+  if (message) {
+    box.textContent = message;
+    box.hidden = false;
+  } else {
+    box.textContent = "";
+    box.hidden = true;
+  }
+}
+
+// ---- the APIs ---------------------------------------------------------------------------
+
+export async function call(method, request, init = {}) {
+  const response = await fetch(`/api/v1/${method}`, {
+    method: "POST",
+    headers: init.headers || { "Content-Type": "application/json" },
+    body: init.body !== undefined ? init.body : JSON.stringify(request || {}),
+  });
+  const text = await response.text();
+  let answer;
+  try { answer = JSON.parse(text); } catch { answer = { message: text }; }
+  if (response.status === 401) showLogin();
+  if (!response.ok) throw new Error(answer.message || `${method}: HTTP ${response.status}`);
+  return answer;
+}
+
+// A server stream (Server-Sent Events, one whole state each) until it ends.
+export async function follow(url, onState, signal) {
+  const response = await fetch(url, { signal });
+  if (response.status === 401) showLogin();
+  if (!response.ok) {
+    const text = await response.text();
+    let message = text;
+    try { message = JSON.parse(text).message; } catch { /* plain text */ }
+    throw new Error(message);
+  }
+  const reader = response.body.getReader();
+  const decoder = new TextDecoder();
+  let buffer = "";
+  for (;;) {
+    const { value, done } = await reader.read();
+    if (done) return;
+    buffer += decoder.decode(value, { stream: true });
+    let cut;
+    while ((cut = buffer.indexOf("\n\n")) >= 0) {
+      const block = buffer.slice(0, cut);
+      buffer = buffer.slice(cut + 2);
+      let event = "message";
+      const data = [];
+      for (const line of block.split("\n")) {
+        if (line.startsWith("event:")) event = line.slice(6).trim();
+        else if (line.startsWith("data:")) data.push(line.slice(5).replace(/^ /, ""));
+      }
+      if (!data.length) continue; // keep-alive comment
+      if (event === "error") throw new Error(data.join("\n"));
+      onState(JSON.parse(data.join("\n")));
+    }
+  }
+}
+
+// SVG text in a figure, scaled to its column.
+export function figure(svgText, caption) {
+  const fig = el("figure", { class: "plot" });
+  const holder = el("div", { role: "img", "aria-label": caption });
+  holder.innerHTML = svgText;
+  const svg = holder.querySelector("svg");
+  if (svg && !svg.getAttribute("viewBox")) {
+    const w = parseFloat(svg.getAttribute("width")), h = parseFloat(svg.getAttribute("height"));
+    if (w && h) svg.setAttribute("viewBox", `0 0 ${w} ${h}`);
+    svg.removeAttribute("width");
+    svg.removeAttribute("height");
+  }
+  fig.append(holder, el("figcaption", { text: caption }));
+  return fig;
+}
+
+export async function plot(request) {
+  const response = await fetch("/ui/plot", {
+    method: "POST",
+    headers: { "Content-Type": "application/json" },
+    body: JSON.stringify(request),
+  });
+  const text = await response.text();
+  if (response.status === 401) showLogin();
+  if (!response.ok) throw new Error(JSON.parse(text).message);
+  return text;
+}
+
+// ---- the login --------------------------------------------------------------------------
+// A server with a token (calib coordinator --token-file) asks for it once: POST /login
+// with it as the bearer token answers with a session cookie (HttpOnly, SameSite=Strict)
+// that every later call carries. The page never keeps the token.
+
+export function showLogin() {
+  document.body.classList.add("signing-in");
+  $("login").hidden = false;
+  $("login-token").focus();
+}
+
+// A bound as a form value: empty when the model gives none (JSON null for ±infinity).
+export const bound = (v) => (Number.isFinite(v) ? String(v) : "");
+
+// At most `n` points of a series, for drawing.
+export function thin(x, y, n = 20000) {
+  const step = Math.max(1, Math.ceil(x.length / n));
+  if (step === 1) return [x, y];
+  return [x.filter((_, k) => k % step === 0), y.filter((_, k) => k % step === 0)];
+}
+
+export function number(id) {
+  const v = parseFloat($(id).value);
+  if (!Number.isFinite(v)) throw new Error(`${$(id).getAttribute("aria-label") || id}: not a number`);
+  return v;
+}
+
+// ---- model inputs -----------------------------------------------------------------------
+
+export const INTERPOLATIONS = [["linear", "linear"], ["hold", "held (zero-order hold)"]];
+
+export const modelInputs = () => (app.model && app.model.inputs) || [];
