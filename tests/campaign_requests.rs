@@ -505,7 +505,11 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
     let c = Coordinator::start(dir.path(), &[]);
     let dataset = c.upload();
     let good = message(SEARCH, &dataset.id);
-    assert_eq!(c.validate(good.clone()), [], "a good campaign has no problem");
+    assert_eq!(
+        c.validate(good.clone()),
+        [],
+        "a good campaign has no problem"
+    );
 
     type Change = fn(&mut pb::Campaign);
     let cases: [(Change, &str, &str); 12] = [
@@ -514,7 +518,11 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
             "search.methods",
             "choose at least one method",
         ),
-        (|m| m.window_stop = 50.0, "window_stop", "time runs from 0 to 40 s"),
+        (
+            |m| m.window_stop = 50.0,
+            "window_stop",
+            "time runs from 0 to 40 s",
+        ),
         (|m| m.window_start = -5.0, "window_start", "-5"),
         (
             |m| (m.window_start, m.window_stop) = (30.0, 20.0),
@@ -596,7 +604,11 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
     many.outputs[1].measured = "no_such_column".into();
     many.window_stop = 50.0;
     many.parameters[0].max = -1.0;
-    let fields: Vec<String> = c.validate(many.clone()).into_iter().map(|p| p.field).collect();
+    let fields: Vec<String> = c
+        .validate(many.clone())
+        .into_iter()
+        .map(|p| p.field)
+        .collect();
     assert_eq!(
         fields,
         [
@@ -607,7 +619,10 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
         ]
     );
     let status = c.submit(many.clone()).unwrap_err();
-    assert!(status.message().starts_with("campaign.search.methods: "), "{status:?}");
+    assert!(
+        status.message().starts_with("campaign.search.methods: "),
+        "{status:?}"
+    );
 
     // The web app's route answers the same problems as JSON.
     let body = serde_json::to_vec(&pb::ValidateCampaignRequest {
@@ -624,7 +639,10 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
     let problems = answer["problems"].as_array().unwrap();
     assert_eq!(problems.len(), 4, "{body}");
     assert_eq!(problems[0]["field"], "search.methods", "{body}");
-    assert_eq!(problems[0]["message"], "choose at least one method", "{body}");
+    assert_eq!(
+        problems[0]["message"], "choose at least one method",
+        "{body}"
+    );
     assert!(c.listed().is_empty(), "nothing was started");
 
     // A campaign without `search` takes the default method, as a campaign file does; the

@@ -891,18 +891,30 @@ fn two_finished_campaigns_are_compared_side_by_side() {
     let shown = page["parameters"].as_array().unwrap();
     assert_eq!(shown.len(), 3, "arm-only frees one, both two: {page}");
     for p in shown {
-        let (id, name) = (p["campaign"].as_str().unwrap(), p["parameter"].as_str().unwrap());
+        let (id, name) = (
+            p["campaign"].as_str().unwrap(),
+            p["parameter"].as_str().unwrap(),
+        );
         assert_eq!(p["value"], results[id]["parameters"][name], "{p}");
         let spread = &results[id]["spread"][name];
         let (low, high): (f64, f64) = (
             p["low"].as_str().unwrap().parse().unwrap(),
             p["high"].as_str().unwrap().parse().unwrap(),
         );
-        assert_eq!((low, high), (spread["min"].as_f64().unwrap(), spread["max"].as_f64().unwrap()));
+        assert_eq!(
+            (low, high),
+            (
+                spread["min"].as_f64().unwrap(),
+                spread["max"].as_f64().unwrap()
+            )
+        );
         let value: f64 = p["value"].as_str().unwrap().parse().unwrap();
         assert!(low <= value && value <= high, "{p}");
     }
-    assert_eq!(page["not_calibrated"], 1, "pendulumFriction in arm-only: {page}");
+    assert_eq!(
+        page["not_calibrated"], 1,
+        "pendulumFriction in arm-only: {page}"
+    );
     // One row per fitted output, both campaigns' plots in it.
     let rows = page["plot_rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{page}");

@@ -150,9 +150,10 @@ def run_campaign(driver, name, free, evaluations):
             box.click()
     type_into(driver, "max-evaluations", str(evaluations))
     by_id(driver, "start").click()
-    wait(driver, LONG).until(lambda d: not by_id(d, "result").get_attribute("hidden")
+    wait(driver, LONG).until(lambda d: by_id(d, "calibration-status").text.startswith(f"{name}: finished")
                              or by_id(d, "calibration-error").is_displayed())
     no_error(driver, "calibration-error")
+    wait(driver).until(lambda d: not by_id(d, "result").get_attribute("hidden"))
 
 
 def compare(url, data, shot, out):

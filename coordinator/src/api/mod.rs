@@ -469,14 +469,19 @@ fn without_names(field: &str) -> String {
 /// A loader's message in the words of someone filling in a form rather than a campaign file.
 fn plain_words(message: &str) -> String {
     [
-        ("[[parameters]] or [[effects]] entry", "parameter to calibrate"),
+        (
+            "[[parameters]] or [[effects]] entry",
+            "parameter to calibrate",
+        ),
         ("[[parameters]] entry", "parameter to calibrate"),
         ("[[outputs]] entry", "output to compare"),
         ("[model.parameters]", "the model's fixed values"),
         ("[window]", "a window"),
     ]
     .iter()
-    .fold(message.to_string(), |m, (toml, words)| m.replace(toml, words))
+    .fold(message.to_string(), |m, (toml, words)| {
+        m.replace(toml, words)
+    })
 }
 
 /// What the form of a campaign states wrong on its own, before any dataset or model is
@@ -502,11 +507,18 @@ fn form_problems(c: &pb::Campaign) -> Vec<Problem> {
     } else if c.outputs.is_empty() {
         for (k, e) in c.experiments.iter().enumerate() {
             if e.outputs.is_empty() {
-                problems.push(Problem::new(format!("experiments[{k}].outputs"), no_outputs));
+                problems.push(Problem::new(
+                    format!("experiments[{k}].outputs"),
+                    no_outputs,
+                ));
             }
         }
     }
-    let outputs = c.outputs.iter().enumerate().map(|(i, o)| (String::new(), i, o));
+    let outputs = c
+        .outputs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| (String::new(), i, o));
     let own = c.experiments.iter().enumerate().flat_map(|(k, e)| {
         e.outputs
             .iter()
