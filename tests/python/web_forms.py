@@ -25,7 +25,7 @@ import sys
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import Select
 
-from web_ui import LONG, browser, by_id, no_error, tab, type_into, wait
+from web_ui import LONG, browser, by_id, no_error, press, tab, type_into, wait
 
 
 def problems(driver):
@@ -36,7 +36,7 @@ def problems(driver):
 
 
 def campaigns_listed(driver):
-    by_id(driver, "refresh-campaigns").click()
+    press(driver, "refresh-campaigns")
     return driver.execute_script(
         "return (async () => ((await (await fetch('/api/v1/ListCampaigns', {method: 'POST', "
         "headers: {'Content-Type': 'application/json'}, body: '{}'})).json()).campaigns || []).length)()")
@@ -51,7 +51,7 @@ def upload_file(driver, path, time_column=""):
     tab(driver, "measurement")
     type_into(driver, "measurement-time", time_column)
     by_id(driver, "measurement-file").send_keys(os.path.abspath(path))
-    by_id(driver, "upload").click()
+    press(driver, "upload")
 
 
 def map_outputs(driver):
@@ -90,7 +90,7 @@ def forms(url, data, broken, out):
 
         map_outputs(driver)
         for name in ("armFriction", "pendulumFriction"):
-            by_id(driver, f"free-{name}").click()
+            press(driver, f"free-{name}")
 
         # A file that does not parse: the good dataset and its mappings stay.
         upload_file(driver, broken, "time_s")
@@ -109,9 +109,10 @@ def forms(url, data, broken, out):
         # No method: the message next to the methods, nothing started.
         for box in driver.find_elements(By.CSS_SELECTOR, 'input[name="method"]'):
             if box.is_selected():
+                driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
                 box.click()
         type_into(driver, "max-evaluations", "40")
-        by_id(driver, "start").click()
+        press(driver, "start")
         wait(driver).until(lambda d: by_id(d, "calibration-error").is_displayed())
         wait(driver).until(lambda d: "methods" in problems(d))
         report["no_method_problems"] = problems(driver)
@@ -123,7 +124,9 @@ def forms(url, data, broken, out):
         report["started_without_method"] = campaigns_listed(driver)
 
         # A method, and a window past the data's end: said before any Start.
-        driver.find_element(By.CSS_SELECTOR, 'input[name="method"][value="nelder-mead"]').click()
+        method = driver.find_element(By.CSS_SELECTOR, 'input[name="method"][value="nelder-mead"]')
+        driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", method)
+        method.click()
         type_into(driver, "window-stop", "50")
         wait(driver).until(lambda d: "window-stop" in problems(d))
         report["late_window_problems"] = problems(driver)
@@ -147,9 +150,9 @@ def run_campaign(driver, name, free, evaluations):
     for p in ("armFriction", "pendulumFriction"):
         box = by_id(driver, f"free-{p}")
         if box.is_selected() != (p in free):
-            box.click()
+            press(driver, f"free-{p}")
     type_into(driver, "max-evaluations", str(evaluations))
-    by_id(driver, "start").click()
+    press(driver, "start")
     wait(driver, LONG).until(lambda d: by_id(d, "calibration-status").text.startswith(f"{name}: finished")
                              or by_id(d, "calibration-error").is_displayed())
     no_error(driver, "calibration-error")
@@ -172,12 +175,13 @@ def compare(url, data, shot, out):
         run_campaign(driver, "arm-only", ["armFriction"], 60)
         run_campaign(driver, "both", ["armFriction", "pendulumFriction"], 120)
 
-        by_id(driver, "refresh-campaigns").click()
+        press(driver, "refresh-campaigns")
         wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, 'input[name="compare"]')) >= 2)
         for box in driver.find_elements(By.CSS_SELECTOR, 'input[name="compare"]'):
             if not box.is_selected():
+                driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
                 box.click()
-        by_id(driver, "compare").click()
+        press(driver, "compare")
         wait(driver).until(lambda d: by_id(d, "comparison").is_displayed())
         no_error(driver, "compare-error")
         wait(driver).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#comparison-plots .compare-row"))

@@ -479,9 +479,36 @@ fn plain_words(message: &str) -> String {
         ("[window]", "a window"),
     ]
     .iter()
-    .fold(message.to_string(), |m, (toml, words)| {
+    .fold(without_stored_names(message), |m, (toml, words)| {
         m.replace(toml, words)
     })
+}
+
+/// `message` with each uploaded file named as the coordinator stores it ("dataset
+/// <64 hex digits>.csv") called "the measurement": the user never saw that name.
+fn without_stored_names(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(at) = rest.find("dataset ") {
+        let after = &rest[at + "dataset ".len()..];
+        let hex = after.bytes().take_while(u8::is_ascii_hexdigit).count();
+        let extension = [".csv", ".txt", ".mat"]
+            .iter()
+            .find(|e| hex == 64 && after[hex..].starts_with(**e));
+        match extension {
+            Some(e) => {
+                out.push_str(&rest[..at]);
+                out.push_str("the measurement");
+                rest = &after[hex + e.len()..];
+            }
+            None => {
+                out.push_str(&rest[..at + "dataset ".len()]);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// What the form of a campaign states wrong on its own, before any dataset or model is
