@@ -761,7 +761,8 @@ fn the_forms_say_what_will_happen_before_a_campaign_starts() {
     // The stop time each model describes: furuta's 40 s record, the heat exchanger's
     // 300 s cycle.
     assert_eq!(page["stop_times"]["furuta"], "40", "{page}");
-    assert_eq!(page["stop_times"]["hx"], "300", "{page}");
+    assert_eq!(page["stop_times"]["hx_highfi"], "300", "{page}");
+    assert_eq!(page["stop_times"]["hx_lowfi"], "300", "{page}");
 
     // The time column guessed, the file's columns offered to change it.
     assert_eq!(page["time_choice_shown"], true, "{page}");
