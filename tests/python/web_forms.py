@@ -213,7 +213,9 @@ def compare(url, data, shot, out):
             };
         })();""")
         report.update(read)
-        driver.execute_script("document.getElementById('comparison').scrollIntoView()")
+        # The sticky header would cover the section's top in an element screenshot.
+        driver.execute_script("document.querySelector('header').style.position = 'static';"
+                              "document.getElementById('comparison').scrollIntoView()")
         height = driver.execute_script("return document.getElementById('comparison').scrollHeight")
         driver.set_window_size(1366, max(900, min(int(height) + 200, 4000)))
         by_id(driver, "comparison").screenshot(shot)
