@@ -99,6 +99,15 @@ impl Coordinator {
         )
     }
 
+    fn validate(&self, campaign: pb::Campaign) -> Vec<pb::CampaignProblem> {
+        let request = pb::ValidateCampaignRequest {
+            campaign: Some(campaign),
+        };
+        self.grpc(async move |mut c| c.validate_campaign(request).await)
+            .unwrap()
+            .problems
+    }
+
     fn state(&self, id: &str) -> pb::CampaignState {
         let id = id.to_string();
         self.grpc(async move |mut c| c.get_campaign(pb::GetCampaignRequest { id }).await)
@@ -484,4 +493,202 @@ fn a_stored_campaign_beyond_the_limits_is_closed_as_failed_when_the_coordinator_
     drop(c);
     let c = Coordinator::start(dir.path(), &cluster.urls());
     assert_eq!(c.state(&hex).phase(), pb::CampaignPhase::Failed);
+}
+
+/// Whether a problem's message speaks to someone filling in a form: no campaign file's words.
+fn in_plain_words(message: &str) -> bool {
+    !["[[", "entry", ".toml", "[model", "[search"]
+        .iter()
+        .any(|toml| message.contains(toml))
+}
+
+#[test]
+fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(dir.path(), &[]);
+    let dataset = c.upload();
+    let good = message(SEARCH, &dataset.id);
+    assert_eq!(
+        c.validate(good.clone()),
+        [],
+        "a good campaign has no problem"
+    );
+
+    type Change = fn(&mut pb::Campaign);
+    let cases: [(Change, &str, &str); 12] = [
+        (
+            |m| m.search.as_mut().unwrap().methods.clear(),
+            "search.methods",
+            "choose at least one method",
+        ),
+        (
+            |m| m.window_stop = 50.0,
+            "window_stop",
+            "time runs from 0 to 40 s",
+        ),
+        (|m| m.window_start = -5.0, "window_start", "-5"),
+        (
+            |m| (m.window_start, m.window_stop) = (30.0, 20.0),
+            "window_stop",
+            "end after it starts",
+        ),
+        (
+            |m| m.outputs[1].measured = "no_such_column".into(),
+            "outputs[1].measured",
+            "arm_angle_rad",
+        ),
+        (
+            |m| m.outputs[0].measured.clear(),
+            "outputs[0].measured",
+            "choose the measured column",
+        ),
+        (
+            |m| m.outputs.clear(),
+            "outputs",
+            "choose at least one output to compare",
+        ),
+        (
+            |m| m.parameters[0].max = -1.0,
+            "parameters[0].max",
+            "above the lower bound 0",
+        ),
+        (
+            |m| m.parameters[1].nominal = Some(2.0),
+            "parameters[1].nominal",
+            "outside the bounds [0, 0.9]",
+        ),
+        // Found by the campaign's loader, past the form's checks: the field without the
+        // parameter's name, the message without the file's words.
+        (
+            |m| m.parameters[1].name = "no_such_parameter".into(),
+            "parameters[1]",
+            "no_such_parameter",
+        ),
+        (
+            |m| (m.window_start, m.window_stop) = (10.0, 10.001),
+            "window_stop",
+            "too few",
+        ),
+        (
+            |m| m.dataset_id = "0".repeat(64),
+            "dataset_id",
+            "upload the measurement again",
+        ),
+    ];
+    for (change, field, fragment) in cases {
+        let mut campaign = good.clone();
+        change(&mut campaign);
+        let problems = c.validate(campaign.clone());
+        let [problem] = &problems[..] else {
+            panic!("{field}: one problem expected, got {problems:?}");
+        };
+        assert_eq!(problem.field, field, "{problem:?}");
+        assert!(problem.message.contains(fragment), "{problem:?}");
+        assert!(in_plain_words(&problem.message), "{problem:?}");
+        c.assert_no_path(&problem.message);
+        // SubmitCampaign refuses it with the same problem, at both doors.
+        // (A refusal of the campaign's loader names the parameter after its index too, and
+        // a window by both its ends.)
+        let status = c.submit(campaign.clone()).unwrap_err();
+        let refused = status.message();
+        let (named, _) = refused.split_once(": ").unwrap();
+        assert!(
+            named.contains(&problem.field),
+            "{refused} is not {problem:?}"
+        );
+        assert!(!problem.message.contains(&dataset.id), "{problem:?}");
+        let expected = if field == "dataset_id" {
+            (tonic::Code::NotFound, 404)
+        } else {
+            (tonic::Code::InvalidArgument, 400)
+        };
+        assert_eq!(status.code(), expected.0, "{status:?}");
+        let (code, body) = c.submit_json(campaign);
+        assert_eq!(code, expected.1, "{body}");
+        assert!(body.contains(&problem.field), "{body}");
+    }
+
+    // Several problems at once: each at its field, in the form's order.
+    let mut many = good.clone();
+    many.search.as_mut().unwrap().methods.clear();
+    many.outputs[1].measured = "no_such_column".into();
+    many.window_stop = 50.0;
+    many.parameters[0].max = -1.0;
+    let fields: Vec<String> = c
+        .validate(many.clone())
+        .into_iter()
+        .map(|p| p.field)
+        .collect();
+    assert_eq!(
+        fields,
+        [
+            "search.methods",
+            "parameters[0].max",
+            "outputs[1].measured",
+            "window_stop"
+        ]
+    );
+    let status = c.submit(many.clone()).unwrap_err();
+    assert!(
+        status.message().starts_with("campaign.search.methods: "),
+        "{status:?}"
+    );
+
+    // The web app's route answers the same problems as JSON.
+    let body = serde_json::to_vec(&pb::ValidateCampaignRequest {
+        campaign: Some(many),
+    })
+    .unwrap();
+    let (code, body) = http_post(
+        c.server().http_address().expect("--http"),
+        "/api/v1/ValidateCampaign",
+        &body,
+    );
+    assert_eq!(code, 200, "{body}");
+    let answer: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let problems = answer["problems"].as_array().unwrap();
+    assert_eq!(problems.len(), 4, "{body}");
+    assert_eq!(problems[0]["field"], "search.methods", "{body}");
+    assert_eq!(
+        problems[0]["message"], "choose at least one method",
+        "{body}"
+    );
+    assert!(c.listed().is_empty(), "nothing was started");
+
+    // A campaign without `search` takes the default method, as a campaign file does; the
+    // good campaign is started.
+    let mut defaults = good.clone();
+    defaults.search = None;
+    assert_eq!(c.validate(defaults), []);
+    assert!(c.submit(good).unwrap().started);
+}
+
+#[test]
+fn an_upload_without_a_time_column_gets_the_guessed_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(dir.path(), &[]);
+    let data = std::fs::read(repo().join("examples/data/furuta_clean.csv")).unwrap();
+    let upload = |time_column: &str| {
+        let chunk = pb::DatasetChunk {
+            file_name: "record.csv".into(),
+            time_column: time_column.into(),
+            data: data.clone(),
+        };
+        c.grpc(async move |mut c| c.upload_dataset(tokio_stream::iter([chunk])).await)
+    };
+    let guessed = upload("").unwrap();
+    assert_eq!(guessed.time_column, "time_s");
+    assert!(guessed.time_column_guessed);
+    let named = upload("time_s").unwrap();
+    assert!(!named.time_column_guessed);
+    // The same dataset as the upload that names the column.
+    assert_eq!(
+        (&guessed.id, &guessed.columns, guessed.stop_time),
+        (&named.id, &named.columns, named.stop_time)
+    );
+    assert!(!guessed.columns.contains(&"time_s".to_string()));
+    // A column that is not a time axis is refused, naming it.
+    let status = upload("arm_angle_rad").unwrap_err();
+    assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
+    c.assert_no_path(status.message());
 }

@@ -929,3 +929,217 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
         .unwrap();
     assert!(best <= 0.5, "{best}");
 }
+
+
+/// Run `tests/python/web_forms.py` in `mode` with `args`; what it read off the page.
+fn drive_forms(mode: &str, args: &[&str], dir: &std::path::Path) -> Value {
+    let out = dir.join(format!("{mode}.json"));
+    let run = Command::new("python3")
+        .arg(repo().join("tests/python/web_forms.py"))
+        .arg(mode)
+        .args(args)
+        .arg(&out)
+        .output()
+        .expect("run python3");
+    assert!(
+        run.status.success(),
+        "web_forms.py {mode} failed:\n{}\n{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    serde_json::from_slice(&std::fs::read(&out).expect("page report")).expect("page report JSON")
+}
+
+/// The page asks the server (ValidateCampaign) and shows each problem next to its field:
+/// no method ticked gives the message next to the methods and starts nothing; a window past
+/// the data's end is named next to the window before any Start; a fixed form shows no
+/// message. An upload without a time column offers the file's columns with the time column
+/// guessed; a failed upload keeps the good dataset and the outputs mapped onto it. The
+/// Model tab's stop time follows the model.
+#[test]
+fn the_forms_say_what_will_happen_before_a_campaign_starts() {
+    if let Some(reason) = browser_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let broken = dir.path().join("broken_rig.csv");
+    std::fs::write(
+        &broken,
+        "time_s,arm_angle_rad\n0,0.1\n0.01,0.2\n0.02,zero\n",
+    )
+    .unwrap();
+    let ui = Ui::start(&dir.path().join("db"));
+    let data = repo().join("examples/data/furuta_clean.csv");
+    let page = drive_forms(
+        "forms",
+        &[&ui.url, data.to_str().unwrap(), broken.to_str().unwrap()],
+        dir.path(),
+    );
+
+    // The stop time each model describes: furuta's 40 s record, the heat exchanger's
+    // 300 s cycle.
+    assert_eq!(page["stop_times"]["furuta"], "40", "{page}");
+    assert_eq!(page["stop_times"]["hx_highfi"], "300", "{page}");
+    assert_eq!(page["stop_times"]["hx_lowfi"], "300", "{page}");
+
+    // The time column guessed, the file's columns offered to change it.
+    assert_eq!(page["time_choice_shown"], true, "{page}");
+    assert_eq!(page["time_chosen"], "time_s", "{page}");
+    assert_eq!(
+        page["time_offered"],
+        serde_json::json!(["time_s", "arm_angle_rad", "pendulum_angle_rad"])
+    );
+    assert!(
+        page["time_note"].as_str().unwrap().contains("guessed"),
+        "{page}"
+    );
+
+    // The failed upload: its error, and the good dataset kept with its mappings.
+    let error = page["broken_error"].as_str().unwrap();
+    assert!(
+        error.contains("broken_rig.csv")
+            && error.contains("line 4")
+            && error.contains("furuta_clean.csv, uploaded before, is still the measurement in use"),
+        "{error}"
+    );
+    assert!(
+        page["status_after_broken"]
+            .as_str()
+            .unwrap()
+            .starts_with("furuta_clean.csv: 4001 samples"),
+        "{page}"
+    );
+    assert_eq!(
+        page["columns_after_broken"],
+        serde_json::json!(["arm_angle_rad", "pendulum_angle_rad"])
+    );
+    assert!(
+        page["context_after_broken"]
+            .as_str()
+            .unwrap()
+            .contains("furuta_clean.csv"),
+        "{page}"
+    );
+    assert_eq!(
+        page["mapping_after_broken"],
+        serde_json::json!({
+            "armJoint.phi": ["arm_angle_rad", true],
+            "pendulumJoint.phi": ["pendulum_angle_rad", true],
+            "armJoint.w": ["", false],
+        })
+    );
+
+    // No method: the message next to the methods and in the error box, not in the status
+    // line; nothing started.
+    assert_eq!(
+        page["no_method_problems"],
+        serde_json::json!({"methods": "choose at least one method"})
+    );
+    assert_eq!(page["no_method_next_to"], "methods", "{page}");
+    assert!(
+        page["no_method_error"]
+            .as_str()
+            .unwrap()
+            .contains("choose at least one method"),
+        "{page}"
+    );
+    assert_eq!(page["no_method_status"], "", "{page}");
+    assert_eq!(page["started_without_method"], 0, "{page}");
+
+    // The window past the data's end, named next to its stop before any Start; the stale
+    // message about the methods gone.
+    let late = page["late_window_problems"].as_object().unwrap();
+    assert_eq!(late.len(), 1, "{page}");
+    let message = late["window-stop"].as_str().unwrap();
+    assert!(
+        message.contains("50 s lies outside") && message.contains("time runs from 0 to 40 s"),
+        "{message}"
+    );
+    assert_eq!(page["late_window_invalid"], "true", "{page}");
+    assert_eq!(page["late_window_status"], "", "{page}");
+    assert_eq!(page["started_with_late_window"], 0, "{page}");
+    assert_eq!(page["problems_after_fix"], serde_json::json!({}), "{page}");
+}
+
+/// Two finished campaigns side by side: both names, their objectives and their parameters
+/// with the range over the runs that reached the best, each the value of its result.json;
+/// the fit plots of both in one row per output. The screenshot lands in `compare.png` (with
+/// `CALIB_SCREENSHOTS=docs/img`, README's).
+#[test]
+fn two_finished_campaigns_are_compared_side_by_side() {
+    if let Some(reason) = browser_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let ui = Ui::start(&dir.path().join("db"));
+    let shots = match std::env::var_os("CALIB_SCREENSHOTS") {
+        Some(folder) => repo().join(folder),
+        None => std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("screenshots"),
+    };
+    std::fs::create_dir_all(&shots).unwrap();
+    let shot = shots.join("compare.png");
+    let data = repo().join("examples/data/furuta_clean.csv");
+    let page = drive_forms(
+        "compare",
+        &[&ui.url, data.to_str().unwrap(), shot.to_str().unwrap()],
+        dir.path(),
+    );
+
+    let ids: Vec<&str> = page["ids"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    assert_eq!(ids.len(), 2, "{page}");
+    let results = &page["results"];
+    let mut names: Vec<&str> = ids
+        .iter()
+        .map(|id| results[id]["name"].as_str().unwrap())
+        .collect();
+    for (header, name) in page["headers"].as_array().unwrap().iter().zip(&names) {
+        assert!(header.as_str().unwrap().starts_with(name), "{page}");
+    }
+    names.sort();
+    assert_eq!(names, ["arm-only", "both"], "{page}");
+    // Each objective and parameter as its result holds it, digit for digit.
+    for id in &ids {
+        assert_eq!(page["objectives"][id], results[id]["objective"], "{page}");
+    }
+    let shown = page["parameters"].as_array().unwrap();
+    assert_eq!(shown.len(), 3, "arm-only frees one, both two: {page}");
+    for p in shown {
+        let (id, name) = (
+            p["campaign"].as_str().unwrap(),
+            p["parameter"].as_str().unwrap(),
+        );
+        assert_eq!(p["value"], results[id]["parameters"][name], "{p}");
+        let spread = &results[id]["spread"][name];
+        let (low, high): (f64, f64) = (
+            p["low"].as_str().unwrap().parse().unwrap(),
+            p["high"].as_str().unwrap().parse().unwrap(),
+        );
+        assert_eq!(
+            (low, high),
+            (
+                spread["min"].as_f64().unwrap(),
+                spread["max"].as_f64().unwrap()
+            )
+        );
+        let value: f64 = p["value"].as_str().unwrap().parse().unwrap();
+        assert!(low <= value && value <= high, "{p}");
+    }
+    assert_eq!(
+        page["not_calibrated"], 1,
+        "pendulumFriction in arm-only: {page}"
+    );
+    // One row per fitted output, both campaigns' plots in it.
+    let rows = page["plot_rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{page}");
+    for row in rows {
+        assert_eq!(row["figures"], 2, "{row}");
+    }
+    assert!(shot.metadata().unwrap().len() > 10_000, "a screenshot");
+}

@@ -149,6 +149,10 @@ impl<M: Model> Model for WithOutputEffects<M> {
         self.inner.tolerance_origin()
     }
 
+    fn default_stop_time(&self) -> f64 {
+        self.inner.default_stop_time()
+    }
+
     fn simulate(
         &self,
         params: &[f64],

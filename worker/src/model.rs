@@ -226,6 +226,9 @@ pub enum SimulationError {
     Failed { time: f64, reason: String },
 }
 
+/// [`Model::default_stop_time`] of a model that says none [s].
+pub const DEFAULT_STOP_TIME: f64 = 10.0;
+
 /// A hosted model.
 ///
 /// Models implement the physics ([`Model::simulate`]); the registry wraps every model in
@@ -238,6 +241,12 @@ pub trait Model: Send + Sync {
     /// stays far below what sensors resolve, no tighter. Campaigns may override it.
     fn default_options(&self) -> SolverOptions {
         SolverOptions::default()
+    }
+
+    /// How long a simulation of it usually runs [s]: the end of the record it is calibrated
+    /// against (an FMU: its `DefaultExperiment`'s stop time). What a client starts from.
+    fn default_stop_time(&self) -> f64 {
+        DEFAULT_STOP_TIME
     }
 
     /// Where the tolerance of [`Model::default_options`] comes from, in words (Describe and

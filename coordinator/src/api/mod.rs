@@ -49,8 +49,9 @@ impl CalibrationApi {
         if bytes.is_empty() {
             return Err(Status::invalid_argument("data: the file is empty"));
         }
-        if time_column.is_empty() {
-            time_column = "time".into();
+        let guessed = time_column.trim().is_empty();
+        if guessed {
+            time_column.clear();
         }
         let campaigns = self.campaigns.clone();
         let info = self
@@ -62,6 +63,8 @@ impl CalibrationApi {
             samples: info.samples as u64,
             start_time: info.start_time,
             stop_time: info.stop_time,
+            time_column: info.time_column,
+            time_column_guessed: guessed,
         })
     }
 
@@ -120,6 +123,95 @@ impl CalibrationApi {
         })
     }
 
+    /// The dataset `id` a campaign names at `field` ("dataset_id"), or the problem it is.
+    async fn named_dataset(
+        &self,
+        id: &str,
+        field: &str,
+    ) -> Result<Result<DatasetInfo, Problem>, Status> {
+        if id.is_empty() {
+            return Ok(Err(Problem::new(
+                field,
+                "missing: upload a measurement first",
+            )));
+        }
+        let found = {
+            let campaigns = self.campaigns.clone();
+            let id = id.to_string();
+            self.blocking(move || campaigns.datasets().get(&id)).await
+        };
+        Ok(match found {
+            Ok(Some(dataset)) => Ok(dataset),
+            Ok(None) => Err(Problem {
+                code: tonic::Code::NotFound,
+                ..Problem::new(
+                    field,
+                    "no dataset with this id on this server: upload the measurement again",
+                )
+            }),
+            Err(s) if s.code() == tonic::Code::InvalidArgument => {
+                Err(Problem::new(field, s.message()))
+            }
+            Err(s) => return Err(s),
+        })
+    }
+
+    /// Every problem of campaign `c` found before its campaign file is written: the form's
+    /// own ([`form_problems`]), then its datasets' (each named, each holding the columns
+    /// and the windows mapped onto it).
+    async fn early_problems(&self, c: &pb::Campaign) -> Result<Vec<Problem>, Status> {
+        let mut problems = form_problems(c);
+        if c.experiments.is_empty() {
+            match self.named_dataset(&c.dataset_id, "dataset_id").await? {
+                Err(problem) => problems.push(problem),
+                Ok(dataset) => problems.extend(dataset_problems(&mapped_campaign(c), &dataset)),
+            }
+        } else {
+            for (k, e) in c.experiments.iter().enumerate() {
+                let field = format!("experiments[{k}].dataset_id");
+                match self.named_dataset(&e.dataset_id, &field).await? {
+                    Err(problem) => problems.push(problem),
+                    Ok(dataset) => {
+                        problems.extend(dataset_problems(&mapped_experiment(c, k), &dataset))
+                    }
+                }
+            }
+        }
+        Ok(problems)
+    }
+
+    /// Every problem that makes SubmitCampaign refuse campaign `c`, each at its field, in
+    /// SubmitCampaign's order: the form's and the datasets' ([`Self::early_problems`]);
+    /// when there are none, the first the campaign's loader finds in the campaign file
+    /// SubmitCampaign would start (the model, its parameters and outputs, the solver, the
+    /// window against the data). Nothing is started. An error only when the server fails.
+    pub async fn validate(&self, c: &pb::Campaign) -> Result<Vec<Problem>, Status> {
+        let early = self.early_problems(c).await?;
+        if !early.is_empty() {
+            return Ok(early);
+        }
+        let refused = |s: &Status| {
+            matches!(
+                s.code(),
+                tonic::Code::InvalidArgument | tonic::Code::NotFound
+            )
+        };
+        let text = match self.campaign_file(c).await {
+            Ok(text) => text,
+            Err(s) if refused(&s) => return Ok(vec![Problem::of_refusal(&s)]),
+            Err(s) => return Err(s),
+        };
+        let campaigns = self.campaigns.clone();
+        match self
+            .blocking(move || campaigns.check(&text).map(|_| ()))
+            .await
+        {
+            Ok(()) => Ok(Vec::new()),
+            Err(s) if refused(&s) => Ok(vec![Problem::of_refusal(&s)]),
+            Err(s) => Err(s),
+        }
+    }
+
     /// The dataset as the campaign file names it.
     fn record(&self, dataset: &DatasetInfo) -> spec::Record {
         spec::Record {
@@ -135,30 +227,7 @@ impl CalibrationApi {
             let dataset = self
                 .dataset(&campaign.dataset_id, "campaign.dataset_id")
                 .await?;
-            let mut windows = Vec::new();
-            // A window of 0 to 0 is no window: the campaign's check names it missing.
-            if campaign.window_start != 0.0 || campaign.window_stop != 0.0 {
-                windows.push((
-                    "window_start".to_string(),
-                    "window_stop".to_string(),
-                    campaign.window_start,
-                    campaign.window_stop,
-                ));
-            }
-            for (j, w) in campaign.windows.iter().enumerate() {
-                windows.push((
-                    format!("windows[{j}].start"),
-                    format!("windows[{j}].stop"),
-                    w.start,
-                    w.stop,
-                ));
-            }
-            let mapped = Mapped {
-                place: String::new(),
-                outputs: &campaign.outputs,
-                inputs: &campaign.inputs,
-                windows,
-            };
+            let mapped = mapped_campaign(campaign);
             check_against_dataset(&mapped, &dataset)?;
             (Some(self.record(&dataset)), Vec::new())
         } else {
@@ -181,24 +250,7 @@ impl CalibrationApi {
                 let dataset = self
                     .dataset(&e.dataset_id, &format!("campaign.{place}dataset_id"))
                     .await?;
-                let mapped = Mapped {
-                    place: place.clone(),
-                    outputs: own_or(&e.outputs, &campaign.outputs),
-                    inputs: own_or(&e.inputs, &campaign.inputs),
-                    windows: e
-                        .windows
-                        .iter()
-                        .enumerate()
-                        .map(|(j, w)| {
-                            (
-                                format!("{place}windows[{j}].start"),
-                                format!("{place}windows[{j}].stop"),
-                                w.start,
-                                w.stop,
-                            )
-                        })
-                        .collect(),
-                };
+                let mapped = mapped_experiment(campaign, k);
                 check_against_dataset(&mapped, &dataset)?;
                 records.push(self.record(&dataset));
             }
@@ -264,6 +316,58 @@ impl CalibrationApi {
 /// Most column names a refusal lists.
 const LISTED_COLUMNS: usize = 20;
 
+/// What a campaign of one record maps onto its dataset.
+fn mapped_campaign(campaign: &pb::Campaign) -> Mapped<'_> {
+    let mut windows = Vec::new();
+    // A window of 0 to 0 is no window: the campaign's check names it missing.
+    if campaign.window_start != 0.0 || campaign.window_stop != 0.0 {
+        windows.push((
+            "window_start".to_string(),
+            "window_stop".to_string(),
+            campaign.window_start,
+            campaign.window_stop,
+        ));
+    }
+    for (j, w) in campaign.windows.iter().enumerate() {
+        windows.push((
+            format!("windows[{j}].start"),
+            format!("windows[{j}].stop"),
+            w.start,
+            w.stop,
+        ));
+    }
+    Mapped {
+        place: String::new(),
+        outputs: &campaign.outputs,
+        inputs: &campaign.inputs,
+        windows,
+    }
+}
+
+/// What experiment `k` of a campaign maps onto its dataset.
+fn mapped_experiment(campaign: &pb::Campaign, k: usize) -> Mapped<'_> {
+    let e = &campaign.experiments[k];
+    let place = format!("experiments[{k}].");
+    Mapped {
+        place: place.clone(),
+        outputs: own_or(&e.outputs, &campaign.outputs),
+        inputs: own_or(&e.inputs, &campaign.inputs),
+        windows: e
+            .windows
+            .iter()
+            .enumerate()
+            .map(|(j, w)| {
+                (
+                    format!("{place}windows[{j}].start"),
+                    format!("{place}windows[{j}].stop"),
+                    w.start,
+                    w.stop,
+                )
+            })
+            .collect(),
+    }
+}
+
 /// An experiment's own list, or the campaign's when it has none.
 fn own_or<'a, T>(own: &'a [T], campaign: &'a [T]) -> &'a [T] {
     if own.is_empty() {
@@ -283,9 +387,314 @@ struct Mapped<'a> {
     windows: Vec<(String, String, f64, f64)>,
 }
 
+/// What is wrong with a campaign, and where: a field of the Campaign message, written as a
+/// path from it ("outputs[1].measured", "window_stop"; "" for the whole campaign).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Problem {
+    pub field: String,
+    pub message: String,
+    /// How SubmitCampaign refuses it: INVALID_ARGUMENT, or NOT_FOUND for an unknown dataset.
+    pub code: tonic::Code,
+}
+
+impl Problem {
+    fn new(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self {
+            field: field.into(),
+            message: message.into(),
+            code: tonic::Code::InvalidArgument,
+        }
+    }
+
+    /// SubmitCampaign's refusal: the field named from the request, as every refusal does.
+    fn status(&self) -> Status {
+        let field = if self.field.is_empty() {
+            "campaign".to_string()
+        } else {
+            format!("campaign.{}", self.field)
+        };
+        Status::new(self.code, format!("{field}: {}", self.message))
+    }
+
+    fn message(&self) -> pb::CampaignProblem {
+        pb::CampaignProblem {
+            field: self.field.clone(),
+            message: self.message.clone(),
+        }
+    }
+
+    /// The problem a refusal of the campaign's loader states: its message is "campaign.<field>:
+    /// <what>" (a parameter named in the field, "parameters[0] (armFriction)", is its index
+    /// alone), "data: <what>" for the dataset's file, else about the whole campaign.
+    fn of_refusal(status: &Status) -> Self {
+        let text = status.message();
+        let (field, message) = if let Some(rest) = text.strip_prefix("campaign.") {
+            match rest.split_once(": ") {
+                Some((field, message)) => (field.to_string(), message.to_string()),
+                None => (String::new(), rest.to_string()),
+            }
+        } else if let Some(rest) = text.strip_prefix("data: ") {
+            ("dataset_id".to_string(), rest.to_string())
+        } else {
+            (String::new(), text.to_string())
+        };
+        let field = match field.as_str() {
+            // The window as a whole: its stop, where the form's window ends.
+            "window_start, campaign.window_stop" => "window_stop".to_string(),
+            other => without_names(other),
+        };
+        Self {
+            field,
+            message: plain_words(&message),
+            code: status.code(),
+        }
+    }
+}
+
+/// `field` without the names the loader adds after an index ("parameters[0] (armFriction)"
+/// is "parameters[0]").
+fn without_names(field: &str) -> String {
+    let mut out = String::with_capacity(field.len());
+    let mut rest = field;
+    while let Some(at) = rest.find(" (") {
+        out.push_str(&rest[..at]);
+        rest = match rest[at..].find(')') {
+            Some(end) => &rest[at + end + 1..],
+            None => "",
+        };
+    }
+    out.push_str(rest);
+    out
+}
+
+/// A loader's message in the words of someone filling in a form rather than a campaign file.
+fn plain_words(message: &str) -> String {
+    [
+        (
+            "[[parameters]] or [[effects]] entry",
+            "parameter to calibrate",
+        ),
+        ("[[parameters]] entry", "parameter to calibrate"),
+        ("[[outputs]] entry", "output to compare"),
+        ("[model.parameters]", "the model's fixed values"),
+        ("[window]", "a window"),
+    ]
+    .iter()
+    .fold(without_stored_names(message), |m, (toml, words)| {
+        m.replace(toml, words)
+    })
+}
+
+/// `message` with each uploaded file named as the coordinator stores it ("dataset
+/// <64 hex digits>.csv") called "the measurement": the user never saw that name.
+fn without_stored_names(message: &str) -> String {
+    let mut out = String::with_capacity(message.len());
+    let mut rest = message;
+    while let Some(at) = rest.find("dataset ") {
+        let after = &rest[at + "dataset ".len()..];
+        let hex = after.bytes().take_while(u8::is_ascii_hexdigit).count();
+        let extension = [".csv", ".txt", ".mat"]
+            .iter()
+            .find(|e| hex == 64 && after[hex..].starts_with(**e));
+        match extension {
+            Some(e) => {
+                out.push_str(&rest[..at]);
+                out.push_str("the measurement");
+                rest = &after[hex + e.len()..];
+            }
+            None => {
+                out.push_str(&rest[..at + "dataset ".len()]);
+                rest = after;
+            }
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// What the form of a campaign states wrong on its own, before any dataset or model is
+/// looked at: every such problem, each at its field.
+fn form_problems(c: &pb::Campaign) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    if !c.experiments.is_empty() && !c.dataset_id.is_empty() {
+        problems.push(Problem::new(
+            "dataset_id",
+            "with experiments, each experiment names its dataset; leave this one empty",
+        ));
+    }
+    if let Some(search) = &c.search {
+        if search.methods.is_empty() {
+            problems.push(Problem::new("search.methods", "choose at least one method"));
+        }
+    }
+    let no_outputs = "choose at least one output to compare with the measurement";
+    if c.experiments.is_empty() {
+        if c.outputs.is_empty() {
+            problems.push(Problem::new("outputs", no_outputs));
+        }
+    } else if c.outputs.is_empty() {
+        for (k, e) in c.experiments.iter().enumerate() {
+            if e.outputs.is_empty() {
+                problems.push(Problem::new(
+                    format!("experiments[{k}].outputs"),
+                    no_outputs,
+                ));
+            }
+        }
+    }
+    let outputs = c
+        .outputs
+        .iter()
+        .enumerate()
+        .map(|(i, o)| (String::new(), i, o));
+    let own = c.experiments.iter().enumerate().flat_map(|(k, e)| {
+        e.outputs
+            .iter()
+            .enumerate()
+            .map(move |(i, o)| (format!("experiments[{k}]."), i, o))
+    });
+    for (place, i, o) in outputs.chain(own) {
+        if o.measured.is_empty() {
+            problems.push(Problem::new(
+                format!("{place}outputs[{i}].measured"),
+                "choose the measured column this output is compared with",
+            ));
+        }
+    }
+    let shared_free = !c.parameters.is_empty() || !c.effects.is_empty();
+    let own_free = c.experiments.iter().any(|e| !e.parameters.is_empty());
+    if !shared_free && !own_free {
+        problems.push(Problem::new(
+            "parameters",
+            "choose at least one parameter to calibrate",
+        ));
+    }
+    let lists = [
+        (String::from("parameters"), &c.parameters),
+        (String::from("effects"), &c.effects),
+    ];
+    let own = c
+        .experiments
+        .iter()
+        .enumerate()
+        .map(|(k, e)| (format!("experiments[{k}].parameters"), &e.parameters));
+    for (list, parameters) in lists.into_iter().chain(own) {
+        for (i, p) in parameters.iter().enumerate() {
+            problems.extend(bound_problems(&format!("{list}[{i}]"), p));
+        }
+    }
+    if c.experiments.is_empty() {
+        let (start, stop) = (c.window_start, c.window_stop);
+        if c.windows.is_empty() && start == 0.0 && stop == 0.0 {
+            problems.push(Problem::new(
+                "window_stop",
+                "give the window of the data to fit: its start and its stop",
+            ));
+        } else if !c.windows.is_empty() && (start != 0.0 || stop != 0.0) {
+            problems.push(Problem::new(
+                "windows",
+                "give one window or several windows, not both",
+            ));
+        } else if c.windows.is_empty() {
+            problems.extend(window_problems("window_start", "window_stop", start, stop));
+        }
+        for (j, w) in c.windows.iter().enumerate() {
+            problems.extend(window_problems(
+                &format!("windows[{j}].start"),
+                &format!("windows[{j}].stop"),
+                w.start,
+                w.stop,
+            ));
+        }
+    } else {
+        for (k, e) in c.experiments.iter().enumerate() {
+            if e.windows.is_empty() {
+                problems.push(Problem::new(
+                    format!("experiments[{k}].windows"),
+                    "give the window of the data to fit: its start and its stop",
+                ));
+            }
+            for (j, w) in e.windows.iter().enumerate() {
+                problems.extend(window_problems(
+                    &format!("experiments[{k}].windows[{j}].start"),
+                    &format!("experiments[{k}].windows[{j}].stop"),
+                    w.start,
+                    w.stop,
+                ));
+            }
+        }
+    }
+    problems
+}
+
+/// A free parameter's bounds, start value and scale, at `field` ("parameters[0]").
+fn bound_problems(field: &str, p: &pb::Parameter) -> Vec<Problem> {
+    let mut problems = Vec::new();
+    if !p.min.is_finite() {
+        problems.push(Problem::new(format!("{field}.min"), "give a lower bound"));
+    }
+    if !p.max.is_finite() {
+        problems.push(Problem::new(format!("{field}.max"), "give an upper bound"));
+    }
+    if !problems.is_empty() {
+        return problems;
+    }
+    if p.min >= p.max {
+        problems.push(Problem::new(
+            format!("{field}.max"),
+            format!(
+                "the upper bound {} must be above the lower bound {}",
+                p.max, p.min
+            ),
+        ));
+        return problems;
+    }
+    if p.scale == "log10" && p.min <= 0.0 {
+        problems.push(Problem::new(
+            format!("{field}.min"),
+            format!(
+                "a log10 scale needs a lower bound above 0 (it is {}); use the lin scale to \
+                 search from 0",
+                p.min
+            ),
+        ));
+    }
+    if let Some(nominal) = p.nominal {
+        if !nominal.is_finite() || nominal < p.min || nominal > p.max {
+            problems.push(Problem::new(
+                format!("{field}.nominal"),
+                format!(
+                    "the start value {nominal} lies outside the bounds [{}, {}]",
+                    p.min, p.max
+                ),
+            ));
+        }
+    }
+    problems
+}
+
+/// A window's start and stop on their own: finite, from 0 s, the stop after the start.
+fn window_problems(start_field: &str, stop_field: &str, start: f64, stop: f64) -> Vec<Problem> {
+    if !start.is_finite() || start < 0.0 {
+        return vec![Problem::new(
+            start_field,
+            format!("the window starts at {start} s; it must start at 0 s or later"),
+        )];
+    }
+    if !stop.is_finite() || stop <= start {
+        return vec![Problem::new(
+            stop_field,
+            format!("the window must end after it starts ({start} s); it ends at {stop} s"),
+        )];
+    }
+    Vec::new()
+}
+
 /// The fields mapped onto a dataset checked against it, before anything is parsed or run:
-/// every mapped column is one of the dataset's, the windows lie inside its data.
-fn check_against_dataset(mapped: &Mapped, dataset: &DatasetInfo) -> Result<(), Status> {
+/// every mapped column is one of the dataset's, the windows lie inside its data. Every
+/// problem found.
+fn dataset_problems(mapped: &Mapped, dataset: &DatasetInfo) -> Vec<Problem> {
+    let mut problems = Vec::new();
     let columns = mapped
         .outputs
         .iter()
@@ -299,43 +708,61 @@ fn check_against_dataset(mapped: &Mapped, dataset: &DatasetInfo) -> Result<(), S
                 .map(|(i, input)| (format!("inputs[{i}]"), &input.measured)),
         );
     for (field, measured) in columns {
-        if !dataset.columns.contains(measured) {
-            let mut listed: Vec<String> = dataset
-                .columns
-                .iter()
-                .take(LISTED_COLUMNS)
-                .map(|c| format!("{c:?}"))
-                .collect();
-            if dataset.columns.len() > LISTED_COLUMNS {
-                listed.push(format!("… ({} in all)", dataset.columns.len()));
-            }
-            return Err(Status::invalid_argument(format!(
-                "campaign.{}{field}.measured: dataset `{}` has no column {measured:?}; its \
-                 columns are: {}",
-                mapped.place,
-                dataset.id,
-                listed.join(", ")
-            )));
+        // An empty choice is the form's problem, named there.
+        if measured.is_empty() || dataset.columns.contains(measured) {
+            continue;
         }
+        let mut listed: Vec<String> = dataset
+            .columns
+            .iter()
+            .take(LISTED_COLUMNS)
+            .map(|c| format!("{c:?}"))
+            .collect();
+        if dataset.columns.len() > LISTED_COLUMNS {
+            listed.push(format!("… ({} in all)", dataset.columns.len()));
+        }
+        problems.push(Problem::new(
+            format!("{}{field}.measured", mapped.place),
+            format!(
+                "dataset {} has no column {measured:?}; its columns are: {}",
+                dataset.file_name,
+                listed.join(", ")
+            ),
+        ));
     }
     let (first, last) = (dataset.start_time, dataset.stop_time);
     let slack = 1e-9 * last.abs().max(1.0);
     let outside = |field: &str, value: f64| {
-        Status::invalid_argument(format!(
-            "campaign.{field}: {value} s lies outside the data of dataset `{}` (time runs \
-             from {first} to {last} s)",
-            dataset.id
-        ))
+        Problem::new(
+            field,
+            format!(
+                "{value} s lies outside the data of dataset {} (time runs from {first} to {last} \
+                 s)",
+                dataset.file_name
+            ),
+        )
     };
     for (start_field, stop_field, start, stop) in &mapped.windows {
+        // A window wrong on its own is the form's problem, named there.
+        if !window_problems(start_field, stop_field, *start, *stop).is_empty() {
+            continue;
+        }
         if *stop > last + slack {
-            return Err(outside(stop_field, *stop));
+            problems.push(outside(stop_field, *stop));
         }
         if *start < first - slack {
-            return Err(outside(start_field, *start));
+            problems.push(outside(start_field, *start));
         }
     }
-    Ok(())
+    problems
+}
+
+/// [`dataset_problems`]' first, as the refusal of a request.
+fn check_against_dataset(mapped: &Mapped, dataset: &DatasetInfo) -> Result<(), Status> {
+    match dataset_problems(mapped, dataset).first() {
+        Some(problem) => Err(problem.status()),
+        None => Ok(()),
+    }
 }
 
 /// The campaign message's name of a campaign file's field (`model.stop_time` is the
@@ -648,6 +1075,10 @@ impl Calibration for CalibrationApi {
                 request.idempotency_key.len()
             )));
         }
+        // Refused for what ValidateCampaign reports, the same checks on the same code.
+        if let Some(problem) = self.early_problems(&campaign).await?.first() {
+            return Err(problem.status());
+        }
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
@@ -656,6 +1087,20 @@ impl Calibration for CalibrationApi {
             .blocking(move || campaigns.submit_message(&text, key.as_deref(), message))
             .await?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
+    }
+
+    async fn validate_campaign(
+        &self,
+        request: Request<pb::ValidateCampaignRequest>,
+    ) -> Result<Response<pb::ValidateCampaignResponse>, Status> {
+        let campaign = request
+            .into_inner()
+            .campaign
+            .ok_or_else(|| Status::invalid_argument("campaign: missing"))?;
+        let problems = self.validate(&campaign).await?;
+        Ok(Response::new(pb::ValidateCampaignResponse {
+            problems: problems.iter().map(Problem::message).collect(),
+        }))
     }
 
     type WatchCampaignStream = StateStream;
@@ -803,6 +1248,11 @@ impl Calibration for CalibrationApi {
             },
         };
         settings.check().map_err(status)?;
+        // What SubmitCampaign would refuse, but the search, which an analysis does not use.
+        let early = self.early_problems(&campaign).await?;
+        if let Some(problem) = early.iter().find(|p| !p.field.starts_with("search")) {
+            return Err(problem.status());
+        }
         let text = self.campaign_file(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let receiver = self

@@ -309,6 +309,8 @@ pub fn campaign_message_on(
         .get("search")
         .and_then(|v| v.as_table())
         .map(|s| pb::Search {
+            // A file's [search] without `methods` takes its documented default, which the
+            // message states: the API refuses an empty list.
             methods: s
                 .get("methods")
                 .and_then(|v| v.as_array())
@@ -317,7 +319,12 @@ pub fn campaign_message_on(
                         .filter_map(|m| m.as_str().map(str::to_string))
                         .collect()
                 })
-                .unwrap_or_default(),
+                .unwrap_or_else(|| {
+                    crate::campaign::default_methods()
+                        .iter()
+                        .map(|m| m.name().to_string())
+                        .collect()
+                }),
             starts: uint(s, "starts"),
             max_evaluations: uint(s, "max_evaluations"),
             seed: uint(s, "seed").unwrap_or_default(),
@@ -512,6 +519,22 @@ step = 0.01
         let back: Table = file.parse().unwrap();
         let model = back["model"].as_table().unwrap();
         assert!(!model.contains_key("start_time") && !model.contains_key("step"));
+    }
+
+    /// A campaign file's `[search]` without `methods` keeps its documented default, stated in
+    /// the message (the API refuses an empty list); one without `[search]` sends none.
+    #[test]
+    fn a_files_default_methods_are_stated_in_the_message() {
+        let file = "[model]\nname = \"furuta\"\n[search]\nstarts = 2\n";
+        let message = campaign_message(file, "d").unwrap();
+        let search = message.search.unwrap();
+        assert_eq!(search.methods, ["nelder-mead"]);
+        assert_eq!(search.starts, Some(2));
+        let stated = "[model]\nname = \"furuta\"\n[search]\nmethods = [\"powell\"]\n";
+        let message = campaign_message(stated, "d").unwrap();
+        assert_eq!(message.search.unwrap().methods, ["powell"]);
+        let none = campaign_message("[model]\nname = \"furuta\"\n", "d").unwrap();
+        assert_eq!(none.search, None);
     }
 
     /// Inputs, disjoint windows and experiments travel through the message and back into a

@@ -156,7 +156,8 @@ pub(super) struct SearchSection {
     pub(super) screening: Option<usize>,
 }
 
-pub(super) fn default_methods() -> Vec<Method> {
+/// The methods of a `[search]` that names none.
+pub fn default_methods() -> Vec<Method> {
     vec![Method::NelderMead]
 }
 pub(super) fn default_starts() -> usize {

@@ -10,6 +10,7 @@ mod resolve;
 use calib_worker::content_hash::ContentHasher;
 pub use calib_worker::inputs::Interpolation;
 use calib_worker::{Model, SolverOptions};
+pub use file::default_methods;
 pub use resolve::MAX_EXPERIMENTS;
 use resolve::{resolve, Locator};
 use serde::Deserialize;

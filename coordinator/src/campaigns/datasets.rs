@@ -27,6 +27,61 @@ pub struct DatasetInfo {
     pub stop_time: f64,
 }
 
+/// Most columns tried as the time axis when guessing it by its values.
+pub const MAX_GUESS_COLUMNS: usize = 64;
+
+/// Whether a column's name says it holds time: "time" or "t" in any case, or "time" followed
+/// by a unit or a separator ("time_s", "Time [s]", "time (s)").
+fn named_time(name: &str) -> bool {
+    let lower = name.trim().to_ascii_lowercase();
+    if lower == "time" || lower == "t" {
+        return true;
+    }
+    lower
+        .strip_prefix("time")
+        .and_then(|rest| rest.chars().next())
+        .is_some_and(|c| !c.is_ascii_alphanumeric())
+}
+
+/// The time column of the file `file_name` (its content `bytes`) when its upload names none:
+/// the first column named as time ([`named_time`]) that reads as a time axis, else the first
+/// of its first [`MAX_GUESS_COLUMNS`] columns that does (its values finite and strictly
+/// increasing). An error when the file does not parse or no column qualifies.
+pub fn guess_time_column(file_name: &str, bytes: &[u8]) -> Result<String> {
+    const NONE: &str = "\u{0}no such column\u{0}";
+    let path = Path::new(file_name);
+    let names = match Measurement::from_bytes(path, bytes, NONE, &[]) {
+        Err(crate::measurement::MeasurementError::MissingColumn {
+            available, column, ..
+        })
+        | Err(crate::measurement::MeasurementError::MissingVariable {
+            available,
+            variable: column,
+            ..
+        }) if column == NONE => available,
+        Err(e) => return Err(e.into()),
+        Ok(_) => Vec::new(),
+    };
+    let reads_as_time = |name: &str| Measurement::from_bytes(path, bytes, name, &[]).is_ok();
+    let named = names.iter().filter(|n| named_time(n));
+    let rest = names.iter().take(MAX_GUESS_COLUMNS);
+    for name in named.chain(rest) {
+        if reads_as_time(name) {
+            return Ok(name.clone());
+        }
+    }
+    Err(Error::InvalidRequest(format!(
+        "time_column: no column of {file_name} reads as time (named \"time\" or \"t\", or \
+         increasing from sample to sample); its columns are: {}",
+        names
+            .iter()
+            .take(20)
+            .map(|n| format!("{n:?}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )))
+}
+
 /// The folder of uploaded datasets.
 #[derive(Debug, Clone)]
 pub struct Datasets {
@@ -48,8 +103,9 @@ impl Datasets {
         Ok(Self { folder })
     }
 
-    /// Parse `bytes` as the file `file_name` with its time in `time_column` and keep it.
-    /// The same bytes give the same id; storing them again changes nothing.
+    /// Parse `bytes` as the file `file_name` with its time in `time_column` (empty: the
+    /// column [`guess_time_column`] finds) and keep it. The same bytes on the same time
+    /// column give the same id; storing them again changes nothing.
     pub fn put(&self, file_name: &str, time_column: &str, bytes: &[u8]) -> Result<DatasetInfo> {
         let extension = Path::new(file_name)
             .extension()
@@ -69,6 +125,13 @@ impl Datasets {
                 MAX_DATASET_BYTES
             )));
         }
+        let guessed;
+        let time_column = if time_column.is_empty() {
+            guessed = guess_time_column(file_name, bytes)?;
+            guessed.as_str()
+        } else {
+            time_column
+        };
         let id = dataset_id(time_column, bytes);
         // A record whose file does not match it (a crash between the two renames of an
         // older version, a file edited by hand) is written again below.
@@ -235,6 +298,43 @@ mod tests {
         assert_eq!(kept, 2, "only the good dataset and its record");
         assert_eq!(d.get("not-an-id").unwrap(), None);
         assert_eq!(d.get(&"0".repeat(64)).unwrap(), None);
+    }
+
+    /// An upload naming no time column gets the column named as time, else the first one
+    /// increasing from sample to sample; a file with neither is refused, naming its columns.
+    #[test]
+    fn the_time_column_is_guessed_by_its_name_then_by_its_values() {
+        let named = b"arm,Time [s],pendulum\n0.3,0,1\n0.2,0.5,2\n0.1,1,3\n";
+        assert_eq!(guess_time_column("rig.csv", named).unwrap(), "Time [s]");
+        for header in ["t", "TIME", "time_s", "Time (s)"] {
+            let csv = format!("x,{header}\n5,0\n4,1\n");
+            assert_eq!(guess_time_column("r.csv", csv.as_bytes()).unwrap(), header);
+        }
+        // "timer" and "timestamp_id" are not named as time; the first increasing column is.
+        let by_values = b"timer,angle,stamp\n3,0.5,10\n2,0.4,11\n1,0.3,12\n";
+        assert_eq!(guess_time_column("r.csv", by_values).unwrap(), "stamp");
+        // A column named time that does not increase is passed over.
+        let bad_name = b"time,s\n0,0\n0,1\n";
+        assert_eq!(guess_time_column("r.csv", bad_name).unwrap(), "s");
+        let none = b"a,b\n1,2\n0,2\n";
+        let err = guess_time_column("flat.csv", none).unwrap_err().to_string();
+        assert!(
+            err.starts_with("time_column:") && err.contains("\"a\", \"b\""),
+            "{err}"
+        );
+
+        // Kept under the guessed column: the same dataset as an upload naming it.
+        let dir = tempfile::tempdir().unwrap();
+        let d = Datasets::open(dir.path()).unwrap();
+        let guessed = d.put("rig.csv", "", named).unwrap();
+        assert_eq!(guessed.time_column, "Time [s]");
+        assert_eq!(guessed.columns, ["arm", "pendulum"]);
+        assert_eq!((guessed.start_time, guessed.stop_time), (0.0, 1.0));
+        assert_eq!(d.put("rig.csv", "Time [s]", named).unwrap(), guessed);
+        // Another time column is another dataset, the guessed one among its columns.
+        let other = d.put("rig.csv", "pendulum", named).unwrap();
+        assert_ne!(other.id, guessed.id);
+        assert_eq!(other.columns, ["arm", "Time [s]"]);
     }
 
     #[test]

@@ -259,6 +259,16 @@ impl Campaigns {
         message
     }
 
+    /// The campaign file `spec` resolved, its measurement loaded, and both checked against
+    /// each other (the window and the weights against the data), as [`Campaigns::submit`]
+    /// checks a campaign before starting it; nothing is started.
+    pub fn check(&self, spec: &str) -> Result<(Campaign, crate::measurement::Measurement)> {
+        let campaign = Campaign::parse(spec, &self.source())?;
+        let measurement = calibration::load_measurement(&campaign)?;
+        Objective::new(&campaign, &measurement)?;
+        Ok((campaign, measurement))
+    }
+
     /// Start the campaign file `spec` (its measurement a dataset of this coordinator),
     /// unless it is known already; its id, and whether it was started now.
     pub fn submit(
@@ -281,10 +291,7 @@ impl Campaigns {
         if let Some(id) = idempotency_key.and_then(|k| keys.get(k)) {
             return Ok((hex(id), false));
         }
-        let campaign = Campaign::parse(spec, &self.source())?;
-        let measurement = calibration::load_measurement(&campaign)?;
-        // The window and the weights checked against the data now, not once running.
-        Objective::new(&campaign, &measurement)?;
+        let (campaign, measurement) = self.check(spec)?;
         let id = campaign.identity(&measurement.content_hash());
         if let Some(k) = idempotency_key {
             keys.insert(k.to_string(), id);

@@ -65,6 +65,8 @@ const SCRIPTS: &[(&str, &str)] = &[
     ("route.js", include_str!("assets/js/route.js")),
     ("runs.js", include_str!("assets/js/runs.js")),
     ("reopen.js", include_str!("assets/js/reopen.js")),
+    ("forms.js", include_str!("assets/js/forms.js")),
+    ("compare.js", include_str!("assets/js/compare.js")),
 ];
 const APP_CSS: &str = include_str!("assets/app.css");
 
@@ -137,6 +139,7 @@ impl WebApp {
             )
             .route("/api/v1/GetFmu", post(get_fmu))
             .route("/api/v1/SubmitCampaign", post(submit_campaign))
+            .route("/api/v1/ValidateCampaign", post(validate_campaign))
             .route("/api/v1/GetCampaign", post(get_campaign))
             .route("/api/v1/ListCampaigns", post(list_campaigns))
             .route("/api/v1/CancelCampaign", post(cancel_campaign))
@@ -325,6 +328,12 @@ unary!(
     calibration,
     submit_campaign,
     pb::SubmitCampaignRequest
+);
+unary!(
+    validate_campaign,
+    calibration,
+    validate_campaign,
+    pb::ValidateCampaignRequest
 );
 unary!(
     get_campaign,

@@ -394,6 +394,15 @@ impl Model for FmuModel {
         options
     }
 
+    /// The `DefaultExperiment`'s stop time, when it gives one after its start.
+    fn default_stop_time(&self) -> f64 {
+        let start = self.description.default_start_time.unwrap_or(0.0);
+        self.description
+            .default_stop_time
+            .filter(|t| t.is_finite() && *t > start)
+            .unwrap_or(crate::model::DEFAULT_STOP_TIME)
+    }
+
     fn tolerance_origin(&self) -> &'static str {
         if self.own_tolerance().is_some() {
             "the FMU's default experiment"

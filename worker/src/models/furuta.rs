@@ -277,6 +277,11 @@ impl Model for Furuta {
         &self.info
     }
 
+    /// The 40 s free swing of the rig's records.
+    fn default_stop_time(&self) -> f64 {
+        40.0
+    }
+
     fn simulate(
         &self,
         params: &[f64],

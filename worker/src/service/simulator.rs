@@ -293,6 +293,7 @@ pub fn describe(model: &dyn Model) -> proto::ModelDescription {
             communication_step: solver.communication_step,
         }),
         tolerance_origin: model.tolerance_origin().to_string(),
+        default_stop_time: model.default_stop_time(),
         inputs: info
             .inputs
             .iter()

@@ -660,6 +660,11 @@ impl Model for HxModel {
         &self.info
     }
 
+    /// The 300 s bench cycle.
+    fn default_stop_time(&self) -> f64 {
+        300.0
+    }
+
     /// rtol 1e-6: over the 300 s bench cycle its outputs stay within 3.5 Pa and 0.75 W of a
     /// run at 1e-8 (`hx_highfi`), far below what pressure and heat-flow sensors resolve,
     /// at half the steps. Integrated by RKC since (see the module documentation): within

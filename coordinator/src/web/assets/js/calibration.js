@@ -1,7 +1,9 @@
 // The Calibration tab: the form, the campaign's progress, its result and the list of campaigns.
 import { clearProfiles } from "./analysis.js";
-import { $, PHASES, app, bound, call, el, figure, fmt, follow, modelInputs, number, plot, showError } from "./common.js";
-import { experimentName, inputMessages, inputRows, renderExperiments } from "./experiments.js";
+import { $, PHASES, app, bound, call, el, figure, fmt, follow, modelInputs, plot, showError } from "./common.js";
+import { compareBox, ticked } from "./compare.js";
+import { inputRows, renderExperiments } from "./experiments.js";
+import { campaignDraft, clearProblems, problemSummary, validateNow } from "./forms.js";
 import { modelValue } from "./model.js";
 import { fillForm } from "./reopen.js";
 import { writeRoute } from "./route.js";
@@ -32,6 +34,8 @@ export function renderCalibration() {
       fit.checked = old.querySelector(`#fit-${CSS.escape(o.name)}`).checked;
       const was = old.querySelector("select").value;
       if ([...column.options].some((x) => x.value === was)) column.value = was;
+      // A mapping whose column the measurement no longer has is no longer fitted.
+      else if (was) fit.checked = false;
       weight.value = old.querySelector('input[type="number"]').value;
       scale.value = old.querySelectorAll("select")[1].value;
     }
@@ -70,77 +74,31 @@ export function renderCalibration() {
   renderExperiments();
 }
 
-// The Campaign message of the form: field for field a campaign file.
+// The Campaign message of the form: field for field a campaign file ([campaignDraft]); an
+// error when a field holds no number or no model is chosen.
 export function campaignMessage() {
-  const model = app.model, dataset = app.dataset;
-  if (!model) throw new Error("choose a model on the Model tab");
-  if (!dataset) throw new Error("upload a measurement on the Measurement tab");
-  const outputs = model.outputs
-    .filter((o) => $(`fit-${o.name}`).checked)
-    .map((o) => {
-      const measured = $(`measured-${o.name}`).value;
-      if (!measured) throw new Error(`${o.name}: pick the measured column it is compared with`);
-      return { model: o.name, measured, weight: number(`weight-${o.name}`), scale: $(`scale-${o.name}`).value };
-    });
-  const free = model.parameters.filter((p) => $(`free-${p.name}`).checked);
-  const parameters = free.map((p) => ({
-    name: p.name, nominal: number(`nominal-${p.name}`), min: number(`min-${p.name}`),
-    max: number(`max-${p.name}`), scale: $(`pscale-${p.name}`).value,
-  }));
-  const fixed = {};
-  for (const p of model.parameters) {
-    if (!free.includes(p) && modelValue(p) !== p.default_value) fixed[p.name] = modelValue(p);
+  const draft = campaignDraft();
+  if (draft.local.length) {
+    const [first] = draft.local;
+    const box = $(first.id);
+    throw new Error(`${(box && box.getAttribute("aria-label")) || first.id}: ${first.message}`);
   }
-  const methods = [...document.querySelectorAll('input[name="method"]:checked')].map((m) => m.value);
-  const windowStop = number("window-stop");
-  const inputs = inputMessages("");
-  const message = {
-    name: $("campaign-name").value.trim(),
-    model: model.name,
-    fmu_id: app.fmus[model.name] ? app.fmus[model.name].id : "",
-    stop_time: windowStop,
-    model_parameters: fixed,
-    dataset_id: dataset.id,
-    outputs,
-    inputs,
-    parameters,
-    window_start: number("window-start"),
-    window_stop: windowStop,
-    search: {
-      methods,
-      starts: Math.round(number("starts")),
-      max_evaluations: Math.round(number("max-evaluations")),
-      seed: Math.round(number("seed")),
-    },
-  };
-  if (!app.experiments.length) return message;
-  // Several records: the first is the experiment of the fields above, each card another.
-  const experiments = [{
-    name: $("experiment-name").value.trim(), dataset_id: dataset.id,
-    windows: [{ start: message.window_start, stop: windowStop }], inputs,
-  }];
-  for (const [k, x] of app.experiments.entries()) {
-    const name = experimentName(x) || `experiment ${k + 2}`;
-    if (!x.dataset) throw new Error(`experiment ${name}: upload its record first`);
-    const own = {};
-    for (const row of $(`${x.prefix}fixed`).tBodies[0].rows) {
-      own[row.querySelector("select").value] = number(`${row.dataset.fixed}-value`);
-    }
-    experiments.push({
-      name, dataset_id: x.dataset.id,
-      windows: [{ start: number(`${x.prefix}window-start`), stop: number(`${x.prefix}window-stop`) }],
-      fixed: own, inputs: inputMessages(x.prefix),
-    });
-  }
-  return { ...message, dataset_id: "", window_start: 0, window_stop: 0, inputs: [], experiments };
+  return draft.campaign;
 }
 
+// Start the campaign of the form, once the server finds nothing wrong with it: otherwise
+// each problem is shown next to its field and listed in the error box, and nothing starts.
 export async function start() {
   showError("calibration-error", "");
-  let campaign;
-  try { campaign = campaignMessage(); } catch (e) { showError("calibration-error", e.message); return; }
+  clearProblems();
+  const problems = await validateNow();
+  if (problems === null) return; // the check itself failed: its error is shown
+  if (problems.length) {
+    showError("calibration-error", problemSummary(problems));
+    return;
+  }
   try {
-    const { id, started } = await call("SubmitCampaign", { campaign });
+    const { id, started } = await call("SubmitCampaign", { campaign: campaignDraft().campaign });
     $("calibration-status").textContent = started ? "started" : "known already: showing it";
     watch(id);
   } catch (e) {
@@ -154,7 +112,7 @@ export function describeState(s) {
   const runs = s.runs || [];
   let text = `${s.name}: ${PHASES[s.phase] || s.phase}, ${s.evaluations} evaluations, best objective ${fmt(s.best_objective)}`;
   if (runs.length) text += `, ${runs.filter((r) => r.at_best).length} of ${runs.length} runs at the best`;
-  if (s.failure) text += ` (${s.failure})`;
+  // Why it failed goes to the error box (showFailure), not here.
   return text;
 }
 
@@ -163,6 +121,7 @@ export function describeState(s) {
 function showState(s) {
   app.campaign = s;
   $("calibration-status").textContent = describeState(s);
+  showFailure(s);
   if ((s.history || []).length) drawProgress();
   showRuns(s, parameterNames(s));
   $("campaign-actions").hidden = s.phase === 1 || !s.campaign;
@@ -175,6 +134,11 @@ function parameterNames(s) {
   if (s.result_json) return JSON.parse(s.result_json).free_parameters.map((p) => p.name);
   const c = s.campaign || {};
   return [...(c.parameters || []), ...(c.effects || [])].map((p) => p.name);
+}
+
+// A failed campaign's reason, in the error box.
+export function showFailure(s) {
+  if (s.failure) showError("calibration-error", s.failure);
 }
 
 export function watch(id) {
@@ -219,13 +183,13 @@ export async function drawProgress() {
         label: run ? run.label : `run ${r + 1}`, x,
         y: history.map((h) => {
           const v = (h.run_best || [])[r];
-          return v === null || v === undefined || !(v > 0) ? null : Math.log10(v);
+          return v === null || v === undefined || !(v > 0) ? null : v;
         }),
       });
     }
     const svg = await plot({
       title: "best objective of each run", x_label: "evaluations (all runs)",
-      y_label: "log10 of the best objective", series,
+      y_label: "best objective", y_scale: "log", direct_labels: runs <= 12, series,
     });
     if (app.campaign && app.campaign.id === s.id) {
       $("progress-plot").replaceChildren(figure(svg, "progress: best objective of each run over the evaluations"));
@@ -384,6 +348,7 @@ export async function refreshCampaigns() {
       token = page.next_page_token;
     } while (token);
     const body = $("campaigns").tBodies[0];
+    const wasTicked = new Set(ticked());
     body.replaceChildren();
     const select = $("diagnosis-campaign");
     const chosen = select.value || app.campaignId;
@@ -391,7 +356,7 @@ export async function refreshCampaigns() {
     for (const s of all) {
       const open = el("button", { type: "button", text: "Open", "aria-label": `open campaign ${s.name} ${s.id.slice(0, 8)}` });
       open.addEventListener("click", () => openCampaign(s.id));
-      body.append(el("tr", {},
+      body.append(el("tr", {}, compareBox(s, wasTicked.has(s.id)),
         el("td", { text: s.name }), el("td", { text: PHASES[s.phase] || String(s.phase) }),
         el("td", { class: "num", text: String(s.evaluations) }),
         el("td", { class: "num", text: fmt(s.best_objective) }),

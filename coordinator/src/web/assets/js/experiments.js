@@ -54,7 +54,7 @@ export function addExperiment() {
     el("div", { class: "row" },
       field("Name", { type: "text", id: `${x}name`, value: `record${n}` }),
       field("File (CSV, or MAT)", { type: "file", id: `${x}file`, accept: ".csv,.txt,.mat" }),
-      field("Time column", { type: "text", id: `${x}time`, value: $("measurement-time").value.trim() || "time" }),
+      field("Time column", { type: "text", id: `${x}time`, value: app.dataset ? app.dataset.time_column : "", placeholder: "guessed from the file" }),
       uploadButton, remove),
     el("p", { id: `${x}status`, role: "status", "aria-live": "polite" }),
     el("div", { id: `${x}error`, class: "error", role: "alert", hidden: true }),
@@ -137,7 +137,8 @@ export async function uploadExperiment(experiment) {
   showError(`${x}error`, "");
   const file = $(`${x}file`).files[0];
   if (!file) { showError(`${x}error`, "choose a file first"); return; }
-  const time = $(`${x}time`).value.trim() || "time";
+  const time = $(`${x}time`).value.trim();
+  const before = $(`${x}status`).textContent;
   $(`${x}status`).textContent = `uploading ${file.name}…`;
   try {
     const query = `file_name=${encodeURIComponent(file.name)}&time_column=${encodeURIComponent(time)}`;
@@ -147,16 +148,17 @@ export async function uploadExperiment(experiment) {
     });
     dataset.file_name = file.name;
     experiment.dataset = dataset;
+    $(`${x}time`).value = dataset.time_column;
     $(`${x}status`).textContent =
       `${file.name}: ${dataset.samples} samples from ${fmt(dataset.start_time)} s to ${fmt(dataset.stop_time)} s; ` +
+      `time in ${dataset.time_column}${dataset.time_column_guessed ? " (guessed: type another and upload again if it is not the time)" : ""}; ` +
       `columns ${dataset.columns.join(", ")}`;
     $(`${x}window-start`).value = String(dataset.start_time);
     $(`${x}window-stop`).value = String(dataset.stop_time);
     renderExperiments();
   } catch (e) {
-    experiment.dataset = null;
-    $(`${x}status`).textContent = "";
+    // The record uploaded before, if any, stays this experiment's.
+    $(`${x}status`).textContent = experiment.dataset ? before : "";
     showError(`${x}error`, e.message);
-    renderExperiments();
   }
 }

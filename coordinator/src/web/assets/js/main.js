@@ -6,9 +6,11 @@
 import { analyse, profileParameters } from "./analysis.js";
 import { cancel, editAndRerun, openCampaign, refreshCampaigns, start, useValues } from "./calibration.js";
 import { $, app, showError, showLogin } from "./common.js";
+import { compareTicked } from "./compare.js";
 import { diagnose } from "./diagnosis.js";
 import { addExperiment } from "./experiments.js";
-import { plotColumns, restoreDataset, upload } from "./measurement.js";
+import { setUpValidation } from "./forms.js";
+import { plotColumns, restoreDataset, setUpTimeColumn, upload } from "./measurement.js";
 import { loadModels, setUpFmuDrop, simulate } from "./model.js";
 import { readRoute, writeRoute } from "./route.js";
 
@@ -110,6 +112,9 @@ $("start").addEventListener("click", start);
 $("add-experiment").addEventListener("click", addExperiment);
 $("cancel").addEventListener("click", cancel);
 $("refresh-campaigns").addEventListener("click", refreshCampaigns);
+$("compare").addEventListener("click", compareTicked);
+setUpValidation();
+setUpTimeColumn();
 $("diagnose").addEventListener("click", diagnose);
 $("analyse").addEventListener("click", analyse);
 $("profile").addEventListener("click", profileParameters);

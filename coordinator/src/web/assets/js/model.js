@@ -81,6 +81,9 @@ export async function describe(name) {
   showError("model-error", "");
   const model = app.fmus[name] ? app.fmus[name].model : (await call("Describe", { model: name })).model;
   app.model = model;
+  // The stop time follows the model: how long it usually runs (its own record's length, an
+  // FMU's default experiment), as the server describes it.
+  if (model.default_stop_time > 0) $("model-stop").value = String(model.default_stop_time);
   $("model-description").textContent = `${model.name} (version ${model.version}): ${model.description}`;
   const body = $("model-parameters").tBodies[0];
   body.replaceChildren();
