@@ -381,7 +381,7 @@ fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
     let last = body
         .lines()
         .filter_map(|l| l.strip_prefix("data: "))
-        .last()
+        .next_back()
         .unwrap();
     let state: pb::CampaignState = serde_json::from_str(last).unwrap();
     assert_eq!(state.phase, pb::CampaignPhase::Finished as i32, "{state:?}");

@@ -930,7 +930,6 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
     assert!(best <= 0.5, "{best}");
 }
 
-
 /// Run `tests/python/web_forms.py` in `mode` with `args`; what it read off the page.
 fn drive_forms(mode: &str, args: &[&str], dir: &std::path::Path) -> Value {
     let out = dir.join(format!("{mode}.json"));
