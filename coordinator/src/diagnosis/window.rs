@@ -36,9 +36,14 @@ pub fn windows(campaign: &Campaign, measurement: &Measurement) -> Result<((f64, 
 }
 
 /// `campaign` over another time window.
+/// The objective reads the fitted intervals (`windows`), so both change; the campaign's own
+/// window keeps its intervals (disjoint ones included).
 pub(super) fn with_window(campaign: &Campaign, window: (f64, f64)) -> Campaign {
     let mut c = campaign.clone();
-    c.window = window;
+    if window != c.window {
+        c.window = window;
+        c.windows = vec![window];
+    }
     c
 }
 
@@ -97,5 +102,23 @@ mod tests {
             windows(&c, &record(40.0)).unwrap(),
             ((0.0, 30.0), (30.5, 37.5))
         );
+    }
+
+    #[test]
+    fn the_held_out_objective_reads_only_the_held_out_window() {
+        let c = example("furuta_viscous_arm.toml");
+        let measurement = crate::calibration::load_measurement(&c).unwrap();
+        let (fit, held_out) = windows(&c, &measurement).unwrap();
+        for window in [fit, held_out] {
+            let objective =
+                crate::objective::Objective::new(&with_window(&c, window), &measurement).unwrap();
+            let (first, last) = (objective.grid[0], *objective.grid.last().unwrap());
+            assert!(
+                first >= window.0 - 1e-9 && last <= window.1 + 1e-9,
+                "{window:?}: grid from {first} to {last}"
+            );
+        }
+        // The campaign's own window leaves its intervals as they are.
+        assert_eq!(with_window(&c, c.window).windows, c.windows);
     }
 }
