@@ -258,10 +258,23 @@ fn an_fmu_uploaded_in_chunks_is_named_by_its_hash_and_described() {
 
     // A campaign naming an FMU the coordinator lacks, or a model the FMU does not have.
     let campaign = |fmu_id: &str, model: &str| pb::SubmitCampaignRequest {
+        // Complete but for the FMU and model named: those are what is refused.
         campaign: Some(pb::Campaign {
             model: model.into(),
             fmu_id: fmu_id.into(),
             dataset_id: "0".repeat(64),
+            outputs: vec![pb::Output {
+                model: "x0".into(),
+                measured: "h".into(),
+                ..Default::default()
+            }],
+            parameters: vec![pb::Parameter {
+                name: "mu".into(),
+                min: 0.1,
+                max: 5.0,
+                ..Default::default()
+            }],
+            window_stop: 2.0,
             ..Default::default()
         }),
         idempotency_key: String::new(),

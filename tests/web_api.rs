@@ -272,9 +272,22 @@ fn json_routes_fail_with_the_rpcs_status_and_message() {
     let message = error["message"].as_str().unwrap();
     assert!(message.starts_with("data: rig.csv line 3"), "{message}");
 
+    // Complete but for its dataset: the reference to nothing is what is refused.
     let mut campaign = pb::Campaign {
         model: "furuta".into(),
         dataset_id: "0".repeat(64),
+        outputs: vec![pb::Output {
+            model: "armJoint.phi".into(),
+            measured: "arm_angle_rad".into(),
+            ..Default::default()
+        }],
+        parameters: vec![pb::Parameter {
+            name: "armFriction".into(),
+            min: 0.0,
+            max: 0.9,
+            ..Default::default()
+        }],
+        window_stop: 10.0,
         ..Default::default()
     };
     let (code, body) = post(

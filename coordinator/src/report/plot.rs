@@ -446,11 +446,11 @@ mod tests {
         assert_eq!(
             a.x_ticks,
             [
-                "nelder-mead #5",
+                "nelder-mead #4",
                 "nelder-mead #0",
                 "nelder-mead #1",
-                "nelder-mead #3",
-                "nelder-mead #4"
+                "nelder-mead #2",
+                "nelder-mead #3"
             ]
         );
         assert_eq!(a.y_scale, "log");

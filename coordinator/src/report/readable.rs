@@ -143,7 +143,7 @@ fn progress_plots_use_a_log_axis_across_decades() {
             assert!(a.y_ticks.len() >= 5, "{:?}", a.y_ticks);
             assert!(a.y_ticks.iter().all(decade), "{:?}", a.y_ticks);
         }
-        assert!(svg.contains("differential-evolution #4"), "runs named");
+        assert!(svg.contains("differential-evolution #3"), "runs named");
         // Twelve runs, twelve different looks (colour and dash pattern).
         let looks: std::collections::BTreeSet<String> = svg
             .split("<polyline")
