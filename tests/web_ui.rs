@@ -675,6 +675,7 @@ seed = 1
     );
     assert!(!model["undriven"].to_string().contains("input"), "{model}");
     assert_eq!(model["arm_differs"], true, "{model}");
+    assert_eq!(model["overlaid_previous"], true, "{model}");
     let (arm, pendulum) = common::true_frictions();
     for (name, truth) in [("armFriction", arm), ("pendulumFriction", pendulum)] {
         let expected = best_parameter(&reference_text, name);
@@ -1134,6 +1135,23 @@ fn two_finished_campaigns_are_compared_side_by_side() {
         page["not_calibrated"], 1,
         "pendulumFriction in arm-only: {page}"
     );
+    // Each fitted output's fits overlaid on the measured data once, both campaigns named in
+    // the legend with their objectives.
+    let overlays = page["overlays"].as_array().unwrap();
+    let outputs: Vec<&str> = overlays
+        .iter()
+        .map(|o| o["output"].as_str().unwrap())
+        .collect();
+    assert_eq!(outputs, ["armJoint.phi", "pendulumJoint.phi"], "{page}");
+    for o in overlays {
+        let legend = o["legend"].as_str().unwrap();
+        assert!(
+            legend.contains("arm-only: objective")
+                && legend.contains("both: objective")
+                && legend.contains("measured"),
+            "{legend}"
+        );
+    }
     // One row per fitted output, both campaigns' plots in it.
     let rows = page["plot_rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{page}");

@@ -185,6 +185,7 @@ def compare(url, data, shot, out):
         wait(driver).until(lambda d: by_id(d, "comparison").is_displayed())
         no_error(driver, "compare-error")
         wait(driver).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#comparison-plots .compare-row"))
+        wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, "#comparison-overlays .overlay-row svg")) >= 2)
         read = driver.execute_script("""return (async () => {
             const heads = [...document.querySelectorAll('#comparison-table thead th[data-campaign]')];
             const ids = heads.map(h => h.dataset.campaign);
@@ -203,6 +204,8 @@ def compare(url, data, shot, out):
                 value: c.dataset.value, low: c.dataset.low, high: c.dataset.high, text: c.textContent})),
               not_calibrated: cell('#comparison-table td').filter(c => c.textContent === 'not calibrated').length,
               rows: cell('#comparison-table tbody th').map(h => h.textContent),
+              overlays: cell('#comparison-overlays .overlay-row').map(r => ({output: r.dataset.output,
+                legend: [...r.querySelectorAll('svg text')].map(t => t.textContent).join('|')})),
               plot_rows: cell('#comparison-plots .compare-row').map(r => ({plot: r.dataset.plot,
                 figures: r.querySelectorAll('figure svg').length,
                 captions: [...r.querySelectorAll('figcaption')].map(f => f.textContent)})),

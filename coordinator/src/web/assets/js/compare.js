@@ -76,8 +76,33 @@ function showComparison(states) {
     row(name, cells, { "data-parameter": name });
   }
   showComparedPlots(states);
+  showOverlays(states);
   $("comparison").hidden = false;
   $("comparison").scrollIntoView({ block: "start" });
+}
+
+// Each output every campaign compares, its fits drawn over the measured data once
+// (POST /ui/compare: the server draws, the first campaign's record and windows).
+async function showOverlays(states) {
+  const holder = $("comparison-overlays");
+  holder.replaceChildren();
+  const outputs = (s) => Object.keys((JSON.parse(s.result_json).best || {}).rms || {});
+  const shared = outputs(states[0]).filter((o) => states.every((s) => outputs(s).includes(o)));
+  for (const output of shared) {
+    try {
+      const response = await fetch("/ui/compare", {
+        method: "POST",
+        headers: { "Content-Type": "application/json" },
+        body: JSON.stringify({ campaigns: states.map((s) => s.id), output }),
+      });
+      const text = await response.text();
+      if (!response.ok) throw new Error(JSON.parse(text).message);
+      holder.append(el("div", { class: "overlay-row", "data-output": output },
+        figure(text, `${output}: ${states.map((s) => s.name).join(", ")} over the measured data`)));
+    } catch (e) {
+      showError("compare-error", `${output}: ${e.message}`);
+    }
+  }
 }
 
 // Each fit plot of the campaigns (measured, nominal and calibrated, per output), the

@@ -211,14 +211,29 @@ export async function simulate() {
       });
       plots.append(figure(svg, `input ${d.input.name} driven by ${d.column}`));
     }
+    // The previous simulation of the same model and output stays, dashed underneath: a
+    // before/after of the values changed since.
+    const previous = app.lastSimulation && app.lastSimulation.model === model.name ? app.lastSimulation : null;
     for (const s of answer.series) {
       const unit = (model.outputs.find((o) => o.name === s.output) || {}).unit || "";
+      const [x, y] = thin(answer.times, s.values);
+      const before = previous && previous.series[s.output];
       const svg = await plot({
-        title: `${model.name}: ${s.output}`, x_label: "time [s]", y_label: `${s.output} [${unit}]`,
-        series: [{ label: "simulated", x: answer.times, y: s.values }],
+        title: `${model.name}: ${s.output}`, x_label: "time [s]", y_label: unit ? `${s.output} [${unit}]` : s.output,
+        series: [{ label: before ? "this simulation" : "simulated", x, y }],
+        overlays: before ? [{ label: "previous", series: [{ label: previous.label, x: before.x, y: before.y }] }] : [],
       });
-      plots.append(figure(svg, `${s.output} simulated over ${fmt(stop)} s`));
+      plots.append(figure(svg, `${s.output} simulated over ${fmt(stop)} s${before ? ", the previous simulation dashed" : ""}`));
     }
+    const changed = parameters.map((p) => `${p.name}=${fmt(p.value)}`).join(", ");
+    app.lastSimulation = {
+      model: model.name,
+      label: changed || "defaults",
+      series: Object.fromEntries(answer.series.map((s) => {
+        const [x, y] = thin(answer.times, s.values);
+        return [s.output, { x, y }];
+      })),
+    };
     const st = answer.statistics || {};
     $("model-status").textContent = `simulated ${fmt(stop)} s: ${st.accepted_steps} steps, ${st.events} events`;
   } catch (e) {
