@@ -4,63 +4,14 @@
 
 mod common;
 
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
 use common::cluster::*;
+use common::coordinator::Coordinator;
 use common::*;
 use serde_json::Value;
 use std::path::Path;
 use tonic::transport::Channel;
-
-/// A coordinator on a store, dispatching to `workers`, on a runtime of the test's.
-struct Coordinator {
-    runtime: tokio::runtime::Runtime,
-    server: Option<RunningCoordinator>,
-}
-
-impl Coordinator {
-    fn start(dir: &Path, workers: &[String]) -> Self {
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap();
-        let mut config = CoordinatorConfig::new(
-            "127.0.0.1:0".parse().unwrap(),
-            calib_sandbox::cluster::dispatch_config(workers),
-        );
-        config.store = Some(dir.join("db"));
-        config.api = Some(dir.join("api"));
-        let server = runtime.block_on(async {
-            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            serve_coordinator(listener, config).unwrap()
-        });
-        Self {
-            runtime,
-            server: Some(server),
-        }
-    }
-
-    fn url(&self) -> String {
-        format!("http://{}", self.server.as_ref().unwrap().address())
-    }
-
-    fn client(&self) -> CalibrationClient<Channel> {
-        let url = self.url();
-        self.runtime
-            .block_on(async { CalibrationClient::connect(url).await })
-            .unwrap()
-    }
-}
-
-impl Drop for Coordinator {
-    fn drop(&mut self) {
-        if let Some(server) = self.server.take() {
-            self.runtime.block_on(server.shutdown());
-        }
-    }
-}
 
 fn upload(c: &Coordinator, file: &Path) -> pb::Dataset {
     let bytes = std::fs::read(file).unwrap();

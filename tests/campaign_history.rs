@@ -6,51 +6,23 @@
 
 mod common;
 
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
 use common::cluster::*;
+use common::coordinator::Coordinator;
 use common::*;
 use serde_json::Value;
-use std::path::Path;
 use std::time::Duration;
 
-/// A coordinator on the store in `dir`, in this process; shut down when dropped.
-struct Coordinator {
-    runtime: tokio::runtime::Runtime,
-    server: Option<RunningCoordinator>,
-}
-
+/// What these tests ask of the coordinator, over gRPC.
 impl Coordinator {
-    fn start(dir: &Path, workers: &[String]) -> Self {
-        let runtime = tokio::runtime::Builder::new_multi_thread()
-            .worker_threads(2)
-            .enable_all()
-            .build()
-            .unwrap();
-        let mut config = CoordinatorConfig::new(
-            "127.0.0.1:0".parse().unwrap(),
-            calib_sandbox::cluster::dispatch_config(workers),
-        );
-        config.store = Some(dir.join("db"));
-        config.api = Some(dir.join("api"));
-        let server = runtime.block_on(async {
-            let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            serve_coordinator(listener, config).unwrap()
-        });
-        Self {
-            runtime,
-            server: Some(server),
-        }
-    }
-
     fn grpc<T>(
         &self,
         call: impl AsyncFnOnce(
             CalibrationClient<tonic::transport::Channel>,
         ) -> Result<tonic::Response<T>, tonic::Status>,
     ) -> T {
-        let url = format!("http://{}", self.server.as_ref().unwrap().address());
+        let url = self.url();
         self.runtime.block_on(async {
             let client = CalibrationClient::connect(url).await.unwrap();
             call(client).await.map(tonic::Response::into_inner).unwrap()
@@ -86,14 +58,6 @@ impl Coordinator {
             self.state(id).phase() == phase
         });
         self.state(id)
-    }
-}
-
-impl Drop for Coordinator {
-    fn drop(&mut self) {
-        if let Some(server) = self.server.take() {
-            self.runtime.block_on(server.shutdown());
-        }
     }
 }
 

@@ -3,6 +3,7 @@
 #![allow(dead_code)]
 
 pub mod cluster;
+pub mod coordinator;
 pub mod pki;
 
 use std::path::{Path, PathBuf};
