@@ -42,6 +42,20 @@ impl Calibration {
         &self.runs[self.best]
     }
 
+    /// Each run's best point as the store keeps it with the campaign.
+    pub fn run_bests(&self) -> Vec<RunBest> {
+        self.runs
+            .iter()
+            .map(|r| RunBest {
+                method: r.method.name().into(),
+                start: r.start,
+                point: r.point.clone(),
+                objective: r.objective,
+                evaluations: r.evaluations,
+            })
+            .collect()
+    }
+
     /// Evaluations the optimisers asked for (the nominal point and the screening batch
     /// included).
     pub fn evaluations(&self) -> usize {
@@ -252,17 +266,7 @@ fn calibrate_measured<E: Evaluator>(
         elapsed: started.elapsed(),
     };
     record.status = CampaignStatus::Finished;
-    record.runs = calibration
-        .runs
-        .iter()
-        .map(|r| RunBest {
-            method: r.method.name().into(),
-            start: r.start,
-            point: r.point.clone(),
-            objective: r.objective,
-            evaluations: r.evaluations,
-        })
-        .collect();
+    record.runs = calibration.run_bests();
     record.result = Some(report::result_json(&calibration));
     store.put_campaign(&id, &record)?;
     Ok(calibration)

@@ -477,17 +477,7 @@ impl Campaigns {
                     s.best_objective = c.best_run().objective;
                     s.evaluations = c.evaluations() as u64;
                     s.history.record(s.evaluations, &s.run_best);
-                    s.runs = c
-                        .runs
-                        .iter()
-                        .map(|r| RunBest {
-                            method: r.method.name().into(),
-                            start: r.start,
-                            point: r.point.clone(),
-                            objective: r.objective,
-                            evaluations: r.evaluations,
-                        })
-                        .collect();
+                    s.runs = c.run_bests();
                     s.result = Some(result);
                     s.plots = plots;
                 });
