@@ -5,9 +5,9 @@
 use super::{verdict, Diagnosis, Fit, Verdict};
 use crate::error::{Error, Result};
 use crate::report::chart;
+use crate::report::chart::RGBColor;
 use crate::report::evidence::{self, bound_hits, bound_sentence};
 use crate::report::plot::{self, line_plot, sanitize, time_plot, Dash, Series};
-use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};
 use std::fmt::Write;
 use std::path::{Path, PathBuf};

@@ -4,9 +4,9 @@
 
 use super::{ParameterProfile, Profiles, SideProfile};
 use crate::error::{Error, Result};
+use crate::report::chart::RGBColor;
 use crate::report::chart::{self, Chart};
 use crate::report::plot::{sanitize, with_unit, Dash, Series};
-use plotters::style::RGBColor;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};

@@ -8,7 +8,6 @@
 //! `data-scale` of its `g` of class `axis-x` / `axis-y`.
 
 use super::ticks::{self, Ticks};
-use plotters::style::RGBColor;
 use std::fmt::Write;
 
 /// How an axis maps values.
@@ -102,6 +101,10 @@ impl<'a> Series<'a> {
         self
     }
 }
+
+/// A colour of the charts, as 8-bit red, green and blue.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RGBColor(pub u8, pub u8, pub u8);
 
 /// Colours of successive series (runs, campaigns).
 pub const PALETTE: [RGBColor; 10] = [

@@ -5,7 +5,7 @@ use super::chart::{self, Chart, Scale};
 use super::evidence::{best_threshold, BEST_TOLERANCE};
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
-use plotters::style::RGBColor;
+use crate::report::chart::RGBColor;
 use std::path::{Path, PathBuf};
 
 pub use super::chart::{Dash, Series};

@@ -6,8 +6,8 @@
 
 use super::chart::{anatomy, Anatomy, Bars};
 use super::plot::{comparison_svg, fit_svg, input_svg, waterfall_svg};
+use crate::report::chart::RGBColor;
 use crate::web::plots::{draw, PlotRequest, PlotSeries, SeriesSet};
-use plotters::style::RGBColor;
 
 /// `n` values from `lo` to `hi`, evenly spaced (`log`: evenly in log10).
 fn ramp(lo: f64, hi: f64, n: usize, log: bool) -> Vec<f64> {

@@ -4,9 +4,9 @@
 use super::Sensitivity;
 use crate::campaign::Scale;
 use crate::error::{Error, Result};
+use crate::report::chart::RGBColor;
 use crate::report::chart::{self, Bars as BarSet, Chart};
 use crate::report::plot::sanitize;
-use plotters::style::RGBColor;
 use serde_json::{json, Value};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
