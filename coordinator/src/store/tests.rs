@@ -20,6 +20,7 @@ fn evaluation(i: u64) -> Evaluation {
             objective: i as f64 * 0.1,
             sse: vec![i as f64, 1.0 / (i as f64 + 1.0)],
             failure: None,
+            residuals: Vec::new(),
         }
     }
 }
@@ -278,6 +279,7 @@ impl Evaluator for Counting {
                 objective: p.iter().sum(),
                 sse: vec![p.iter().sum()],
                 failure: None,
+                residuals: Vec::new(),
             })
             .collect())
     }
@@ -799,6 +801,7 @@ impl Evaluator for AnswersShort {
                 objective: p[0],
                 sse: vec![p[0]],
                 failure: None,
+                residuals: Vec::new(),
             })
             .collect())
     }
