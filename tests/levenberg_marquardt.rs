@@ -50,10 +50,11 @@ fn relative(a: f64, b: f64) -> f64 {
 }
 
 /// Levenberg–Marquardt and Nelder–Mead from the nominal point of `name`: LM comes within 1%
-/// of the better of the two in at most 25 rounds, and both end at the same optimum
-/// (objective within `objective_tolerance`, each parameter within `parameter_tolerance`,
-/// relative).
-fn matches_nelder_mead(name: &str, parameter_tolerance: f64, objective_tolerance: f64) {
+/// of the better of the two in at most 25 rounds and fewer evaluations, ends at an objective
+/// no higher than Nelder–Mead's (to 1e-9, relative) with each parameter within
+/// `parameter_tolerance` of Nelder–Mead's (relative), at a local minimum: moving any
+/// parameter by ±10⁻⁴ of itself raises the objective.
+fn matches_nelder_mead(name: &str, parameter_tolerance: f64) {
     let dir = tempfile::tempdir().unwrap();
     let (lm, batches) = calibrate_counting(&example(
         dir.path(),
@@ -97,7 +98,7 @@ fn matches_nelder_mead(name: &str, parameter_tolerance: f64, objective_tolerance
     assert!(a.termination.starts_with("converged"), "{}", a.termination);
     assert_eq!(a.stop, Stop::Minimum);
     assert!(
-        relative(a.objective, b.objective) <= objective_tolerance,
+        a.objective <= b.objective * (1.0 + 1e-9),
         "{} vs {}",
         a.objective,
         b.objective
@@ -111,24 +112,40 @@ fn matches_nelder_mead(name: &str, parameter_tolerance: f64, objective_tolerance
         a.evaluations,
         b.evaluations
     );
+    for k in 0..a.point.len() {
+        for share in [-1e-4, 1e-4] {
+            let mut p = a.point.clone();
+            p[k] *= 1.0 + share;
+            let moved = lm.objective.evaluate(&p).objective;
+            assert!(
+                moved > a.objective,
+                "parameter {k} × (1 {share:+}): {moved}"
+            );
+        }
+    }
 }
 
 #[test]
 fn levenberg_marquardt_finds_the_furuta_optimum_of_nelder_mead() {
-    matches_nelder_mead("furuta.toml", 1e-5, 1e-9);
+    matches_nelder_mead("furuta.toml", 1e-6);
 }
 
 #[test]
 fn levenberg_marquardt_finds_the_heat_exchanger_optimum_of_nelder_mead() {
-    matches_nelder_mead("hx.toml", 1e-5, 1e-9);
+    // Nelder–Mead's simplex collapses 0.1% short of the minimum along the valley of
+    // CF_RefHT (at an objective 6e-7 higher): Levenberg–Marquardt ends lower, and the
+    // local-minimum check holds its point.
+    matches_nelder_mead("hx.toml", 2e-3);
 }
 
 #[test]
 fn an_optimum_beyond_a_bound_ends_on_the_bound() {
     let dir = tempfile::tempdir().unwrap();
     // The pendulum's true friction (0.00117 N·m·s) lies above its upper bound.
-    let text = clean_campaign(&one_start("levenberg-marquardt", 400))
-        .replace("max = 0.9\n[window]", "max = 0.001\n[window]");
+    let text = clean_campaign(&one_start("levenberg-marquardt", 400)).replace(
+        "nominal = 0.002\nmin = 0.0\nmax = 0.9",
+        "nominal = 0.0005\nmin = 0.0\nmax = 0.001",
+    );
     let campaign = Campaign::load(&write(dir.path(), "bounded.toml", &text)).unwrap();
     let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
     let run = c.best_run();
