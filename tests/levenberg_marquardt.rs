@@ -215,3 +215,49 @@ fn a_cluster_run_equals_the_local_run() {
         .iter()
         .any(|r| r.method.name() == "levenberg-marquardt" && r.iterations > 2));
 }
+
+/// The residuals of a campaign of two experiments (one driven by a measured torque): each
+/// experiment's in turn, squaring to the objective, whose bits they do not change; the same
+/// bits from workers as in one process.
+#[test]
+fn residuals_of_several_experiments_are_concatenated_alike_everywhere() {
+    use calib_coordinator::calibration::load_measurement;
+    use calib_coordinator::evaluator::Evaluator;
+    use calib_coordinator::objective::Objective;
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = example(
+        dir.path(),
+        "furuta_experiments.toml",
+        &one_start("levenberg-marquardt", 10),
+    );
+    let plain = Objective::new(&campaign, &load_measurement(&campaign).unwrap()).unwrap();
+    let with = plain.with_residuals();
+    assert_ne!(plain.fingerprint(), with.fingerprint());
+    assert!(!plain.returns_residuals() && with.returns_residuals());
+    let points = vec![vec![0.012, 0.002, 2.75], vec![0.0101, 0.00117, 2.9]];
+    let local = LocalEvaluator.evaluate(&with, &points).unwrap();
+    let samples: usize = with
+        .experiments()
+        .map(|e| e.grid.len() * e.outputs.len())
+        .sum();
+    for (point, e) in points.iter().zip(&local) {
+        let alone = plain.evaluate(point);
+        assert!(alone.residuals.is_empty());
+        assert_eq!(alone.objective.to_bits(), e.objective.to_bits());
+        assert_eq!(e.residuals.len(), samples);
+        let squares: f64 = e.residuals.iter().map(|r| r * r).sum();
+        assert!(
+            relative(squares, e.objective) < 1e-12,
+            "{squares} vs {}",
+            e.objective
+        );
+    }
+    let cluster = TestCluster::start(2, 1);
+    let remote = cluster.connect();
+    let answers = remote.evaluator().evaluate(&with, &points).unwrap();
+    for (a, b) in local.iter().zip(&answers) {
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(a.objective.to_bits(), b.objective.to_bits());
+        assert_eq!(bits(&a.residuals), bits(&b.residuals));
+    }
+}
