@@ -77,8 +77,9 @@ fn solve(mut m: Vec<Vec<f64>>) -> Option<Vec<f64>> {
         for row in col + 1..n {
             let factor = m[row][col] / m[col][col];
             if factor != 0.0 {
-                for k in col..=n {
-                    m[row][k] -= factor * m[col][k];
+                let (upper, lower) = m.split_at_mut(row);
+                for (a, b) in lower[0][col..].iter_mut().zip(&upper[col][col..]) {
+                    *a -= factor * b;
                 }
             }
         }
