@@ -12,8 +12,9 @@ use std::process::ExitCode;
     about = "Calibrate physical simulation models against measured data",
     long_about = "calib fits the parameters of a simulation model (a Furuta pendulum, a heat \
 exchanger test bench, ...) to measured data: weighted least squares over a time window, \
-bounded parameters, Nelder-Mead, Powell and differential evolution from several start \
-points at once. Run `calib models` to see the hosted models and `calib calibrate \
+bounded parameters, Nelder-Mead, Powell, differential evolution and Levenberg-Marquardt \
+(`methods = [\"levenberg-marquardt\"]`, on the weighted residuals) from several start points \
+at once. Run `calib models` to see the hosted models and `calib calibrate \
 examples/furuta.toml` for a first campaign.",
     propagate_version = true
 )]

@@ -82,6 +82,7 @@ fn evaluate_request(points: usize) -> proto::EvaluateRequest {
             .collect(),
         solver: None,
         fmu_hash: Vec::new(),
+        residuals: false,
     }
 }
 

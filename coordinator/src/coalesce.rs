@@ -332,6 +332,7 @@ mod tests {
             objective: x,
             sse: vec![x],
             failure: None,
+            residuals: Vec::new(),
         }
     }
 

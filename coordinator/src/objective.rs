@@ -46,6 +46,9 @@ pub struct Objective {
     /// The further experiments, each an objective of its own over the same free
     /// parameters (their own `more` empty).
     pub more: Vec<Objective>,
+    /// Whether evaluations return the weighted residuals beside the objective (see
+    /// [`Objective::with_residuals`]).
+    residuals: bool,
     measurement_hash: [u8; 32],
     fingerprint: [u8; 32],
 }
@@ -189,6 +192,7 @@ impl Objective {
             solver: campaign.solver,
             inputs,
             more: Vec::new(),
+            residuals: false,
             measurement_hash: measurement.content_hash(),
             fingerprint: [0; 32],
         };
@@ -214,6 +218,26 @@ impl Objective {
         o.base = full;
         o.fingerprint = o.compute_fingerprint();
         o
+    }
+
+    /// The same objective whose evaluations also return each point's weighted residuals
+    /// `sqrt(k_i) (y_i − w_i)` ([`Evaluation::residuals`], every experiment's in turn), for
+    /// least-squares methods. Its fingerprint differs from this one's (a stored evaluation
+    /// of it holds the residuals); the objective's value at a point does not.
+    pub fn with_residuals(&self) -> Objective {
+        let mut o = self.clone();
+        o.residuals = true;
+        for part in &mut o.more {
+            part.residuals = true;
+            part.fingerprint = part.compute_fingerprint();
+        }
+        o.fingerprint = o.compute_fingerprint();
+        o
+    }
+
+    /// Whether evaluations return the weighted residuals.
+    pub fn returns_residuals(&self) -> bool {
+        self.residuals
     }
 
     /// A hash of everything that changes the value of the objective at a given point: model
@@ -265,6 +289,11 @@ impl Objective {
             for part in &self.more {
                 h.bytes(&part.fingerprint);
             }
+        }
+        // Evaluations that carry residuals are other entries of the store; an objective
+        // without them keeps its fingerprint.
+        if self.residuals {
+            h.text("residuals");
         }
         h.finish()
     }
@@ -320,6 +349,7 @@ impl Objective {
             weights: &self.weights,
             solver: &self.solver,
             inputs: &self.inputs,
+            residuals: self.residuals,
         }
     }
 
@@ -348,11 +378,17 @@ impl Objective {
             return Evaluation::failed(self.series_count(), why);
         }
         let objective = parts.iter().map(|e| e.objective).sum();
-        let sse = parts.into_iter().flat_map(|e| e.sse).collect();
+        let mut sse = Vec::with_capacity(self.series_count());
+        let mut residuals = Vec::new();
+        for part in parts {
+            sse.extend(part.sse);
+            residuals.extend(part.residuals);
+        }
         Evaluation {
             objective,
             sse,
             failure: None,
+            residuals,
         }
     }
 
@@ -380,10 +416,11 @@ impl Objective {
         let mut from = 0;
         for part in self.experiments() {
             let n = part.outputs.len();
-            parts.push(scoring::score(
+            parts.push(scoring::score_with(
                 &simulated[from..from + n],
                 &part.measured,
                 &part.weights,
+                self.residuals,
             ));
             from += n;
         }

@@ -147,6 +147,7 @@ impl Simulator for NappingSimulator {
                     objective: 1.0,
                     sse: vec![1.0; outputs],
                     failure: None,
+                    residuals: Vec::new(),
                 })
                 .collect(),
             measurement_hash: request.measurement_hash.clone(),

@@ -53,6 +53,7 @@ fn evaluation(i: usize) -> Evaluation {
         objective: i as f64 * 1e-3,
         sse: vec![i as f64 * 4e-4, i as f64 * 6e-4],
         failure: None,
+        residuals: Vec::new(),
     }
 }
 

@@ -13,7 +13,8 @@ use std::time::{Duration, Instant};
 
 #[derive(clap::Args)]
 pub struct Args {
-    /// Campaign file (TOML): model, measurement, outputs, parameters, window, search.
+    /// Campaign file (TOML): model, measurement, outputs, parameters, window, search
+    /// (`methods`: nelder-mead, powell, differential-evolution, levenberg-marquardt).
     campaign: PathBuf,
     /// Results folder: result.json and the plots go to DIR/<campaign name>/ [default:
     /// results/ beside the campaign file], as `calib coordinator --out` puts them.

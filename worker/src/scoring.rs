@@ -5,6 +5,10 @@
 //! `f(p) = Σ_i k_i Σ_t (y_i(p, t) − w_i(t))²`, outputs read at the measurement times. A
 //! simulation that fails (diverged, step limit) or yields a non-finite value scores
 //! [`FAILURE_PENALTY`]: finite, so optimisers that compare or average costs keep working.
+//!
+//! A point may also be asked for its weighted residuals `r = sqrt(k_i) (y_i(p, t) − w_i(t))`
+//! (per output, then per sample: `f = Σ r²` up to rounding), which least-squares methods
+//! read; they are computed only when asked for ([`Target::residuals`]).
 
 use crate::content_hash::ContentHasher;
 use crate::inputs::{Inputs, NamedSignal};
@@ -21,6 +25,9 @@ pub struct Evaluation {
     pub sse: Vec<f64>,
     /// Why the simulation failed, when it did (then `objective` is the penalty).
     pub failure: Option<String>,
+    /// The weighted residuals `sqrt(k_i) (y_i − w_i)`, output after output, when they were
+    /// asked for and the simulation succeeded; empty otherwise.
+    pub residuals: Vec<f64>,
 }
 
 impl Evaluation {
@@ -29,6 +36,7 @@ impl Evaluation {
             objective: FAILURE_PENALTY,
             sse: vec![f64::NAN; outputs],
             failure: Some(why),
+            residuals: Vec::new(),
         }
     }
 }
@@ -49,10 +57,40 @@ pub fn score(simulated: &[Vec<f64>], measured: &[Vec<f64>], weights: &[f64]) -> 
             objective,
             sse,
             failure: None,
+            residuals: Vec::new(),
         }
     } else {
         Evaluation::failed(measured.len(), NON_FINITE_OUTPUT.into())
     }
+}
+
+/// The weighted residuals `sqrt(k_i) (y_i − w_i)` of simulated series against measured
+/// ones, output after output.
+pub fn residuals(simulated: &[Vec<f64>], measured: &[Vec<f64>], weights: &[f64]) -> Vec<f64> {
+    simulated
+        .iter()
+        .zip(measured)
+        .zip(weights)
+        .flat_map(|((y, w), k)| {
+            let root = k.sqrt();
+            y.iter().zip(w).map(move |(a, b)| root * (a - b))
+        })
+        .collect()
+}
+
+/// [`score`], with the weighted [`residuals`] when `with_residuals` (and the score is not a
+/// failure). The objective is the same bits either way.
+pub fn score_with(
+    simulated: &[Vec<f64>],
+    measured: &[Vec<f64>],
+    weights: &[f64],
+    with_residuals: bool,
+) -> Evaluation {
+    let mut e = score(simulated, measured, weights);
+    if with_residuals && e.failure.is_none() {
+        e.residuals = residuals(simulated, measured, weights);
+    }
+    e
 }
 
 /// What a point is scored against: the measured series on their grid, and the weights.
@@ -66,6 +104,8 @@ pub struct Target<'a> {
     pub solver: &'a SolverOptions,
     /// The signals driving the model (none for a free response).
     pub inputs: &'a Inputs,
+    /// Whether the weighted residuals are returned beside the objective.
+    pub residuals: bool,
 }
 
 /// Simulate `model` with the full parameter vector `params` and score it. A failed
@@ -83,7 +123,12 @@ pub fn simulate_and_score(
         target.solver,
         target.inputs,
     )?;
-    Ok(score(&trajectory.values, target.measured, target.weights))
+    Ok(score_with(
+        &trajectory.values,
+        target.measured,
+        target.weights,
+        target.residuals,
+    ))
 }
 
 /// Simulate and score, a failed simulation scoring [`FAILURE_PENALTY`].
@@ -123,6 +168,21 @@ mod tests {
         assert_eq!(e.sse, vec![5.0, 2.0]);
         assert_eq!(e.objective, 11.0);
         assert!(e.failure.is_none());
+    }
+
+    #[test]
+    fn residuals_are_weighted_and_square_to_the_objective() {
+        let simulated = [vec![1.0, 2.0], vec![0.0, 0.0]];
+        let measured = [vec![0.0, 0.0], vec![1.0, 1.0]];
+        let plain = score(&simulated, &measured, &[4.0, 0.25]);
+        let with = score_with(&simulated, &measured, &[4.0, 0.25], true);
+        assert!(plain.residuals.is_empty());
+        assert_eq!(with.objective.to_bits(), plain.objective.to_bits());
+        assert_eq!(with.residuals, vec![2.0, 4.0, -0.5, -0.5]);
+        let squares: f64 = with.residuals.iter().map(|r| r * r).sum();
+        assert_eq!(squares, with.objective);
+        let failed = score_with(&[vec![f64::NAN]], &[vec![0.0]], &[1.0], true);
+        assert!(failed.residuals.is_empty());
     }
 
     #[test]

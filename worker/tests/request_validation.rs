@@ -168,6 +168,7 @@ fn any_evaluate_request() -> impl Strategy<Value = proto::EvaluateRequest> {
                 points,
                 solver,
                 fmu_hash: Vec::new(),
+                residuals: false,
             },
         )
 }

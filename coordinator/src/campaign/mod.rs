@@ -47,6 +47,7 @@ pub enum Method {
     NelderMead,
     Powell,
     DifferentialEvolution,
+    LevenbergMarquardt,
 }
 
 impl Method {
@@ -55,6 +56,7 @@ impl Method {
             Method::NelderMead => "nelder-mead",
             Method::Powell => "powell",
             Method::DifferentialEvolution => "differential-evolution",
+            Method::LevenbergMarquardt => "levenberg-marquardt",
         }
     }
 }
@@ -461,6 +463,11 @@ seed = 7
         );
         assert_eq!(c.search.methods, vec![Method::NelderMead, Method::Powell]);
         assert_eq!(c.window, (0.0, 40.0));
+        let lm = parse(&GOOD.replacen("\"powell\"", "\"levenberg-marquardt\"", 1)).unwrap();
+        assert_eq!(
+            lm.search.methods,
+            vec![Method::NelderMead, Method::LevenbergMarquardt]
+        );
     }
 
     fn error_for(from: &str, to: &str) -> CampaignError {
@@ -494,6 +501,8 @@ seed = 7
 
         let e = error_for("\"powell\"", "\"simplex\"");
         assert!(e.message.contains("simplex"), "{e}");
+        // The error lists the methods there are.
+        assert!(e.message.contains("`levenberg-marquardt`"), "{e}");
 
         let e = error_for("theta0 = 0.5235987755983", "theta1 = 0.5");
         assert!(e.message.contains("no parameter `theta1`"), "{e}");

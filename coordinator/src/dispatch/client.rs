@@ -102,6 +102,7 @@ impl WireObjective {
             points: Vec::new(),
             solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
+            residuals: objective.returns_residuals(),
         };
         let measurement = proto::Measurement {
             times: objective.grid.clone(),
@@ -326,6 +327,7 @@ impl WorkerClient {
                     objective: r.objective,
                     sse: r.sse,
                     failure: None,
+                    residuals: r.residuals,
                 },
             })
             .collect())

@@ -12,12 +12,16 @@
 //! * [`DifferentialEvolution`]: differential evolution after Storn and Price
 //!   (rand/1/bin or best/1/bin), a global population-based method
 //!   ([`differential_evolution`]).
+//! * [`levenberg_marquardt`]: Levenberg–Marquardt on the weighted residuals, bounded to the
+//!   box, for the least-squares objective; its Jacobian and trial steps are one batch per
+//!   iteration.
 //! * [`multistart`]: every method from every start point, concurrently; minima clustered.
 //!
 //! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
 
 pub mod budget;
 pub mod differential_evolution;
+pub mod levenberg_marquardt;
 pub mod multistart;
 pub mod nelder_mead;
 pub mod powell;

@@ -13,7 +13,7 @@ use super::budget::Budgeted;
 use super::budget::{Stall, BUDGET_USED, STALLED};
 use super::problem::{Progress, RunLog, RunProblem};
 use super::space::{self, UnitBox};
-use super::{differential_evolution, nelder_mead, powell};
+use super::{differential_evolution, levenberg_marquardt, nelder_mead, powell};
 use crate::campaign::Method;
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
@@ -152,8 +152,12 @@ pub fn run_all(
 
 /// Run one method from one start.
 pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmin::core::Error> {
+    // Levenberg–Marquardt reads the weighted residuals: its evaluations return them.
+    let residual_objective =
+        (spec.method == Method::LevenbergMarquardt).then(|| context.objective.with_residuals());
+    let objective = residual_objective.as_ref().unwrap_or(context.objective);
     let mut problem = RunProblem::new(
-        context.objective,
+        objective,
         context.evaluator,
         context.space,
         context.scale,
@@ -189,6 +193,10 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             );
             execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
+        Method::LevenbergMarquardt => {
+            let inner = levenberg_marquardt::LevenbergMarquardt::new(spec.start_unit.clone())?;
+            execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
+        }
     };
     let termination = if !log.best_objective.is_finite() || log.best_objective >= f64::MAX {
         Termination::Failures
@@ -203,15 +211,19 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
         objective: log.best_objective,
         evaluations: log.evaluations,
         iterations,
-        stop: match termination {
+        stop: match &termination {
             Termination::Plateau => Stop::Plateau,
             Termination::Failures => Stop::Failures,
+            Termination::Other(why) if why.starts_with(PLATEAU) => Stop::Plateau,
             _ => Stop::Minimum,
         },
         termination: termination.describe(spec.method),
         restarts,
     })
 }
+
+/// How the words of a solver's own termination begin when it found no slope to follow.
+const PLATEAU: &str = "plateau:";
 
 /// Why a run stopped.
 enum Termination {
@@ -260,6 +272,7 @@ impl Termination {
                 Method::NelderMead => "converged: simplex objective spread below tolerance",
                 Method::Powell => "converged: a sweep moved x and f below tolerance",
                 Method::DifferentialEvolution => "converged: population spread below tolerance",
+                Method::LevenbergMarquardt => levenberg_marquardt::CONVERGED_OBJECTIVE,
             }
             .into(),
             Self::Collapsed => "converged: simplex diameter below tolerance".into(),

@@ -1,8 +1,9 @@
 //! One run's view of the objective: the unit box, the evaluator, and a log of what it saw.
 
+use super::levenberg_marquardt::Residuals;
 use super::space::UnitBox;
 use crate::evaluator::{Evaluator, Fault};
-use crate::objective::Objective;
+use crate::objective::{Evaluation, Objective};
 use argmin::core::{CostFunction, Error, SyncAlias};
 use std::borrow::Borrow;
 use std::sync::Mutex;
@@ -99,20 +100,40 @@ impl<'a> RunProblem<'a> {
     }
 
     fn evaluate(&self, units: &[&Vec<f64>], count: bool) -> Result<Vec<f64>, Fault> {
+        let evaluations = self.evaluations(units, count)?;
+        Ok(evaluations.iter().map(|e| self.scaled(e)).collect())
+    }
+
+    /// The objective as the solvers see it: divided by the scale, NaN the largest value.
+    fn scaled(&self, e: &Evaluation) -> f64 {
+        if e.objective.is_nan() {
+            f64::MAX
+        } else {
+            e.objective / self.scale
+        }
+    }
+
+    /// Evaluate unit-box points with their weighted residuals (the run's objective must
+    /// return them: [`Objective::with_residuals`]): each point's scaled objective and
+    /// residuals, scaled alike (divided by the square root of the scale), counted as the
+    /// run's evaluations.
+    pub fn batch_residuals(&self, units: &[&Vec<f64>]) -> Result<Vec<(f64, Vec<f64>)>, Fault> {
+        let root = self.scale.sqrt();
+        Ok(self
+            .evaluations(units, true)?
+            .into_iter()
+            .map(|e| {
+                let cost = self.scaled(&e);
+                (cost, e.residuals.iter().map(|r| r / root).collect())
+            })
+            .collect())
+    }
+
+    fn evaluations(&self, units: &[&Vec<f64>], count: bool) -> Result<Vec<Evaluation>, Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
         let evaluations = self.evaluator.evaluate(self.objective, &points)?;
-        let scaled = evaluations
-            .iter()
-            .map(|e| {
-                if e.objective.is_nan() {
-                    f64::MAX
-                } else {
-                    e.objective / self.scale
-                }
-            })
-            .collect();
         if !count {
-            return Ok(scaled);
+            return Ok(evaluations);
         }
         let mut log = self.log.lock().expect("run log lock");
         log.evaluations += points.len();
@@ -129,7 +150,8 @@ impl<'a> RunProblem<'a> {
         }
         self.progress
             .run_evaluated(self.run, points.len(), log.best_objective);
-        Ok(scaled)
+        drop(log);
+        Ok(evaluations)
     }
 
     /// Evaluate points ahead of the solver asking for them one by one (they are then
@@ -160,5 +182,12 @@ impl CostFunction for RunProblem<'_> {
     {
         let units: Vec<&Vec<f64>> = params.iter().map(|p| p.borrow()).collect();
         Ok(self.batch(&units)?)
+    }
+}
+
+impl Residuals for RunProblem<'_> {
+    fn residuals(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, Vec<f64>)>, Error> {
+        let units: Vec<&Vec<f64>> = points.iter().collect();
+        Ok(self.batch_residuals(&units)?)
     }
 }

@@ -78,3 +78,43 @@ impl<O: CostFunction<Param = Vec<f64>, Output = f64>> CostFunction for Recorder<
             .collect()
     }
 }
+
+use super::levenberg_marquardt::Residuals;
+
+/// Costs with their residuals, from a residual function.
+fn with_costs(points: &[Vec<f64>], r: impl Fn(&[f64]) -> Vec<f64>) -> Vec<(f64, Vec<f64>)> {
+    points
+        .iter()
+        .map(|p| {
+            let r = r(p);
+            (r.iter().map(|v| v * v).sum(), r)
+        })
+        .collect()
+}
+
+/// The sphere's residuals `x_i − c_i`.
+impl Residuals for Sphere {
+    fn residuals(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, Vec<f64>)>, Error> {
+        Ok(with_costs(points, |x| {
+            x.iter().zip(&self.centre).map(|(a, c)| a - c).collect()
+        }))
+    }
+}
+
+/// Rosenbrock's residuals `(1 − x, 10 (y − x²))`.
+impl Residuals for Rosenbrock {
+    fn residuals(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, Vec<f64>)>, Error> {
+        Ok(with_costs(points, |u| {
+            let (x, y) = (4.0 * u[0] - 2.0, 4.0 * u[1] - 2.0);
+            vec![1.0 - x, 10.0 * (y - x * x)]
+        }))
+    }
+}
+
+impl<O: Residuals> Residuals for Recorder<O> {
+    fn residuals(&self, points: &[Vec<f64>]) -> Result<Vec<(f64, Vec<f64>)>, Error> {
+        self.batch_sizes.lock().unwrap().push(points.len());
+        self.points.lock().unwrap().extend(points.iter().cloned());
+        self.inner.residuals(points)
+    }
+}

@@ -5,7 +5,7 @@
 //!
 //! | collection | key | value (version 1) |
 //! |---|---|---|
-//! | `evaluations` | 32-byte [`EvaluationKey`](super::EvaluationKey) | `1u8`, objective `f64`, output count `u32`, per-output SSE `f64`s, failure flag `u8` (0 or 1), then if 1: byte length `u32` and UTF-8 message |
+//! | `evaluations` | 32-byte [`EvaluationKey`](super::EvaluationKey) | `1u8`, objective `f64`, output count `u32`, per-output SSE `f64`s, failure flag `u8` (0 or 1), then if 1: byte length `u32` and UTF-8 message; an evaluation that carries weighted residuals starts with `2u8` instead and ends with the residual count `u32` and the residual `f64`s |
 //! | `campaigns` | 32-byte [`CampaignId`](super::CampaignId) | `1u8`, UTF-8 JSON of [`CampaignRecord`] |
 //! | `datasets` | 32-byte content hash | `1u8`, sample count `u64`, column count `u64`, time `f64`s, then per column: name byte length `u64`, UTF-8 name, values `f64`s |
 //! | `meta` (sled only) | `b"layout"` / `b"hits"` / `b"misses"` | `u32` layout version / `u64` counters |
@@ -23,11 +23,25 @@ pub const LAYOUT_VERSION: u32 = 1;
 
 const V1: u8 = 1;
 
+/// The evaluation layout with weighted residuals after the version-1 fields. Evaluations
+/// without residuals keep version 1, byte for byte.
+const V2_RESIDUALS: u8 = 2;
+
 pub fn encode_evaluation(e: &Evaluation) -> Vec<u8> {
     let failure = e.failure.as_deref().map(str::as_bytes);
-    let mut out =
-        Vec::with_capacity(1 + 8 + 4 + 8 * e.sse.len() + 1 + failure.map_or(0, |f| 4 + f.len()));
-    out.push(V1);
+    let residuals = if e.residuals.is_empty() {
+        0
+    } else {
+        4 + 8 * e.residuals.len()
+    };
+    let mut out = Vec::with_capacity(
+        1 + 8 + 4 + 8 * e.sse.len() + 1 + failure.map_or(0, |f| 4 + f.len()) + residuals,
+    );
+    out.push(if e.residuals.is_empty() {
+        V1
+    } else {
+        V2_RESIDUALS
+    });
     out.extend_from_slice(&e.objective.to_bits().to_le_bytes());
     out.extend_from_slice(&(e.sse.len() as u32).to_le_bytes());
     for s in &e.sse {
@@ -41,12 +55,22 @@ pub fn encode_evaluation(e: &Evaluation) -> Vec<u8> {
             out.extend_from_slice(f);
         }
     }
+    if !e.residuals.is_empty() {
+        out.extend_from_slice(&(e.residuals.len() as u32).to_le_bytes());
+        for r in &e.residuals {
+            out.extend_from_slice(&r.to_bits().to_le_bytes());
+        }
+    }
     out
 }
 
 pub fn decode_evaluation(bytes: &[u8]) -> Result<Evaluation, StoreError> {
     let mut r = Reader::new(bytes, "evaluation");
-    r.version()?;
+    let with_residuals = match r.u8()? {
+        V1 => false,
+        V2_RESIDUALS => true,
+        v => return Err(r.corrupt(format!("unknown layout version {v}"))),
+    };
     let objective = r.f64()?;
     let outputs = r.u32()? as usize;
     let sse = (0..outputs).map(|_| r.f64()).collect::<Result<_, _>>()?;
@@ -58,11 +82,18 @@ pub fn decode_evaluation(bytes: &[u8]) -> Result<Evaluation, StoreError> {
         }
         flag => return Err(r.corrupt(format!("failure flag {flag}"))),
     };
+    let residuals = if with_residuals {
+        let count = r.u32()? as usize;
+        r.f64s(count)?
+    } else {
+        Vec::new()
+    };
     r.end()?;
     Ok(Evaluation {
         objective,
         sse,
         failure,
+        residuals,
     })
 }
 
@@ -232,12 +263,20 @@ mod tests {
                 objective: 0.1 + 0.2,
                 sse: vec![1e-300, -0.0, 3.5],
                 failure: None,
+                residuals: Vec::new(),
+            },
+            Evaluation {
+                objective: 0.5,
+                sse: vec![0.25, 0.25],
+                failure: None,
+                residuals: vec![0.5, -0.0, f64::MIN_POSITIVE, -0.5],
             },
             Evaluation::failed(2, "step limit (200000) reached at t = 3.2 s".into()),
             Evaluation {
                 objective: 0.0,
                 sse: vec![],
                 failure: Some("é".into()),
+                residuals: Vec::new(),
             },
         ];
         for e in cases {
@@ -246,6 +285,7 @@ mod tests {
             let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
             assert_eq!(bits(&back.sse), bits(&e.sse));
             assert_eq!(back.failure, e.failure);
+            assert_eq!(bits(&back.residuals), bits(&e.residuals));
         }
     }
 
@@ -255,12 +295,28 @@ mod tests {
             objective: 1.0,
             sse: vec![2.0],
             failure: Some("x".into()),
+            residuals: Vec::new(),
         };
         let mut expected = vec![1u8];
         expected.extend_from_slice(&1.0f64.to_le_bytes());
         expected.extend_from_slice(&1u32.to_le_bytes());
         expected.extend_from_slice(&2.0f64.to_le_bytes());
         expected.extend_from_slice(&[1, 1, 0, 0, 0, b'x']);
+        assert_eq!(encode_evaluation(&e), expected);
+        // With residuals: version 2, the same fields, then the residuals.
+        let e = Evaluation {
+            objective: 1.0,
+            sse: vec![2.0],
+            failure: None,
+            residuals: vec![3.0],
+        };
+        let mut expected = vec![2u8];
+        expected.extend_from_slice(&1.0f64.to_le_bytes());
+        expected.extend_from_slice(&1u32.to_le_bytes());
+        expected.extend_from_slice(&2.0f64.to_le_bytes());
+        expected.push(0);
+        expected.extend_from_slice(&1u32.to_le_bytes());
+        expected.extend_from_slice(&3.0f64.to_le_bytes());
         assert_eq!(encode_evaluation(&e), expected);
     }
 

@@ -4,6 +4,7 @@
 //! ```text
 //! {"format":"calib-store","version":1}
 //! {"evaluation":"<key, 64 hex>","objective":"<f64 bits, 16 hex>","sse":["<f64 bits>",…],"failure":null}
+//! {"evaluation":…,"failure":null,"residuals":["<f64 bits>",…]}   (evaluations with residuals)
 //! {"campaign":"<id, 64 hex>","record":{…CampaignRecord…}}
 //! {"dataset":"<content hash, 64 hex>","time":["<f64 bits>",…],"columns":[{"name":"…","values":["<f64 bits>",…]}]}
 //! {"end":{"evaluations":N,"campaigns":N,"datasets":N}}
@@ -78,12 +79,16 @@ fn record(collection: Collection, key: &[u8], value: &[u8]) -> Result<Value, Sto
     Ok(match collection {
         Collection::Evaluations => {
             let e = encoding::decode_evaluation(value)?;
-            json!({
+            let mut record = json!({
                 "evaluation": hex(key),
                 "objective": bits(e.objective),
                 "sse": bits_list(&e.sse),
                 "failure": e.failure,
-            })
+            });
+            if !e.residuals.is_empty() {
+                record["residuals"] = bits_list(&e.residuals).into();
+            }
+            record
         }
         Collection::Campaigns => json!({
             "campaign": hex(key),
@@ -207,6 +212,10 @@ fn entry(value: &Value) -> Result<(Collection, RawEntry), String> {
             objective: float(&value["objective"])?,
             sse: floats(&value["sse"])?,
             failure,
+            residuals: match value.get("residuals") {
+                Some(list) => floats(list)?,
+                None => Vec::new(),
+            },
         };
         Ok((
             Collection::Evaluations,

@@ -20,6 +20,7 @@ fn evaluation(i: u64) -> Evaluation {
             objective: i as f64 * 0.1,
             sse: vec![i as f64, 1.0 / (i as f64 + 1.0)],
             failure: None,
+            residuals: Vec::new(),
         }
     }
 }
@@ -226,6 +227,33 @@ fn a_sled_store_opens_once_at_a_time() {
 }
 
 #[test]
+fn residuals_survive_the_store_and_its_export() {
+    let source = MemoryStore::new();
+    let with = Evaluation {
+        objective: 0.5,
+        sse: vec![0.25, 0.25],
+        failure: None,
+        residuals: vec![0.5, -0.0, 1e-300, -0.5],
+    };
+    source
+        .put_evaluations(&[(key(1), with.clone()), (key(2), evaluation(2))])
+        .unwrap();
+    let mut text = Vec::new();
+    export::export(&source, &mut text).unwrap();
+    let target = MemoryStore::new();
+    export::import(&target, &mut &text[..]).unwrap();
+    assert_eq!(
+        target.raw_entries(Collection::Evaluations).unwrap(),
+        source.raw_entries(Collection::Evaluations).unwrap()
+    );
+    let back = target.get_evaluations(&[key(1), key(2)]).unwrap();
+    let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let first = back[0].as_ref().unwrap();
+    assert_eq!(bits(&first.residuals), bits(&with.residuals));
+    assert!(back[1].as_ref().unwrap().residuals.is_empty());
+}
+
+#[test]
 fn export_and_import_carry_every_entry() {
     let source = MemoryStore::new();
     contract(&source);
@@ -278,6 +306,7 @@ impl Evaluator for Counting {
                 objective: p.iter().sum(),
                 sse: vec![p.iter().sum()],
                 failure: None,
+                residuals: Vec::new(),
             })
             .collect())
     }
@@ -799,6 +828,7 @@ impl Evaluator for AnswersShort {
                 objective: p[0],
                 sse: vec![p[0]],
                 failure: None,
+                residuals: Vec::new(),
             })
             .collect())
     }

@@ -280,6 +280,8 @@ pub struct Evaluation {
     pub measurement: Option<MeasuredData>,
     pub points: Vec<Vec<f64>>,
     pub solver: SolverOptions,
+    /// Whether each point's weighted residuals are returned.
+    pub residuals: bool,
 }
 
 impl Evaluation {
@@ -396,6 +398,7 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
             measurement,
             points,
             solver: solver_options(model, r.solver)?,
+            residuals: r.residuals,
         })
     }
 }

@@ -206,6 +206,7 @@ impl SimulatorService {
                         weights: &evaluation.weights,
                         solver: &evaluation.solver,
                         inputs: &inputs,
+                        residuals: evaluation.residuals,
                     };
                     scoring::simulate_and_score(
                         evaluation.model,
@@ -221,6 +222,7 @@ impl SimulatorService {
                 Ok(e) => proto::PointResult {
                     objective: e.objective,
                     sse: e.sse,
+                    residuals: e.residuals,
                     failure: e.failure.map(|message| proto::SimulationFailure {
                         kind: proto::simulation_failure::Kind::NonFiniteOutput.into(),
                         message,
@@ -231,6 +233,7 @@ impl SimulatorService {
                     objective: FAILURE_PENALTY,
                     sse: vec![f64::NAN; evaluation.outputs.len()],
                     failure: Some(failure(&e)),
+                    residuals: Vec::new(),
                 },
             });
         }
@@ -451,6 +454,7 @@ mod tests {
                         objective: 1.5,
                         sse: vec![0.25; outputs],
                         failure: None,
+                        residuals: Vec::new(),
                     };
                     MAX_POINTS
                 ],
