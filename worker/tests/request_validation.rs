@@ -108,6 +108,7 @@ fn any_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                     solver,
                     fmu_hash: Vec::new(),
                     inputs: vec![],
+                    effects: vec![],
                 }
             },
         )
@@ -168,6 +169,7 @@ fn any_evaluate_request() -> impl Strategy<Value = proto::EvaluateRequest> {
                 points,
                 solver,
                 fmu_hash: Vec::new(),
+                effects: vec![],
             },
         )
 }
@@ -260,6 +262,7 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 solver,
                 fmu_hash: Vec::new(),
                 inputs: vec![],
+                effects: vec![],
             },
         )
 }
