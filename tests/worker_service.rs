@@ -44,6 +44,7 @@ fn simulate_request() -> proto::SimulateRequest {
         solver: None,
         fmu_hash: Vec::new(),
         inputs: vec![],
+        effects: vec![],
     }
 }
 
@@ -82,6 +83,7 @@ fn evaluate_request(points: usize) -> proto::EvaluateRequest {
             .collect(),
         solver: None,
         fmu_hash: Vec::new(),
+        effects: vec![],
     }
 }
 
@@ -420,6 +422,7 @@ fn a_flood_beyond_the_queue_is_refused() {
             solver: None,
             fmu_hash: Vec::new(),
             inputs: vec![],
+            effects: vec![],
         };
         // Requests the worker has taken in: done, running or waiting.
         let taken_in = |c: &SimulatorClient<Channel>| {
@@ -541,6 +544,7 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 solver: None,
                 fmu_hash: Vec::new(),
                 inputs: vec![],
+                effects: vec![],
             };
             let untouched = c
                 .simulate(described(Vec::new()))

@@ -13,10 +13,10 @@
 //! - `offset(o)` = c [output unit]: `y + c`.
 
 use crate::inputs::Inputs;
-use crate::user_effects::Forces;
 use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, SimulationError, SolverOptions, Trajectory,
 };
+use crate::user_effects::Forces;
 
 /// The measurement-chain effects every output has, in the order of their slots.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -218,9 +218,14 @@ impl<M: Model> Model for WithOutputEffects<M> {
             }
             times.sort_by(f64::total_cmp);
             times.dedup();
-            let full =
-                self.inner
-                    .simulate_forced(inner_params, &times, outputs, options, inputs, forces)?;
+            let full = self.inner.simulate_forced(
+                inner_params,
+                &times,
+                outputs,
+                options,
+                inputs,
+                forces,
+            )?;
             let at = |k: usize, t: f64| {
                 let i = times.partition_point(|x| *x < t);
                 full.values[k][i]

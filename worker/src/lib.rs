@@ -20,6 +20,5 @@ pub mod validate;
 
 pub use model::{
     EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, PlaceKind, PlaceSpec,
-    SimulationError,
-    SolverOptions, SolverStats, Trajectory,
+    SimulationError, SolverOptions, SolverStats, Trajectory,
 };

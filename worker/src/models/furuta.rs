@@ -46,8 +46,8 @@ use crate::model::{
     check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, PlaceKind,
     PlaceSpec, SimulationError, SolverOptions, Trajectory,
 };
-use crate::user_effects::{Force, Forces};
 use crate::ode::{integrate, HybridSystem};
+use crate::user_effects::{Force, Forces};
 use std::f64::consts::PI;
 
 /// Indices of the full parameter vector (base parameters, then effects).

@@ -37,10 +37,7 @@ pub fn hosted_model(name: &str) -> Result<&'static dyn Model> {
 }
 
 /// The hosted model called `name` with the request's user-defined effects.
-pub fn model_with_effects(
-    name: &str,
-    effects: &[proto::UserEffect],
-) -> Result<&'static dyn Model> {
+pub fn model_with_effects(name: &str, effects: &[proto::UserEffect]) -> Result<&'static dyn Model> {
     let model = hosted_model(name)?;
     let refused = |e: user_effects::EffectError| Error::invalid(e.field, e.message);
     let definitions = user_effects::wire::all_from_proto(effects).map_err(refused)?;

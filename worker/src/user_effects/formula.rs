@@ -136,10 +136,7 @@ impl Parser<'_> {
             return Ok(());
         }
         let message = match self.peek() {
-            None => format!(
-                "`(` at character {} is never closed",
-                opened + 1
-            ),
+            None => format!("`(` at character {} is never closed", opened + 1),
             Some(_) => format!("expected `{}` here", wanted as char),
         };
         Err(FormulaError::at(self.pos, message))

@@ -32,7 +32,9 @@ pub struct WithUserEffects {
 /// A name made of letters, digits and `_` (and dots between such parts when `dotted`).
 fn well_formed(name: &str, dotted: bool) -> bool {
     let part = |p: &str| {
-        p.chars().next().is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        p.chars()
+            .next()
+            .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
             && p.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
     };
     if dotted {
@@ -167,7 +169,11 @@ impl WithUserEffects {
                     );
                     let functions = super::FUNCTIONS.iter().copied().chain(["pow"]);
                     if f.message.starts_with("unknown function") {
-                        hint(u, functions, "functions: sin cos exp abs sign sqrt tanh pow")
+                        hint(
+                            u,
+                            functions,
+                            "functions: sin cos exp abs sign sqrt tanh pow",
+                        )
                     } else {
                         hint(u, names, &listed)
                     }

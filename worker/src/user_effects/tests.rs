@@ -53,7 +53,12 @@ fn a_constant_formula_on_an_hx_output_is_its_offset() {
         .unwrap();
     let offset = format!("offset({output})");
     let built_in = base
-        .simulate(&vector(base, &[(offset.as_str(), 0.37)]), &t, &all, &options)
+        .simulate(
+            &vector(base, &[(offset.as_str(), 0.37)]),
+            &t,
+            &all,
+            &options,
+        )
         .unwrap();
     let worst = formula.values[0]
         .iter()
@@ -90,7 +95,12 @@ fn a_formula_torque_is_the_built_in_viscous_friction_bit_for_bit() {
     let t = grid(20.0, 0.01);
     let options = SolverOptions::default();
     let formula = with
-        .simulate(&vector(with, &[("damping.arm.b", 0.003)]), &t, &[0, 1], &options)
+        .simulate(
+            &vector(with, &[("damping.arm.b", 0.003)]),
+            &t,
+            &[0, 1],
+            &options,
+        )
         .unwrap();
     let built_in = base
         .simulate(
@@ -137,14 +147,26 @@ fn an_output_formula_reads_other_outputs_and_time() {
 #[test]
 fn the_same_definitions_are_compiled_once() {
     let base = models::find("furuta").unwrap();
-    let defined = [effect("bias.arm", PlaceKind::Torque, "armJoint", "t0", &["t0"])];
+    let defined = [effect(
+        "bias.arm",
+        PlaceKind::Torque,
+        "armJoint",
+        "t0",
+        &["t0"],
+    )];
     let a = attach(base, &defined).unwrap();
     let b = attach(base, &defined).unwrap();
     assert!(std::ptr::addr_eq(a, b));
     assert_eq!(a.user_effects(), &defined);
     assert_eq!(a.info().name, "furuta");
     assert_eq!(a.info().full_len(), base.info().full_len() + 1);
-    let other = [effect("bias.arm", PlaceKind::Torque, "armJoint", "-t0", &["t0"])];
+    let other = [effect(
+        "bias.arm",
+        PlaceKind::Torque,
+        "armJoint",
+        "-t0",
+        &["t0"],
+    )];
     assert!(!std::ptr::addr_eq(a, attach(base, &other).unwrap()));
 }
 
