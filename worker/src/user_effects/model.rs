@@ -11,7 +11,7 @@ use crate::model::{
 use crate::validate::hint;
 
 /// One definition, compiled.
-struct Compiled1 {
+struct Definition {
     formula: Compiled,
     /// Its first parameter's position among the user parameters.
     first: usize,
@@ -26,7 +26,7 @@ pub struct WithUserEffects {
     info: ModelInfo,
     base_len: usize,
     definitions: Vec<UserEffect>,
-    compiled: Vec<Compiled1>,
+    compiled: Vec<Definition>,
 }
 
 /// A name made of letters, digits and `_` (and dots between such parts when `dotted`).
@@ -59,6 +59,112 @@ fn variables(model: &dyn Model, kind: PlaceKind, effect: &UserEffect) -> Vec<Str
     names.push("time".into());
     names.extend(effect.parameters.iter().map(|p| p.name.clone()));
     names
+}
+
+/// Check the parameters of effect `i` (`known`: its formula's variables, the parameters
+/// last) and add them to `info` as effect slots.
+fn add_parameters(
+    info: &mut ModelInfo,
+    i: usize,
+    e: &UserEffect,
+    known: &[String],
+) -> Result<(), EffectError> {
+    let reserved = known.len() - e.parameters.len();
+    for (j, p) in e.parameters.iter().enumerate() {
+        let at = |what: &str| format!("effects[{i}].parameters[{j}].{what}");
+        if !well_formed(&p.name, false) {
+            return refuse(
+                at("name"),
+                format!("`{}` is not a name: letters, digits and `_`", p.name),
+            );
+        }
+        if known[..reserved].contains(&p.name) {
+            return refuse(
+                at("name"),
+                format!("`{}` is already a variable of the formula", p.name),
+            );
+        }
+        if e.parameters[..j].iter().any(|q| q.name == p.name) {
+            return refuse(at("name"), format!("`{}` is listed twice", p.name));
+        }
+        if !(p.min.is_finite() && p.max.is_finite() && p.min <= p.max) {
+            return refuse(
+                at("max"),
+                format!("bounds [{}, {}] are not a finite range", p.min, p.max),
+            );
+        }
+        if !(p.nominal >= p.min && p.nominal <= p.max) {
+            return refuse(
+                at("nominal"),
+                format!(
+                    "nominal {} is outside its bounds [{}, {}]",
+                    p.nominal, p.min, p.max
+                ),
+            );
+        }
+        let full = e.parameter_name(p);
+        if info.parameter_index(&full).is_some() || info.effect(&full).is_some() {
+            return refuse(
+                at("name"),
+                format!("`{full}` is already a parameter or effect of the model"),
+            );
+        }
+        info.effects.push(EffectSpec {
+            name: full,
+            unit: String::new(),
+            min: p.min,
+            max: p.max,
+            description: format!(
+                "parameter `{}` of the effect `{}` on the {} {}: {}",
+                p.name,
+                e.name,
+                e.kind.word(),
+                e.place,
+                e.formula
+            ),
+            parameter: None,
+        });
+    }
+    Ok(())
+}
+
+/// Longest formula accepted [characters].
+pub const MAX_FORMULA: usize = 10_000;
+
+/// The formula of effect `i` compiled against its variables `known`; an unknown name gets
+/// the nearest known one.
+fn compile(i: usize, e: &UserEffect, known: &[String]) -> Result<Compiled, EffectError> {
+    let field = format!("effects[{i}].formula");
+    if e.formula.len() > MAX_FORMULA {
+        return refuse(
+            field,
+            format!("{} characters, more than {MAX_FORMULA}", e.formula.len()),
+        );
+    }
+    Compiled::new(&e.formula, known).map_err(|f| {
+        let suggestion = f.unknown.as_deref().map_or(String::new(), |u| {
+            if f.message.starts_with("unknown function") {
+                let functions = super::FUNCTIONS.iter().copied().chain(["pow"]);
+                return hint(
+                    u,
+                    functions,
+                    "functions: sin cos exp abs sign sqrt tanh pow",
+                );
+            }
+            let listed = format!(
+                "a formula reads {}, `time` and its parameters",
+                match e.kind {
+                    PlaceKind::Torque => "the state by output names, the inputs",
+                    PlaceKind::Output => "`y`, the outputs, the inputs",
+                }
+            );
+            hint(u, known.iter().map(String::as_str), &listed)
+        });
+        EffectError {
+            field,
+            message: format!("at character {}: {}{suggestion}", f.position, f.message),
+        }
+    })
 }
 
 impl WithUserEffects {
@@ -101,89 +207,9 @@ impl WithUserEffects {
                 );
             }
             let known = variables(base, e.kind, e);
-            let reserved = known.len() - e.parameters.len();
-            for (j, p) in e.parameters.iter().enumerate() {
-                let at = |what: &str| field(&format!("parameters[{j}].{what}"));
-                if !well_formed(&p.name, false) {
-                    return refuse(
-                        at("name"),
-                        format!("`{}` is not a name: letters, digits and `_`", p.name),
-                    );
-                }
-                if known[..reserved].contains(&p.name) {
-                    return refuse(
-                        at("name"),
-                        format!("`{}` is already a variable of the formula", p.name),
-                    );
-                }
-                if e.parameters[..j].iter().any(|q| q.name == p.name) {
-                    return refuse(at("name"), format!("`{}` is listed twice", p.name));
-                }
-                if !(p.min.is_finite() && p.max.is_finite() && p.min <= p.max) {
-                    return refuse(
-                        at("max"),
-                        format!("bounds [{}, {}] are not a finite range", p.min, p.max),
-                    );
-                }
-                if !(p.nominal >= p.min && p.nominal <= p.max) {
-                    return refuse(
-                        at("nominal"),
-                        format!(
-                            "nominal {} is outside its bounds [{}, {}]",
-                            p.nominal, p.min, p.max
-                        ),
-                    );
-                }
-                let full = e.parameter_name(p);
-                if info.parameter_index(&full).is_some() || info.effect(&full).is_some() {
-                    return refuse(
-                        at("name"),
-                        format!("`{full}` is already a parameter or effect of the model"),
-                    );
-                }
-                info.effects.push(EffectSpec {
-                    name: full,
-                    unit: String::new(),
-                    min: p.min,
-                    max: p.max,
-                    description: format!(
-                        "parameter `{}` of the effect `{}` on the {} {}: {}",
-                        p.name,
-                        e.name,
-                        e.kind.word(),
-                        e.place,
-                        e.formula
-                    ),
-                    parameter: None,
-                });
-            }
-            let formula = Compiled::new(&e.formula, &known).map_err(|f| {
-                let suggestion = f.unknown.as_deref().map_or(String::new(), |u| {
-                    let names = known.iter().map(String::as_str);
-                    let listed = format!(
-                        "a formula reads {}, `time` and its parameters",
-                        match e.kind {
-                            PlaceKind::Torque => "the state by output names, the inputs",
-                            PlaceKind::Output => "`y`, the outputs, the inputs",
-                        }
-                    );
-                    let functions = super::FUNCTIONS.iter().copied().chain(["pow"]);
-                    if f.message.starts_with("unknown function") {
-                        hint(
-                            u,
-                            functions,
-                            "functions: sin cos exp abs sign sqrt tanh pow",
-                        )
-                    } else {
-                        hint(u, names, &listed)
-                    }
-                });
-                EffectError {
-                    field: field("formula"),
-                    message: format!("at character {}: {}{suggestion}", f.position, f.message),
-                }
-            })?;
-            compiled.push(Compiled1 {
+            add_parameters(&mut info, i, e, &known)?;
+            let formula = compile(i, e, &known)?;
+            compiled.push(Definition {
                 formula,
                 first,
                 count: e.parameters.len(),
