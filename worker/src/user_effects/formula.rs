@@ -343,13 +343,20 @@ impl Compiled {
     /// Its value with name `k` worth `value(k)` (asked once per name it reads).
     #[inline]
     pub fn eval_by(&self, value: impl Fn(usize) -> f64) -> f64 {
-        let mut args = [0.0; MAX_SLOTS];
-        for (a, &s) in args.iter_mut().zip(&self.slots) {
-            *a = value(s);
-        }
-        self.expr
-            .eval(&args[..self.slots.len()])
-            .unwrap_or(f64::NAN)
+        const SHORT: usize = 8;
+        let n = self.slots.len();
+        let result = if n <= SHORT {
+            // Most formulas read a few names: their values on the stack.
+            let mut args = [0.0; SHORT];
+            for (a, &s) in args.iter_mut().zip(&self.slots) {
+                *a = value(s);
+            }
+            self.expr.eval(&args[..n])
+        } else {
+            let args: Vec<f64> = self.slots.iter().map(|&s| value(s)).collect();
+            self.expr.eval(&args)
+        };
+        result.unwrap_or(f64::NAN)
     }
 }
 
