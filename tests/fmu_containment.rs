@@ -353,6 +353,7 @@ fn a_process_an_fmu_sends_away_ends_with_a_killed_worker() {
                     solver: None,
                     fmu_hash: uploaded.fmu_hash,
                     inputs: vec![],
+                    effects: vec![],
                 })
                 .await
                 .unwrap()

@@ -44,6 +44,7 @@ fn simulate_request() -> proto::SimulateRequest {
         solver: None,
         fmu_hash: Vec::new(),
         inputs: vec![],
+        effects: vec![],
     }
 }
 
@@ -83,6 +84,7 @@ fn evaluate_request(points: usize) -> proto::EvaluateRequest {
         solver: None,
         fmu_hash: Vec::new(),
         residuals: false,
+        effects: vec![],
     }
 }
 
@@ -421,6 +423,7 @@ fn a_flood_beyond_the_queue_is_refused() {
             solver: None,
             fmu_hash: Vec::new(),
             inputs: vec![],
+            effects: vec![],
         };
         // Requests the worker has taken in: done, running or waiting.
         let taken_in = |c: &SimulatorClient<Channel>| {
@@ -542,6 +545,7 @@ fn a_client_setting_every_described_default_simulates_the_defaults() {
                 solver: None,
                 fmu_hash: Vec::new(),
                 inputs: vec![],
+                effects: vec![],
             };
             let untouched = c
                 .simulate(described(Vec::new()))

@@ -282,6 +282,9 @@ impl Objective {
         // Inputs and further experiments likewise: an objective without them keeps its
         // fingerprint.
         calib_worker::inputs::hash_into(&mut h, &self.named_inputs());
+        // User-defined effects, as written: another formula is another objective (nothing
+        // replayed); an objective without them keeps its fingerprint.
+        calib_worker::user_effects::hash_into(&mut h, self.model.user_effects());
         if !self.more.is_empty() || !self.name.is_empty() {
             h.text("experiments")
                 .text(&self.name)

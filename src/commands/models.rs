@@ -38,6 +38,7 @@ pub fn run(args: Args) -> Outcome {
             .map(|m| {
                 let mut v = serde_json::to_value(m.info()).expect("plain data");
                 v["default_solver"] = default_solver(*m);
+                v["places"] = serde_json::to_value(m.places()).expect("plain data");
                 v
             })
             .collect();
@@ -88,6 +89,18 @@ pub fn run(args: Args) -> Outcome {
             println!(
                 "    {:<28} [{}, {}] {:<12} {}",
                 e.name, e.min, e.max, e.unit, e.description
+            );
+        }
+        println!("  places of effects defined by a formula (campaigns' [[effects]] `formula`):");
+        for p in model.places() {
+            let key = format!("{} = \"{}\"", p.kind.word(), p.name);
+            println!("    {key:<34} {}", p.description);
+        }
+        let states = model.state_names();
+        if !states.is_empty() {
+            println!(
+                "    (a torque's formula reads the state as {})",
+                states.join(", ")
             );
         }
         println!();

@@ -16,6 +16,7 @@ use crate::inputs::Inputs;
 use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, SimulationError, SolverOptions, Trajectory,
 };
+use crate::user_effects::Forces;
 
 /// The measurement-chain effects every output has, in the order of their slots.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -163,6 +164,14 @@ impl<M: Model> Model for WithOutputEffects<M> {
         self.simulate_driven(params, grid, outputs, options, Inputs::none())
     }
 
+    fn places(&self) -> Vec<crate::PlaceSpec> {
+        self.inner.places()
+    }
+
+    fn state_names(&self) -> Vec<String> {
+        self.inner.state_names()
+    }
+
     fn simulate_driven(
         &self,
         params: &[f64],
@@ -170,6 +179,18 @@ impl<M: Model> Model for WithOutputEffects<M> {
         outputs: &[usize],
         options: &SolverOptions,
         inputs: &Inputs,
+    ) -> Result<Trajectory, SimulationError> {
+        self.simulate_forced(params, grid, outputs, options, inputs, &Forces::default())
+    }
+
+    fn simulate_forced(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+        forces: &Forces,
     ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
         let (inner_params, effects) = params.split_at(self.inner_len);
@@ -188,7 +209,7 @@ impl<M: Model> Model for WithOutputEffects<M> {
 
         let mut trajectory = if delays.iter().all(|d| *d == 0.0) {
             self.inner
-                .simulate_driven(inner_params, grid, outputs, options, inputs)?
+                .simulate_forced(inner_params, grid, outputs, options, inputs, forces)?
         } else {
             // Simulate on the grid and every delayed copy of it, then pick.
             let mut times: Vec<f64> = grid.to_vec();
@@ -197,9 +218,14 @@ impl<M: Model> Model for WithOutputEffects<M> {
             }
             times.sort_by(f64::total_cmp);
             times.dedup();
-            let full =
-                self.inner
-                    .simulate_driven(inner_params, &times, outputs, options, inputs)?;
+            let full = self.inner.simulate_forced(
+                inner_params,
+                &times,
+                outputs,
+                options,
+                inputs,
+                forces,
+            )?;
             let at = |k: usize, t: f64| {
                 let i = times.partition_point(|x| *x < t);
                 full.values[k][i]

@@ -15,9 +15,10 @@ pub mod ode;
 pub mod scoring;
 pub mod service;
 pub mod testing;
+pub mod user_effects;
 pub mod validate;
 
 pub use model::{
-    EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
-    SolverOptions, SolverStats, Trajectory,
+    EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, PlaceKind, PlaceSpec,
+    SimulationError, SolverOptions, SolverStats, Trajectory,
 };

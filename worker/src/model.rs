@@ -59,6 +59,34 @@ pub struct EffectSpec {
     pub parameter: Option<String>,
 }
 
+/// What a user-defined effect acts on (see [`crate::user_effects`]).
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, Eq, Hash)]
+#[serde(rename_all = "lowercase")]
+pub enum PlaceKind {
+    /// A generalized torque on a joint, added to the equations of motion.
+    Torque,
+    /// An output, transformed after the simulation: `y + formula`.
+    Output,
+}
+
+impl PlaceKind {
+    /// The word a campaign writes: `torque = "armJoint"`, `output = "T_out"`.
+    pub fn word(self) -> &'static str {
+        match self {
+            PlaceKind::Torque => "torque",
+            PlaceKind::Output => "output",
+        }
+    }
+}
+
+/// A place of a model where a user-defined effect may act.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PlaceSpec {
+    pub kind: PlaceKind,
+    pub name: String,
+    pub description: String,
+}
+
 /// Everything a client needs to know to drive a model.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct ModelInfo {
@@ -253,6 +281,53 @@ pub trait Model: Send + Sync {
     /// `calib models` say it).
     fn tolerance_origin(&self) -> &'static str {
         "the model's calibration tolerance"
+    }
+
+    /// Where user-defined effects may act: by default each output (a transformation
+    /// `y + formula`); a model with equations of motion adds its joints' torques.
+    fn places(&self) -> Vec<PlaceSpec> {
+        self.info()
+            .outputs
+            .iter()
+            .map(|o| PlaceSpec {
+                kind: PlaceKind::Output,
+                name: o.name.clone(),
+                description: format!("added to the output {} ({})", o.name, o.unit),
+            })
+            .collect()
+    }
+
+    /// The names a formula acting inside the model (on a torque) reads its state by, in
+    /// the order of the state vector; empty for a model without such places.
+    fn state_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+
+    /// The user-defined effects this model carries (see [`crate::user_effects`]); none for
+    /// a model as hosted.
+    fn user_effects(&self) -> &[crate::user_effects::UserEffect] {
+        &[]
+    }
+
+    /// [`Model::simulate_driven`] with the terms of `forces` added at their places. A
+    /// model with no place of that kind refuses them.
+    fn simulate_forced(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+        forces: &crate::user_effects::Forces,
+    ) -> Result<Trajectory, SimulationError> {
+        if let Some(f) = forces.terms.first() {
+            return Err(SimulationError::InvalidInput(format!(
+                "model `{}` has no torque `{}`",
+                self.info().name,
+                f.place
+            )));
+        }
+        self.simulate_driven(params, grid, outputs, options, inputs)
     }
 
     /// Simulate with the full parameter vector `params` (base parameters then effects,

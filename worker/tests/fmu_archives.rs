@@ -308,6 +308,7 @@ fn a_worker_refuses_lying_and_inflating_fmus_and_keeps_serving() {
                 solver: None,
                 fmu_hash: Vec::new(),
                 inputs: vec![],
+                effects: vec![],
             })
             .await
             .unwrap()

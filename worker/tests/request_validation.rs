@@ -108,6 +108,7 @@ fn any_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                     solver,
                     fmu_hash: Vec::new(),
                     inputs: vec![],
+                    effects: vec![],
                 }
             },
         )
@@ -169,6 +170,7 @@ fn any_evaluate_request() -> impl Strategy<Value = proto::EvaluateRequest> {
                 solver,
                 fmu_hash: Vec::new(),
                 residuals: false,
+                effects: vec![],
             },
         )
 }
@@ -261,6 +263,7 @@ fn valid_simulate_request() -> impl Strategy<Value = proto::SimulateRequest> {
                 solver,
                 fmu_hash: Vec::new(),
                 inputs: vec![],
+                effects: vec![],
             },
         )
 }

@@ -18,8 +18,9 @@ pub(super) struct CampaignFile {
     pub(super) inputs: Vec<Spanned<InputEntry>>,
     #[serde(default)]
     pub(super) parameters: Vec<Spanned<ParameterEntry>>,
+    /// Built-in effects made free, and effects defined by a formula.
     #[serde(default)]
-    pub(super) effects: Vec<Spanned<ParameterEntry>>,
+    pub(super) effects: Vec<Spanned<EffectEntry>>,
     #[serde(default)]
     pub(super) diagnosis: Option<Spanned<DiagnosisSection>>,
     pub(super) window: Option<Spanned<WindowSection>>,
@@ -124,6 +125,38 @@ pub(super) struct ParameterEntry {
     pub(super) max: f64,
     #[serde(default)]
     pub(super) scale: super::Scale,
+}
+
+/// An `[[effects]]` entry: a built-in effect made free (`name`, `min`, `max`, `nominal`,
+/// `scale`), or an effect defined by a formula (`name`, `torque` or `output`, `formula`,
+/// `parameters`, `fixed`).
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct EffectEntry {
+    pub(super) name: Spanned<String>,
+    pub(super) nominal: Option<f64>,
+    pub(super) min: Option<f64>,
+    pub(super) max: Option<f64>,
+    #[serde(default)]
+    pub(super) scale: super::Scale,
+    pub(super) torque: Option<Spanned<String>>,
+    pub(super) output: Option<Spanned<String>>,
+    pub(super) formula: Option<Spanned<String>>,
+    pub(super) parameters: Option<Vec<Spanned<UserParameterEntry>>>,
+    /// Every parameter of the defined effect held at its nominal value (diagnosis may
+    /// still offer it as a candidate).
+    pub(super) fixed: Option<bool>,
+}
+
+/// A parameter of an effect defined by a formula.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct UserParameterEntry {
+    pub(super) name: String,
+    pub(super) nominal: Option<f64>,
+    pub(super) min: f64,
+    pub(super) max: f64,
+    pub(super) fixed: Option<bool>,
 }
 
 #[derive(Debug, Deserialize)]

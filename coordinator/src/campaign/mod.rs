@@ -6,6 +6,7 @@
 
 mod file;
 mod resolve;
+mod user_effects;
 
 use calib_worker::content_hash::ContentHasher;
 pub use calib_worker::inputs::Interpolation;
@@ -338,6 +339,7 @@ impl Campaign {
         // identity it always had. So do several windows, experiments and parameters free in
         // one experiment alone.
         hash_inputs(&mut h, &self.inputs);
+        calib_worker::user_effects::hash_into(&mut h, self.model.user_effects());
         if self.windows.len() > 1 {
             h.text("windows").count(self.windows.len());
             for w in &self.windows {

@@ -6,6 +6,7 @@ use super::file::{
     InputEntry, ModelSection, OutputEntry, ParameterEntry, SearchSection, SolverSection,
     WindowSection,
 };
+use super::user_effects;
 use super::{
     Campaign, CampaignError, DiagnosisSettings, Experiment, FreeParameter, InputMapping,
     Interpolation, OutputMapping, OutputScale, Scale, Search,
@@ -33,7 +34,7 @@ impl Locator<'_> {
             + 1
     }
 
-    fn error<T>(
+    pub(super) fn error<T>(
         &self,
         span: std::ops::Range<usize>,
         field: &str,
@@ -63,12 +64,16 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
     let model_span = file.model.span();
     let model_section = file.model.into_inner();
     let model = resolve_model(&model_section, at)?;
+    let effects = user_effects::split(file.effects, at)?;
+    let model = user_effects::attach(model, &effects.defined, at)?;
     let info = model.info();
 
     let (mut base, fixed) = resolve_fixed(&model_section, info, at)?;
+    let defined_free = user_effects::free_parameters(&effects.defined, info, &fixed, &mut base);
     let shared_free = resolve_free(
         &file.parameters,
-        &file.effects,
+        &effects.builtin,
+        defined_free,
         &fixed,
         &mut base,
         info,
@@ -207,6 +212,7 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
             let mut own_free = resolve_free(
                 &e.parameters,
                 &[],
+                Vec::new(),
                 &own_fixed,
                 &mut own,
                 info,
@@ -350,9 +356,9 @@ fn check_counts(file: &CampaignFile, at: &Locator) -> Result<(), CampaignError> 
         let span = file
             .parameters
             .iter()
-            .chain(&file.effects)
-            .nth(limits::MAX_FREE_PARAMETERS)
-            .map(|p| p.span());
+            .map(|p| p.span())
+            .chain(file.effects.iter().map(|e| e.span()))
+            .nth(limits::MAX_FREE_PARAMETERS);
         return match span {
             Some(span) => at.error(span, "parameters", e),
             None => at.unlocated("parameters", &e),
@@ -445,10 +451,14 @@ fn resolve_fixed(
     Ok((base, fixed))
 }
 
-/// Free parameters, then free effects, each set to its nominal value in `base`.
+/// Free parameters, then free effects (`effects`: each with its place in the file's
+/// list), each set to its nominal value in `base`, then the parameters of effects defined
+/// by a formula (`defined`, set already).
+#[allow(clippy::too_many_arguments)]
 fn resolve_free(
     parameters: &[Spanned<ParameterEntry>],
-    effects: &[Spanned<ParameterEntry>],
+    effects: &[(usize, Spanned<ParameterEntry>)],
+    defined: Vec<FreeParameter>,
     fixed: &[usize],
     base: &mut [f64],
     info: &ModelInfo,
@@ -456,13 +466,12 @@ fn resolve_free(
     at: &Locator,
 ) -> Result<Vec<FreeParameter>, CampaignError> {
     let mut free: Vec<FreeParameter> = Vec::new();
-    let sections = [("parameters", parameters), ("effects", effects)];
-    for (section, entry, i) in sections.iter().flat_map(|(section, entries)| {
-        entries
-            .iter()
-            .enumerate()
-            .map(move |(i, e)| (*section, e, i))
-    }) {
+    let entries = parameters
+        .iter()
+        .enumerate()
+        .map(|(i, e)| ("parameters", e, i))
+        .chain(effects.iter().map(|(i, e)| ("effects", e, *i)));
+    for (section, entry, i) in entries {
         let is_effect = section == "effects";
         let span = entry.span();
         let p = entry.get_ref();
@@ -479,6 +488,15 @@ fn resolve_free(
         };
         if free.iter().any(|f| f.index == index) {
             return at.error(span, &field, "is listed twice".into());
+        }
+        if defined.iter().any(|f| f.index == index) {
+            return at.error(
+                span,
+                &field,
+                "is free as a parameter of its effect already (mark it `fixed = true` there \
+                 to hold it)"
+                    .into(),
+            );
         }
         if fixed.contains(&index) {
             return at.error(
@@ -527,6 +545,7 @@ fn resolve_free(
             experiment: None,
         });
     }
+    free.extend(defined);
     if free.is_empty() {
         return at.unlocated(
             "parameters",

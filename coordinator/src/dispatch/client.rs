@@ -60,6 +60,15 @@ pub fn wire_inputs(objective: &Objective) -> Vec<proto::InputSeries> {
         .collect()
 }
 
+/// The user-defined effects of the objective's model, sent as text with every request.
+fn wire_effects(objective: &Objective) -> Vec<proto::UserEffect> {
+    let effects = objective.model.user_effects();
+    effects
+        .iter()
+        .map(calib_worker::user_effects::wire::to_proto)
+        .collect()
+}
+
 impl WireObjective {
     pub fn new(objective: &Objective) -> Self {
         let info = objective.model.info();
@@ -103,6 +112,7 @@ impl WireObjective {
             solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
             residuals: objective.returns_residuals(),
+            effects: wire_effects(objective),
         };
         let measurement = proto::Measurement {
             times: objective.grid.clone(),
@@ -178,6 +188,7 @@ impl WireSimulation {
             solver: Some(wire_solver(&objective.solver)),
             fmu_hash,
             inputs: wire_inputs(objective),
+            effects: wire_effects(objective),
         };
         Self {
             template,

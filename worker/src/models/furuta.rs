@@ -43,10 +43,11 @@
 
 use crate::inputs::{InputSignal, Inputs};
 use crate::model::{
-    check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec,
-    SimulationError, SolverOptions, Trajectory,
+    check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, PlaceKind,
+    PlaceSpec, SimulationError, SolverOptions, Trajectory,
 };
 use crate::ode::{integrate, HybridSystem};
+use crate::user_effects::{Force, Forces};
 use std::f64::consts::PI;
 
 /// Indices of the full parameter vector (base parameters, then effects).
@@ -300,12 +301,59 @@ impl Model for Furuta {
         options: &SolverOptions,
         inputs: &Inputs,
     ) -> Result<Trajectory, SimulationError> {
+        self.simulate_forced(params, grid, outputs, options, inputs, &Forces::default())
+    }
+
+    /// A torque on each joint (`armJoint`, `pendulumJoint`), and each output.
+    fn places(&self) -> Vec<PlaceSpec> {
+        let torques = ["armJoint", "pendulumJoint"].map(|joint| PlaceSpec {
+            kind: PlaceKind::Torque,
+            name: joint.into(),
+            description: format!(
+                "generalized torque on the {joint} [N.m], positive in the direction of \
+                 {joint}.phi; a driving torque the bearing friction must hold while stuck"
+            ),
+        });
+        let outputs = self.info.outputs.iter().map(|o| PlaceSpec {
+            kind: PlaceKind::Output,
+            name: o.name.clone(),
+            description: format!("added to the output {} ({})", o.name, o.unit),
+        });
+        torques.into_iter().chain(outputs).collect()
+    }
+
+    /// The state `[φ, θ, φ̇, θ̇]` is the outputs in their order.
+    fn state_names(&self) -> Vec<String> {
+        self.info.outputs.iter().map(|o| o.name.clone()).collect()
+    }
+
+    fn simulate_forced(
+        &self,
+        params: &[f64],
+        grid: &[f64],
+        outputs: &[usize],
+        options: &SolverOptions,
+        inputs: &Inputs,
+        forces: &Forces,
+    ) -> Result<Trajectory, SimulationError> {
         check_request(&self.info, params, grid, outputs)?;
         inputs
             .check(&self.info, 0.0, grid[grid.len() - 1])
             .map_err(SimulationError::InvalidInput)?;
         let mut system = FurutaSystem::new(params)?;
         system.motor = inputs.signal(0).cloned();
+        for f in &forces.terms {
+            let joint = match f.place.as_str() {
+                "armJoint" => 0,
+                "pendulumJoint" => 1,
+                other => {
+                    return Err(SimulationError::InvalidInput(format!(
+                        "model `furuta` has no torque `{other}`"
+                    )))
+                }
+            };
+            system.forces.push((joint, f.clone()));
+        }
         let y0 = [
             params[idx::PHI0],
             params[idx::THETA0],
@@ -351,6 +399,8 @@ pub(crate) struct FurutaSystem {
     modes: [Mode; 2],
     /// The arm's motor torque, when a signal drives it.
     motor: Option<InputSignal>,
+    /// Torques of user-defined effects, each on a joint.
+    forces: Vec<(usize, Force)>,
 }
 
 /// Accelerations and bearing friction torques in one mode configuration.
@@ -382,6 +432,7 @@ impl FurutaSystem {
             mgl: m * p[idx::G] * l,
             modes: [Mode::Forward; 2],
             motor: None,
+            forces: Vec::new(),
         };
         if system.friction.iter().any(|f| *f < 0.0) {
             return Err(SimulationError::InvalidInput(
@@ -418,6 +469,10 @@ impl FurutaSystem {
         }
         if let Some(motor) = &self.motor {
             r[0] += motor.at(t);
+        }
+        for (joint, force) in &self.forces {
+            let motor = |_: usize| self.motor.as_ref().map_or(0.0, |m| m.at(t));
+            r[*joint] += force.value(t, y, motor);
         }
         (r, a, self.c * c)
     }

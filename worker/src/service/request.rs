@@ -6,7 +6,7 @@
 
 use super::error::{Error, Result};
 use crate::inputs::{Inputs, Interpolation, NamedSignal};
-use crate::{limits, validate, Model, ModelInfo, SolverOptions};
+use crate::{limits, user_effects, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
 /// Reject any protocol version but ours: the check of requests that simulate.
@@ -34,6 +34,14 @@ fn check_protocol_among(client: u32, accepted: &[u32]) -> Result<()> {
 /// The hosted model called `name`.
 pub fn hosted_model(name: &str) -> Result<&'static dyn Model> {
     validate::model(name).map_err(|e| Error::invalid("model", e.message))
+}
+
+/// The hosted model called `name` with the request's user-defined effects.
+pub fn model_with_effects(name: &str, effects: &[proto::UserEffect]) -> Result<&'static dyn Model> {
+    let model = hosted_model(name)?;
+    let refused = |e: user_effects::EffectError| Error::invalid(e.field, e.message);
+    let definitions = user_effects::wire::all_from_proto(effects).map_err(refused)?;
+    user_effects::attach(model, &definitions).map_err(refused)
 }
 
 /// A refusal of [`validate`] placed at `field`, or at its element when it names one.
@@ -189,7 +197,7 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
 
     fn try_from(r: proto::SimulateRequest) -> Result<Self> {
         check_protocol(r.protocol_version)?;
-        let model = hosted_model(&r.model)?;
+        let model = model_with_effects(&r.model, &r.effects)?;
         let info = model.info();
         let params = parameter_vector(info, &r.parameters)?;
         check_times(&r.times, "times")?;
@@ -300,7 +308,7 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
 
     fn try_from(r: proto::EvaluateRequest) -> Result<Self> {
         check_protocol(r.protocol_version)?;
-        let model = hosted_model(&r.model)?;
+        let model = model_with_effects(&r.model, &r.effects)?;
         let info = model.info();
         let base = parameter_vector(info, &r.parameters)?;
         let mut free = Vec::with_capacity(r.free_parameters.len());
@@ -420,6 +428,7 @@ mod tests {
             solver,
             fmu_hash: Vec::new(),
             inputs: vec![],
+            effects: vec![],
         }
     }
 
@@ -495,5 +504,49 @@ mod tests {
         );
         let e = Simulation::try_from(r).err().unwrap();
         assert!(e.to_string().starts_with("solver.max_steps: "), "{e}");
+    }
+
+    fn user_effect(formula: &str) -> proto::UserEffect {
+        proto::UserEffect {
+            name: "damping.arm".into(),
+            torque: "armJoint".into(),
+            output: String::new(),
+            formula: formula.into(),
+            parameters: vec![proto::UserEffectParameter {
+                name: "b".into(),
+                nominal: 0.0,
+                min: 0.0,
+                max: 1.0,
+            }],
+        }
+    }
+
+    #[test]
+    fn user_effects_travel_as_text_and_are_checked_on_arrival() {
+        let mut r = simulate_request("furuta", None);
+        r.effects.push(user_effect("-b * armJoint.w"));
+        r.parameters.push(proto::ParameterValue {
+            name: "damping.arm.b".into(),
+            value: 0.01,
+        });
+        let s = Simulation::try_from(r).unwrap();
+        let b = s.model.info().parameter_index("damping.arm.b").unwrap();
+        assert_eq!(s.params[b], 0.01);
+        assert_eq!(s.model.user_effects()[0].formula, "-b * armJoint.w");
+
+        let mut r = simulate_request("furuta", None);
+        r.effects.push(user_effect("-b * armJoint.v"));
+        let e = Simulation::try_from(r).err().unwrap();
+        assert_eq!(
+            e.to_string(),
+            "effects[0].formula: at character 6: unknown name `armJoint.v`; did you mean \
+             `armJoint.w`?"
+        );
+        let mut r = simulate_request("furuta", None);
+        let mut both = user_effect("b");
+        both.output = "armJoint.phi".into();
+        r.effects.push(both);
+        let e = Simulation::try_from(r).err().unwrap();
+        assert!(e.to_string().starts_with("effects[0].output: "), "{e}");
     }
 }

@@ -297,6 +297,15 @@ pub fn describe(model: &dyn Model) -> proto::ModelDescription {
         }),
         tolerance_origin: model.tolerance_origin().to_string(),
         default_stop_time: model.default_stop_time(),
+        places: model
+            .places()
+            .into_iter()
+            .map(|p| proto::PlaceDescription {
+                kind: p.kind.word().into(),
+                name: p.name,
+                description: p.description,
+            })
+            .collect(),
         inputs: info
             .inputs
             .iter()

@@ -13,6 +13,7 @@ mod solver;
 mod values;
 
 pub use grid::{output_grid, stop_time};
+pub(crate) use names::hint;
 pub use names::{effect, input, model, output, parameter};
 pub use solver::{
     atol, communication_step, max_steps, rtol, solver_options, start_time, SolverOverrides,

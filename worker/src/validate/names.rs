@@ -19,7 +19,11 @@ fn nearest<'a>(name: &str, known: impl IntoIterator<Item = &'a str>) -> Option<&
 }
 
 /// "; did you mean `x`?", or how to list the names when none is near.
-fn hint<'a>(name: &str, known: impl IntoIterator<Item = &'a str>, listing: &str) -> String {
+pub(crate) fn hint<'a>(
+    name: &str,
+    known: impl IntoIterator<Item = &'a str>,
+    listing: &str,
+) -> String {
     match nearest(name, known) {
         Some(k) => format!("; did you mean `{k}`?"),
         None => format!(" ({listing})"),

@@ -1,0 +1,400 @@
+//! Formulas of user-defined effects: parsed here (so that a mistake is reported with its
+//! position and an unknown name with the nearest known one), then compiled by `exmex`
+//! into a flat expression evaluated once per right-hand side or output sample.
+//!
+//! Grammar, loosest first: `+ -`, `* /`, unary `-`, `^` (right-associative, binds tighter
+//! than unary minus: `-x^2` is `-(x^2)`). Atoms: numbers (`12`, `0.5`, `1e-3`), names
+//! (letters, digits, `_`, dotted parts as `armJoint.phi`), calls of the functions
+//! [`FUNCTIONS`] and `pow(a, b)`, parentheses.
+
+use exmex::prelude::*;
+use exmex::FlatEx;
+
+/// Functions of one argument a formula may call (`pow(a, b)` takes two).
+pub const FUNCTIONS: [&str; 7] = ["sin", "cos", "exp", "abs", "sign", "sqrt", "tanh"];
+
+/// Most distinct names and numbers one formula may hold.
+pub const MAX_SLOTS: usize = 64;
+
+/// A mistake in a formula: what, and the character (from 1) where it is.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FormulaError {
+    pub position: usize,
+    pub message: String,
+    /// The unknown name, when that is the mistake (for suggestions).
+    pub unknown: Option<String>,
+}
+
+impl FormulaError {
+    fn at(position: usize, message: impl Into<String>) -> Self {
+        Self {
+            position: position + 1,
+            message: message.into(),
+            unknown: None,
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Node {
+    Number(f64),
+    Name(String, usize),
+    Neg(Box<Node>),
+    Binary(char, Box<Node>, Box<Node>),
+    Call(String, Vec<Node>),
+}
+
+struct Parser<'a> {
+    text: &'a str,
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl Parser<'_> {
+    fn skip(&mut self) {
+        while self.pos < self.bytes.len() && self.bytes[self.pos].is_ascii_whitespace() {
+            self.pos += 1;
+        }
+    }
+
+    fn peek(&mut self) -> Option<u8> {
+        self.skip();
+        self.bytes.get(self.pos).copied()
+    }
+
+    fn expr(&mut self) -> Result<Node, FormulaError> {
+        let mut left = self.term()?;
+        while let Some(op @ (b'+' | b'-')) = self.peek() {
+            self.pos += 1;
+            left = Node::Binary(op as char, Box::new(left), Box::new(self.term()?));
+        }
+        Ok(left)
+    }
+
+    fn term(&mut self) -> Result<Node, FormulaError> {
+        let mut left = self.unary()?;
+        while let Some(op @ (b'*' | b'/')) = self.peek() {
+            self.pos += 1;
+            left = Node::Binary(op as char, Box::new(left), Box::new(self.unary()?));
+        }
+        Ok(left)
+    }
+
+    fn unary(&mut self) -> Result<Node, FormulaError> {
+        match self.peek() {
+            Some(b'-') => {
+                self.pos += 1;
+                Ok(Node::Neg(Box::new(self.unary()?)))
+            }
+            Some(b'+') => {
+                self.pos += 1;
+                self.unary()
+            }
+            _ => self.power(),
+        }
+    }
+
+    fn power(&mut self) -> Result<Node, FormulaError> {
+        let base = self.atom()?;
+        if self.peek() == Some(b'^') {
+            self.pos += 1;
+            let exponent = self.unary()?;
+            return Ok(Node::Binary('^', Box::new(base), Box::new(exponent)));
+        }
+        Ok(base)
+    }
+
+    fn atom(&mut self) -> Result<Node, FormulaError> {
+        let start = match self.peek() {
+            None => return Err(FormulaError::at(self.pos, "the formula ends too early")),
+            Some(_) => self.pos,
+        };
+        let c = self.bytes[start];
+        if c == b'(' {
+            self.pos += 1;
+            let inner = self.expr()?;
+            self.expect(b')', start)?;
+            return Ok(inner);
+        }
+        if c.is_ascii_digit() || c == b'.' {
+            return self.number();
+        }
+        if c.is_ascii_alphabetic() || c == b'_' {
+            let name = self.name();
+            if self.peek() == Some(b'(') {
+                return self.call(name, start);
+            }
+            return Ok(Node::Name(name, start));
+        }
+        let shown = self.text[start..].chars().next().unwrap_or(' ');
+        Err(FormulaError::at(start, format!("unexpected `{shown}`")))
+    }
+
+    fn expect(&mut self, wanted: u8, opened: usize) -> Result<(), FormulaError> {
+        if self.peek() == Some(wanted) {
+            self.pos += 1;
+            return Ok(());
+        }
+        let message = match self.peek() {
+            None => format!("`(` at character {} is never closed", opened + 1),
+            Some(_) => format!("expected `{}` here", wanted as char),
+        };
+        Err(FormulaError::at(self.pos, message))
+    }
+
+    fn name(&mut self) -> String {
+        let start = self.pos;
+        let part = |b: u8| b.is_ascii_alphanumeric() || b == b'_';
+        while self.pos < self.bytes.len() {
+            let b = self.bytes[self.pos];
+            let dotted = b == b'.'
+                && self
+                    .bytes
+                    .get(self.pos + 1)
+                    .is_some_and(|n| n.is_ascii_alphabetic() || *n == b'_');
+            if part(b) || dotted {
+                self.pos += 1;
+            } else {
+                break;
+            }
+        }
+        self.text[start..self.pos].to_string()
+    }
+
+    fn number(&mut self) -> Result<Node, FormulaError> {
+        let start = self.pos;
+        let digits = |p: &mut Self| {
+            while p.pos < p.bytes.len() && p.bytes[p.pos].is_ascii_digit() {
+                p.pos += 1;
+            }
+        };
+        digits(self);
+        if self.bytes.get(self.pos) == Some(&b'.') {
+            self.pos += 1;
+            digits(self);
+        }
+        if matches!(self.bytes.get(self.pos), Some(b'e' | b'E')) {
+            let mark = self.pos;
+            self.pos += 1;
+            if matches!(self.bytes.get(self.pos), Some(b'+' | b'-')) {
+                self.pos += 1;
+            }
+            let before = self.pos;
+            digits(self);
+            if self.pos == before {
+                self.pos = mark;
+            }
+        }
+        let text = &self.text[start..self.pos];
+        match text.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(Node::Number(v)),
+            _ => Err(FormulaError::at(start, format!("`{text}` is not a number"))),
+        }
+    }
+
+    fn call(&mut self, name: String, start: usize) -> Result<Node, FormulaError> {
+        let arity = match name.as_str() {
+            "pow" => 2,
+            n if FUNCTIONS.contains(&n) => 1,
+            _ => {
+                return Err(FormulaError {
+                    unknown: Some(name.clone()),
+                    ..FormulaError::at(start, format!("unknown function `{name}`"))
+                })
+            }
+        };
+        let open = self.pos;
+        self.pos += 1;
+        let mut args = vec![self.expr()?];
+        while self.peek() == Some(b',') {
+            self.pos += 1;
+            args.push(self.expr()?);
+        }
+        self.expect(b')', open)?;
+        if args.len() != arity {
+            return Err(FormulaError::at(
+                start,
+                format!("`{name}` takes {arity} argument(s), not {}", args.len()),
+            ));
+        }
+        Ok(Node::Call(name, args))
+    }
+}
+
+fn parse(text: &str) -> Result<Node, FormulaError> {
+    let mut p = Parser {
+        text,
+        bytes: text.as_bytes(),
+        pos: 0,
+    };
+    if p.peek().is_none() {
+        return Err(FormulaError::at(0, "the formula is empty"));
+    }
+    let node = p.expr()?;
+    match p.peek() {
+        None => Ok(node),
+        Some(b')') => Err(FormulaError::at(p.pos, "`)` closes nothing")),
+        Some(_) => Err(FormulaError::at(
+            p.pos,
+            "expected an operator (+ - * / ^) or the end here",
+        )),
+    }
+}
+
+/// Every name the formula reads, with the character position (from 0) where it first is.
+fn names(node: &Node, out: &mut Vec<(String, usize)>) {
+    match node {
+        Node::Number(_) => {}
+        Node::Name(n, at) => {
+            if !out.iter().any(|(m, _)| m == n) {
+                out.push((n.clone(), *at));
+            }
+        }
+        Node::Neg(a) => names(a, out),
+        Node::Binary(_, a, b) => {
+            names(a, out);
+            names(b, out);
+        }
+        Node::Call(_, args) => args.iter().for_each(|a| names(a, out)),
+    }
+}
+
+/// The formula in exmex's syntax, fully parenthesised: names in braces, numbers in plain
+/// decimals (exact: Rust prints the shortest decimal that reads back to the same bits).
+fn emit(node: &Node, out: &mut String) {
+    match node {
+        Node::Number(v) => out.push_str(&format!("({})", v)),
+        Node::Name(n, _) => out.push_str(&format!("{{{n}}}")),
+        Node::Neg(a) => {
+            out.push_str("(-");
+            emit(a, out);
+            out.push(')');
+        }
+        Node::Binary(op, a, b) => {
+            out.push('(');
+            emit(a, out);
+            out.push(*op);
+            emit(b, out);
+            out.push(')');
+        }
+        Node::Call(f, args) if f == "pow" => emit(
+            &Node::Binary('^', Box::new(args[0].clone()), Box::new(args[1].clone())),
+            out,
+        ),
+        Node::Call(f, args) => {
+            let f = if f == "sign" { "signum" } else { f.as_str() };
+            out.push_str(&format!("({f}("));
+            emit(&args[0], out);
+            out.push_str("))");
+        }
+    }
+}
+
+/// A formula compiled, its names bound to slots of the caller's choosing.
+#[derive(Clone, Debug)]
+pub struct Compiled {
+    expr: FlatEx<f64>,
+    /// For each variable of `expr` (in its order), the index of the caller's name.
+    slots: Vec<usize>,
+}
+
+impl Compiled {
+    /// Parse `text` and compile it; every name it reads must be one of `known`.
+    pub fn new(text: &str, known: &[String]) -> Result<Compiled, FormulaError> {
+        let node = parse(text)?;
+        let mut used = Vec::new();
+        names(&node, &mut used);
+        for (name, at) in &used {
+            if !known.contains(name) {
+                return Err(FormulaError {
+                    unknown: Some(name.clone()),
+                    ..FormulaError::at(*at, format!("unknown name `{name}`"))
+                });
+            }
+        }
+        if used.len() > MAX_SLOTS {
+            return Err(FormulaError::at(
+                0,
+                format!("more than {MAX_SLOTS} distinct names"),
+            ));
+        }
+        let mut source = String::new();
+        emit(&node, &mut source);
+        let expr = FlatEx::<f64>::parse(&source)
+            .map_err(|e| FormulaError::at(0, format!("cannot compile: {e}")))?;
+        let slots = expr
+            .var_names()
+            .iter()
+            .map(|v| known.iter().position(|k| k == v).expect("checked above"))
+            .collect();
+        Ok(Compiled { expr, slots })
+    }
+
+    /// Indices (into the names it was compiled against) of the names it reads.
+    pub fn reads(&self) -> &[usize] {
+        &self.slots
+    }
+
+    /// Its value with name `k` worth `values[k]`.
+    pub fn eval(&self, values: &[f64]) -> f64 {
+        self.eval_by(|k| values[k])
+    }
+
+    /// Its value with name `k` worth `value(k)` (asked once per name it reads).
+    #[inline]
+    pub fn eval_by(&self, value: impl Fn(usize) -> f64) -> f64 {
+        const SHORT: usize = 8;
+        let n = self.slots.len();
+        let result = if n <= SHORT {
+            // Most formulas read a few names: their values on the stack.
+            let mut args = [0.0; SHORT];
+            for (a, &s) in args.iter_mut().zip(&self.slots) {
+                *a = value(s);
+            }
+            self.expr.eval(&args[..n])
+        } else {
+            let args: Vec<f64> = self.slots.iter().map(|&s| value(s)).collect();
+            self.expr.eval(&args)
+        };
+        result.unwrap_or(f64::NAN)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn known(names: &[&str]) -> Vec<String> {
+        names.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn formulas_evaluate_as_written() {
+        let k = known(&["a", "k", "armJoint.phi", "c", "x"]);
+        let v = [0.013, 12.0, 0.7, 0.3, -2.0];
+        let f = Compiled::new("a * sin(k * armJoint.phi + c)", &k).unwrap();
+        assert_eq!(f.eval(&v), 0.013 * (12.0f64 * 0.7 + 0.3).sin());
+        let f = Compiled::new("-x^2 + pow(x, 3) - 1e-3 / 2.5E2", &k).unwrap();
+        assert_eq!(f.eval(&v), -4.0 + -8.0 - 1e-3 / 2.5e2);
+        let f = Compiled::new("sign(x) * sqrt(abs(x)) + tanh(x) + exp(-a) + cos(c)", &k).unwrap();
+        let x: f64 = -2.0;
+        let want = x.signum() * x.abs().sqrt() + x.tanh() + (-0.013f64).exp() + 0.3f64.cos();
+        assert_eq!(f.eval(&v), want);
+    }
+
+    #[test]
+    fn mistakes_say_where_they_are() {
+        let k = known(&["a", "armJoint.phi"]);
+        let e = Compiled::new("a * sin(armJoint.ph)", &k).unwrap_err();
+        assert_eq!((e.position, e.unknown.as_deref()), (9, Some("armJoint.ph")));
+        let e = Compiled::new("a * (armJoint.phi + ", &k).unwrap_err();
+        assert_eq!(e.position, 21, "{e:?}");
+        let e = Compiled::new("a ** 2", &k).unwrap_err();
+        assert_eq!((e.position, e.message.as_str()), (4, "unexpected `*`"));
+        let e = Compiled::new("a + sinh(a)", &k).unwrap_err();
+        assert_eq!(e.position, 5);
+        assert!(e.message.contains("unknown function `sinh`"));
+        let e = Compiled::new("a )", &k).unwrap_err();
+        assert_eq!(e.position, 3);
+    }
+}
