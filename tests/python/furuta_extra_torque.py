@@ -10,6 +10,8 @@ other argument. The terms, positive in the direction of the arm angle ``phi``:
     cogging of the motor, ``A sin(K phi + C)`` [N m];
 ``--arm-cubic K3``
     a hardening spring on the arm, ``-K3 phi^3`` [N m / rad^3];
+``--arm-cubic-drag D3``
+    a drag cubic in the arm speed, ``-D3 phi'^3`` [N m s^3 / rad^3].
 
 The truth printed on stdout (and written with ``--truth``) is that of ``furuta_driven.py``
 with an ``extra_arm_torque`` entry naming the terms and their values. The records it writes
@@ -34,6 +36,7 @@ def main(argv=None):
     p.add_argument("--cogging-k", type=float, default=8.0, help="cogging periods per revolution K")
     p.add_argument("--cogging-phase", type=float, default=0.0, help="cogging phase C [rad]")
     p.add_argument("--arm-cubic", type=float, default=0.0, help="cubic spring K3 [N m/rad^3]: -K3 phi^3")
+    p.add_argument("--arm-cubic-drag", type=float, default=0.0, help="cubic drag D3 [N m s^3/rad^3]: -D3 dphi^3")
     p.add_argument("-h", "--help", action="store_true")
     args, rest = p.parse_known_args(argv)
     if args.help:
@@ -44,7 +47,11 @@ def main(argv=None):
 
     def extra(y):
         phi = y[0]
-        return args.cogging * math.sin(args.cogging_k * phi + args.cogging_phase) - args.arm_cubic * phi**3
+        return (
+            args.cogging * math.sin(args.cogging_k * phi + args.cogging_phase)
+            - args.arm_cubic * phi**3
+            - args.arm_cubic_drag * y[2] ** 3
+        )
 
     base = furuta_driven.Rig.forces
 
@@ -60,6 +67,7 @@ def main(argv=None):
     truth["extra_arm_torque"] = {
         "cogging": {"amplitude_Nm": args.cogging, "k": args.cogging_k, "phase_rad": args.cogging_phase},
         "cubic_spring_Nm_per_rad3": args.arm_cubic,
+        "cubic_drag_Nms3_per_rad3": args.arm_cubic_drag,
     }
     text = json.dumps(truth, indent=1)
     if "--truth" in rest:
