@@ -206,7 +206,7 @@ pub fn torque_residual(
         let rate = filter.derivative(&e, dt);
         let slow: Vec<bool> = speeds[j]
             .iter()
-            .map(|w| coulomb[j] > 0.0 && !(w.abs() >= options.slow_speed))
+            .map(|w| coulomb[j] > 0.0 && (w.is_nan() || w.abs() < options.slow_speed))
             .collect();
         let slow = dilate(&slow, 2 * h + 1);
         let kink = dilate(&kinks, 2 * h + 1);

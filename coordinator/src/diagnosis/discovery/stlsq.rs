@@ -146,28 +146,35 @@ pub fn cross_validate(problem: &Problem, folds: usize, gap: usize) -> Vec<CvPoin
         .max(f64::MIN_POSITIVE);
     let mut grid = vec![f64::INFINITY];
     grid.extend((0..40).map(|k| 2.0 * scale * 10f64.powf(-3.0 * k as f64 / 39.0)));
-    let mut errors = vec![vec![0.0; folds]; grid.len()];
-    for fold in 0..folds {
-        let (lo, hi) = (fold * n / folds, (fold + 1) * n / folds);
-        if hi <= lo {
-            continue;
-        }
-        let (first, last) = (problem.rows[lo], problem.rows[hi - 1]);
-        let train: Vec<bool> = problem
-            .rows
-            .iter()
-            .map(|&r| r + gap < first || r > last + gap)
-            .collect();
-        let normal = Normal::of(problem, &train);
-        let start = normal.solve(&all);
-        let test_x = problem.x.rows(lo, hi - lo);
-        let test_y = problem.y.rows(lo, hi - lo);
-        for (g, &lambda) in grid.iter().enumerate() {
-            let c = stlsq_from(&normal, &start, &problem.groups, lambda);
-            let r = test_y - test_x * c;
-            errors[g][fold] = r.norm_squared() / (hi - lo) as f64;
-        }
-    }
+    // Per fold, the test mean square at every threshold.
+    let by_fold: Vec<Vec<f64>> = (0..folds)
+        .filter_map(|fold| {
+            let (lo, hi) = (fold * n / folds, (fold + 1) * n / folds);
+            if hi <= lo {
+                return None;
+            }
+            let (first, last) = (problem.rows[lo], problem.rows[hi - 1]);
+            let train: Vec<bool> = problem
+                .rows
+                .iter()
+                .map(|&r| r + gap < first || r > last + gap)
+                .collect();
+            let normal = Normal::of(problem, &train);
+            let start = normal.solve(&all);
+            let test_x = problem.x.rows(lo, hi - lo);
+            let test_y = problem.y.rows(lo, hi - lo);
+            Some(
+                grid.iter()
+                    .map(|&lambda| {
+                        let c = stlsq_from(&normal, &start, &problem.groups, lambda);
+                        (test_y - test_x * c).norm_squared() / (hi - lo) as f64
+                    })
+                    .collect(),
+            )
+        })
+        .collect();
+    let folds = by_fold.len().max(1);
+    let errors = (0..grid.len()).map(|g| by_fold.iter().map(|e| e[g]).collect::<Vec<f64>>());
     grid.iter()
         .zip(errors)
         .map(|(&threshold, e)| {
