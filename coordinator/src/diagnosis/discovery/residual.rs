@@ -164,33 +164,7 @@ pub fn torque_residual(
         .iter()
         .map(|a| filter.derivative(a, dt))
         .collect();
-    // Momentum and the rate the model explains, sample by sample.
-    let mut momentum = vec![vec![f64::NAN; n]; joints];
-    let mut known = vec![vec![f64::NAN; n]; joints];
-    let mut coulomb = vec![0.0; joints];
-    for i in 0..n {
-        let q: Vec<f64> = angles.iter().map(|a| a[i]).collect();
-        let w: Vec<f64> = speeds.iter().map(|s| s[i]).collect();
-        if q.iter().chain(&w).any(|v| !v.is_finite()) {
-            continue;
-        }
-        let u: Vec<f64> = record.inputs.iter().map(|s| s[i]).collect();
-        let here = model.forces(&q, &w, &u)?;
-        coulomb.clone_from(&here.coulomb);
-        // Ṁ·q̇ by a central difference of M along the motion.
-        let eps = 1e-6;
-        let step =
-            |sign: f64| -> Vec<f64> { q.iter().zip(&w).map(|(a, b)| a + sign * eps * b).collect() };
-        let ahead = model.forces(&step(1.0), &w, &u)?.mass;
-        let behind = model.forces(&step(-1.0), &w, &u)?.mass;
-        for j in 0..joints {
-            momentum[j][i] = (0..joints).map(|k| here.mass[j][k] * w[k]).sum();
-            let mdot_w: f64 = (0..joints)
-                .map(|k| (ahead[j][k] - behind[j][k]) / (2.0 * eps) * w[k])
-                .sum();
-            known[j][i] = here.forces[j] + mdot_w - here.coulomb[j] * w[j].signum();
-        }
-    }
+    let (momentum, known, coulomb) = momentum_and_known(model, &angles, &speeds, &record.inputs)?;
     let h = filter.half;
     let kinks = input_kinks(&record.inputs, options.kink_share);
     let mut torque = Vec::with_capacity(joints);
@@ -224,6 +198,45 @@ pub fn torque_residual(
         torque,
         valid,
     })
+}
+
+/// Sample by sample: the momentum `M·q̇` of each joint, the rate the model explains
+/// `h + Ṁ·q̇ − F·sign(q̇)`, and the Coulomb levels.
+#[allow(clippy::type_complexity)]
+fn momentum_and_known(
+    model: &dyn JointModel,
+    angles: &[Vec<f64>],
+    speeds: &[Vec<f64>],
+    inputs: &[Vec<f64>],
+) -> Result<(Vec<Vec<f64>>, Vec<Vec<f64>>, Vec<f64>), String> {
+    let (joints, n) = (angles.len(), angles.first().map_or(0, Vec::len));
+    let mut momentum = vec![vec![f64::NAN; n]; joints];
+    let mut known = vec![vec![f64::NAN; n]; joints];
+    let mut coulomb = vec![0.0; joints];
+    for i in 0..n {
+        let q: Vec<f64> = angles.iter().map(|a| a[i]).collect();
+        let w: Vec<f64> = speeds.iter().map(|s| s[i]).collect();
+        if q.iter().chain(&w).any(|v| !v.is_finite()) {
+            continue;
+        }
+        let u: Vec<f64> = inputs.iter().map(|s| s[i]).collect();
+        let here = model.forces(&q, &w, &u)?;
+        coulomb.clone_from(&here.coulomb);
+        // Ṁ·q̇ by a central difference of M along the motion.
+        let eps = 1e-6;
+        let step =
+            |sign: f64| -> Vec<f64> { q.iter().zip(&w).map(|(a, b)| a + sign * eps * b).collect() };
+        let ahead = model.forces(&step(1.0), &w, &u)?.mass;
+        let behind = model.forces(&step(-1.0), &w, &u)?.mass;
+        for j in 0..joints {
+            momentum[j][i] = (0..joints).map(|k| here.mass[j][k] * w[k]).sum();
+            let mdot_w: f64 = (0..joints)
+                .map(|k| (ahead[j][k] - behind[j][k]) / (2.0 * eps) * w[k])
+                .sum();
+            known[j][i] = here.forces[j] + mdot_w - here.coulomb[j] * w[j].signum();
+        }
+    }
+    Ok((momentum, known, coulomb))
 }
 
 /// Samples where an input's slope jumps by more than `share` of its range.
