@@ -183,3 +183,110 @@ fn a_clean_record_gets_no_proposal() {
         );
     }
 }
+
+/// With the frictions from a calibration (Nelder–Mead, 3 starts) on the cogging record
+/// instead of the truth.
+#[test]
+fn cogging_is_found_after_calibrating_the_frictions() {
+    use calib_coordinator::calibration::calibrate;
+    use calib_coordinator::campaign::Campaign;
+    use calib_coordinator::evaluator::LocalEvaluator;
+    use calib_coordinator::optim::problem::Silent;
+    let dir = tempfile::tempdir().unwrap();
+    let Some((record, truth)) = record(
+        dir.path(),
+        "cogging.csv",
+        &["--cogging", "0.006", "--seed", "1"],
+    ) else {
+        return;
+    };
+    let text = format!(
+        r#"name = "cogging"
+[model]
+name = "furuta"
+[measurement]
+file = "{}"
+time_column = "time_s"
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "pendulum_angle_rad"
+[[inputs]]
+model = "armTorque"
+measured = "motor_torque_Nm"
+[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 1e-4
+max = 0.9
+scale = "log10"
+[[parameters]]
+name = "pendulumFriction"
+nominal = 0.002
+min = 1e-4
+max = 0.9
+scale = "log10"
+[window]
+start = 0.0
+stop = 20.0
+[search]
+methods = ["nelder-mead"]
+starts = 3
+max_evaluations = 600
+seed = 1
+"#,
+        dir.path().join("cogging.csv").display()
+    );
+    let campaign = Campaign::load(&write(dir.path(), "cogging.toml", &text)).unwrap();
+    let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    let best = c.best_run();
+    eprintln!(
+        "calibrated: armFriction {:.6e} (truth {}), pendulumFriction {:.6e} (truth {}), objective {:.4}",
+        best.point[0],
+        truth["true_friction"]["armFriction"],
+        best.point[1],
+        truth["true_friction"]["pendulumFriction"],
+        best.objective
+    );
+    let params = campaign.full_parameters(&best.point);
+    let found = discover(
+        &FurutaJoints { params },
+        &record,
+        &DiscoveryOptions::default(),
+    )
+    .unwrap();
+    let arm = &found.joints[0];
+    for t in &arm.terms {
+        eprintln!(
+            "  {} = {:.4e} [{:.4e}, {:.4e}]",
+            t.function, t.estimate, t.ci_low, t.ci_high
+        );
+    }
+    for h in &arm.harmonics {
+        eprintln!(
+            "  harmonic {}: {:.4e} [{:.4e}, {:.4e}]",
+            h.multiple, h.amplitude, h.ci_low, h.ci_high
+        );
+    }
+    // The cogging, and the friction the calibration got wrong while the model could not
+    // follow the record: the missing `−(F_true − F_fit)·sign(ω)`.
+    assert_eq!(arm.harmonics.len(), 1, "{:?}", arm.terms);
+    let h = &arm.harmonics[0];
+    assert_eq!((h.angle.as_str(), h.multiple), ("armJoint.phi", 8));
+    assert!(h.ci_low <= 0.006 && 0.006 <= h.ci_high, "{h:?}");
+    let others: Vec<_> = arm
+        .terms
+        .iter()
+        .filter(|t| !t.function.contains("8 *"))
+        .collect();
+    assert_eq!(others.len(), 1, "{:?}", arm.terms);
+    assert_eq!(others[0].function, "sign(armJoint.w)");
+    let missing = -(truth["true_friction"]["armFriction"].as_f64().unwrap() - best.point[0]);
+    assert!(
+        others[0].ci_low <= missing && missing <= others[0].ci_high,
+        "{:?} vs {missing}",
+        others[0]
+    );
+}
