@@ -29,6 +29,7 @@
 //! The windows come from [`window`]; every evaluation goes through the store ([`stored`]).
 
 pub mod candidates;
+pub mod discovery;
 pub mod fit;
 pub mod linear;
 pub mod ranking;

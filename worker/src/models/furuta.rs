@@ -608,6 +608,43 @@ impl HybridSystem for FurutaSystem {
     }
 }
 
+/// The equations of motion at one state, for inverse dynamics (discovering a missing torque
+/// from a measured trajectory): `M(θ)·q̈ = forces + friction + τ_missing`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointDynamics {
+    /// The mass matrix `[[A, −C·c], [−C·c, B]]` at the state's pendulum angle.
+    pub mass: [[f64; 2]; 2],
+    /// Every generalized force on `[φ, θ]` but the Coulomb bearing frictions: Coriolis,
+    /// centrifugal and gravity terms, the effects of `params`, and `arm_torque` on the arm.
+    pub forces: [f64; 2],
+    /// The Coulomb friction levels `F` of the two joints (`−F·sign(ω)` while sliding).
+    pub coulomb: [f64; 2],
+}
+
+/// [`JointDynamics`] of the model with the full parameter vector `params` (as simulated) at
+/// state `y = [φ, θ, φ̇, θ̇]` with motor torque `arm_torque` [N m].
+pub fn joint_dynamics(
+    params: &[f64],
+    y: &[f64; 4],
+    arm_torque: f64,
+) -> Result<JointDynamics, SimulationError> {
+    if params.len() < idx::BIAS + 2 {
+        return Err(SimulationError::InvalidInput(format!(
+            "furuta: {} parameters given, at least {} expected",
+            params.len(),
+            idx::BIAS + 2
+        )));
+    }
+    let system = FurutaSystem::new(params)?;
+    let (mut forces, a, cc) = system.free_forces(0.0, y);
+    forces[0] += arm_torque;
+    Ok(JointDynamics {
+        mass: [[a, -cc], [-cc, system.b]],
+        forces,
+        coulomb: system.friction,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -775,5 +812,26 @@ mod tests {
         p[0] = f64::NAN;
         let r = model.simulate(&p, &[1.0], &[0], &SolverOptions::default());
         assert!(matches!(r, Err(SimulationError::InvalidInput(_))));
+    }
+
+    #[test]
+    fn joint_dynamics_inverts_the_equations_of_motion() {
+        // Both joints sliding: M·q̈ from the simulated right-hand side is the sum of the
+        // forces and the sliding frictions.
+        let mut p = defaults();
+        p[idx::VISCOUS] = 0.003;
+        let y = [0.4, 2.5, 1.2, -0.7];
+        let mut system = FurutaSystem::new(&p).unwrap();
+        system.motor = Some(constant(0, 0.02, 1.0).signals[0].clone());
+        system.settle_modes(0.5, &y);
+        let mut dy = [0.0; 4];
+        system.rhs(0.5, &y, &mut dy);
+        let d = joint_dynamics(&p, &y, 0.02).unwrap();
+        for j in 0..2 {
+            let lhs = d.mass[j][0] * dy[2] + d.mass[j][1] * dy[3];
+            let rhs = d.forces[j] - d.coulomb[j] * y[j + 2].signum();
+            assert!((lhs - rhs).abs() < 1e-14, "joint {j}: {lhs} != {rhs}");
+        }
+        assert!(joint_dynamics(&p[..10], &y, 0.0).is_err());
     }
 }
