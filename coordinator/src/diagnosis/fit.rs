@@ -7,7 +7,7 @@ use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::evaluator::Simulator;
 use crate::objective::Objective;
-use crate::report::evidence::runs_at_best;
+use crate::evidence::runs_at_best;
 
 /// Everything the report needs about one calibration.
 pub(super) fn fit_of<E: Simulator>(

@@ -55,7 +55,7 @@ use crate::evaluator::{Evaluator, Simulator};
 use crate::measurement::Measurement;
 use crate::objective::Objective;
 use crate::optim::problem::Progress;
-use crate::report::evidence::RunsAtBest;
+use crate::evidence::RunsAtBest;
 use crate::store::{MemoryStore, Store};
 
 use fit::fit_of;

@@ -346,7 +346,18 @@ mod tests {
                 objective: values[1],
                 evaluations: 1,
             }],
-            result: Some(serde_json::json!({ "values": values })),
+            result: Some(crate::outcome::CalibrationOutcome {
+                best: crate::outcome::Best {
+                    parameters: values
+                        .iter()
+                        .enumerate()
+                        .map(|(i, v)| (format!("p{i}"), *v))
+                        .collect(),
+                    objective: values[1],
+                    ..Default::default()
+                },
+                ..Default::default()
+            }),
             failure: None,
             message: None,
             free: Vec::new(),
@@ -356,12 +367,9 @@ mod tests {
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&back.runs[0].point), bits(&values));
         assert_eq!(back.runs[0].objective.to_bits(), values[1].to_bits());
-        let result: Vec<f64> = back.result.unwrap()["values"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let best = back.result.unwrap().best;
+        let result: Vec<f64> = best.parameters.iter().map(|(_, v)| *v).collect();
         assert_eq!(bits(&result), bits(&values));
+        assert_eq!(best.objective.to_bits(), values[1].to_bits());
     }
 }
