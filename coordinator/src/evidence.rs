@@ -179,6 +179,13 @@ mod tests {
     }
 
     #[test]
+    fn flags_mark_the_runs_within_one_percent_of_the_least_finite_objective() {
+        let flags = at_best_flags(&[2.0, 1.0, f64::INFINITY, 1.0099, f64::NAN, 1.0101]);
+        assert_eq!(flags, [false, true, false, true, false, false]);
+        assert_eq!(at_best_flags(&[f64::INFINITY, f64::INFINITY]), [false, false]);
+    }
+
+    #[test]
     fn a_perfect_fit_counts_only_exact_runs() {
         assert_eq!(runs_at_best(&[0.0, 0.0, 1e-300]).count, 2);
         assert_eq!(runs_at_best(&[]).count, 0);

@@ -867,7 +867,11 @@ fn state(s: &Snapshot) -> pb::CampaignState {
         }),
         runs,
         simulated: s.result.as_ref().map(|o| o.simulated).unwrap_or_default(),
-        from_store: s.result.as_ref().map(|o| o.from_store()).unwrap_or_default(),
+        from_store: s
+            .result
+            .as_ref()
+            .map(|o| o.from_store())
+            .unwrap_or_default(),
         best_parameters,
         id: s.id.clone(),
         name: s.name.clone(),

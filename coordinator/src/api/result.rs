@@ -289,10 +289,8 @@ fn driven_input(i: &pb::DrivenInput) -> InputMapping {
         model: i.model.clone(),
         model_index: i.model_index as usize,
         measured: i.measured.clone(),
-        interpolation: serde_json::from_value(serde_json::Value::String(
-            i.interpolation.clone(),
-        ))
-        .unwrap_or_default(),
+        interpolation: serde_json::from_value(serde_json::Value::String(i.interpolation.clone()))
+            .unwrap_or_default(),
     }
 }
 

@@ -4,8 +4,8 @@
 
 use super::{verdict, Diagnosis, Fit, Verdict};
 use crate::error::{Error, Result};
-use crate::report::chart;
 use crate::evidence::{self, bound_hits, bound_sentence};
+use crate::report::chart;
 use crate::report::plot::{self, line_plot, sanitize, time_plot, Dash, Series};
 use plotters::style::RGBColor;
 use serde_json::{json, Map, Value};

@@ -56,7 +56,11 @@ impl CalibrationOutcome {
                 parameters: named(&names, &k.point),
                 runs: k.runs.clone(),
                 kind: k.kind,
-                extent: names.iter().cloned().zip(k.extent.iter().copied()).collect(),
+                extent: names
+                    .iter()
+                    .cloned()
+                    .zip(k.extent.iter().copied())
+                    .collect(),
             })
             .collect();
         // Spread of the parameters over the runs that reached the best objective.
@@ -78,7 +82,12 @@ impl CalibrationOutcome {
             .free
             .iter()
             .zip(&best.point)
-            .map(|(p, &v)| (p.name.clone(), evidence::at_bound(v, p.nominal, p.min, p.max)))
+            .map(|(p, &v)| {
+                (
+                    p.name.clone(),
+                    evidence::at_bound(v, p.nominal, p.min, p.max),
+                )
+            })
             .collect();
         let info = c.campaign.model.info();
         CalibrationOutcome {
@@ -167,7 +176,12 @@ fn experiments(c: &Calibration) -> Vec<ExperimentFit> {
                 sse: over(sse, &|v| v),
                 rms: over(sse, &|v| (v / samples).sqrt()),
                 nominal_rms: over(nominal, &|v| (v / samples).sqrt()),
-                objective: part.weights.iter().zip(sse).map(|(k, s)| k * s).sum::<f64>(),
+                objective: part
+                    .weights
+                    .iter()
+                    .zip(sse)
+                    .map(|(k, s)| k * s)
+                    .sum::<f64>(),
             }
         })
         .collect()

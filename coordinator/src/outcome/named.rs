@@ -112,9 +112,7 @@ impl<'de, T: Deserialize<'de> + Entry> Deserialize<'de> for Named<T> {
                 while let Some((name, value)) = map.next_entry::<String, Option<T>>()? {
                     let value = match value.or_else(T::from_null) {
                         Some(v) => v,
-                        None => {
-                            return Err(serde::de::Error::custom(format!("`{name}` is null")))
-                        }
+                        None => return Err(serde::de::Error::custom(format!("`{name}` is null"))),
                     };
                     named.insert(name, value);
                 }

@@ -9,9 +9,15 @@ fn result_json_reads_and_writes_back_byte_for_byte() {
     assert_eq!(outcome.to_json_text(), TWO_EXPERIMENTS.trim_end());
     assert_eq!(outcome.runs[3].objective, f64::INFINITY);
     assert_eq!(outcome.clusters[2].kind, Stop::Failures);
-    assert_eq!(outcome.best.at_bound.get("theta0@b"), Some(&Some(Bound::Max)));
+    assert_eq!(
+        outcome.best.at_bound.get("theta0@b"),
+        Some(&Some(Bound::Max))
+    );
     assert_eq!(outcome.best.at_bound.get("pendulumFriction"), Some(&None));
-    assert_eq!(outcome.experiments[1].rms.names().next(), Some("pendulumJoint.phi"));
+    assert_eq!(
+        outcome.experiments[1].rms.names().next(),
+        Some("pendulumJoint.phi")
+    );
     assert_eq!(outcome.free_parameters[1].experiment.as_deref(), Some("b"));
 }
 
@@ -22,7 +28,10 @@ fn a_result_stored_before_the_version_field_reads_as_version_one() {
     let outcome: CalibrationOutcome = serde_json::from_value(value).unwrap();
     assert_eq!(outcome.version, VERSION);
     let text = outcome.to_json_text();
-    assert!(text.starts_with("{\n  \"version\": 1,\n  \"campaign\""), "{text}");
+    assert!(
+        text.starts_with("{\n  \"version\": 1,\n  \"campaign\""),
+        "{text}"
+    );
 }
 
 #[test]
@@ -57,6 +66,9 @@ fn a_name_given_twice_keeps_its_place_and_takes_the_last_value() {
     let named: Named<f64> = [("a".to_string(), 1.0), ("b".into(), 2.0), ("a".into(), 3.0)]
         .into_iter()
         .collect();
-    assert_eq!(serde_json::to_string(&named).unwrap(), r#"{"a":3.0,"b":2.0}"#);
+    assert_eq!(
+        serde_json::to_string(&named).unwrap(),
+        r#"{"a":3.0,"b":2.0}"#
+    );
     assert_eq!(named.len(), 2);
 }

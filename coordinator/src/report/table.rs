@@ -73,11 +73,7 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
     let best_point = point(&best.parameters);
     let best_objective = best.objective;
     let _ = writeln!(s);
-    let _ = writeln!(
-        s,
-        "best ({} from start {}):",
-        best.method, best.start
-    );
+    let _ = writeln!(s, "best ({} from start {}):", best.method, best.start);
     for (p, v) in free.iter().zip(&best_point) {
         let bound = match evidence::at_bound(*v, p.nominal, p.min, p.max) {
             Some(b) => format!("   at {} bound", b.word()),
@@ -172,7 +168,11 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
         let loose: Vec<String> = free
             .iter()
             .filter_map(|p| {
-                let (lo, hi) = k.extent.get(&p.name).copied().unwrap_or((f64::NAN, f64::NAN));
+                let (lo, hi) = k
+                    .extent
+                    .get(&p.name)
+                    .copied()
+                    .unwrap_or((f64::NAN, f64::NAN));
                 (hi - lo > LOOSE * (p.max - p.min))
                     .then(|| format!("{} anywhere in [{lo:.4e}, {hi:.4e}]", p.name))
             })

@@ -322,6 +322,28 @@ mod tests {
     }
 
     #[test]
+    fn a_result_that_does_not_read_as_an_outcome_leaves_the_record_readable() {
+        let record = CampaignRecord {
+            name: "c".into(),
+            spec: String::new(),
+            source: PathBuf::new(),
+            dataset: "00".repeat(32),
+            status: CampaignStatus::Finished,
+            runs: vec![],
+            result: None,
+            failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
+        };
+        let mut value = serde_json::to_value(&record).unwrap();
+        value["result"] = serde_json::json!({ "runs": "not a list" });
+        let mut bytes = vec![1];
+        serde_json::to_writer(&mut bytes, &value).unwrap();
+        assert_eq!(decode_campaign(&bytes).unwrap(), record);
+    }
+
+    #[test]
     fn campaign_records_keep_every_number_bit_for_bit() {
         // Values a result holds (a run's best point and objective) whose shortest decimal
         // text a fast but inexact float parser reads back one ulp off: a campaign resumed
