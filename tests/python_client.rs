@@ -150,8 +150,10 @@ fn a_python_client_reads_the_result_from_typed_fields_equal_to_result_json() {
     let stubs = python_stubs();
     let dir = tempfile::tempdir().unwrap();
     let worker = TestWorker::start(1, 16);
-    let coordinator =
-        common::coordinator::Coordinator::start(dir.path(), &[format!("http://{}", worker.address())]);
+    let coordinator = common::coordinator::Coordinator::start(
+        dir.path(),
+        &[format!("http://{}", worker.address())],
+    );
     let out = Command::new("python3")
         .arg(repo().join("tests/python/typed_result_client.py"))
         .arg(coordinator.server.as_ref().unwrap().address().to_string())
@@ -176,7 +178,10 @@ fn a_python_client_reads_the_result_from_typed_fields_equal_to_result_json() {
     let bits = |v: &serde_json::Value| v.as_f64().unwrap().to_bits();
 
     let best = lines.iter().find(|l| l[0] == "best").unwrap();
-    assert_eq!(python_number(best[1]).to_bits(), bits(&result["best"]["objective"]));
+    assert_eq!(
+        python_number(best[1]).to_bits(),
+        bits(&result["best"]["objective"])
+    );
     assert_eq!(best[2], result["best"]["method"]);
     assert_eq!(best[3], result["best"]["start"].to_string());
     let parameters: Vec<&Vec<&str>> = lines.iter().filter(|l| l[0] == "parameter").collect();
@@ -201,7 +206,10 @@ fn a_python_client_reads_the_result_from_typed_fields_equal_to_result_json() {
     }
     // The server's count of the runs at the best, flag by flag, is result.json's.
     let flagged = runs.iter().filter(|r| r[6] == "true").count();
-    assert_eq!(flagged as u64, result["runs_at_best"]["count"].as_u64().unwrap());
+    assert_eq!(
+        flagged as u64,
+        result["runs_at_best"]["count"].as_u64().unwrap()
+    );
     let counted = lines.iter().find(|l| l[0] == "runs_at_best").unwrap();
     assert_eq!(counted[1], result["runs_at_best"]["count"].to_string());
     assert_eq!(counted[2], result["runs_at_best"]["of"].to_string());

@@ -182,7 +182,10 @@ mod tests {
     fn flags_mark_the_runs_within_one_percent_of_the_least_finite_objective() {
         let flags = at_best_flags(&[2.0, 1.0, f64::INFINITY, 1.0099, f64::NAN, 1.0101]);
         assert_eq!(flags, [false, true, false, true, false, false]);
-        assert_eq!(at_best_flags(&[f64::INFINITY, f64::INFINITY]), [false, false]);
+        assert_eq!(
+            at_best_flags(&[f64::INFINITY, f64::INFINITY]),
+            [false, false]
+        );
     }
 
     #[test]
