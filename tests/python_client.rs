@@ -133,3 +133,85 @@ fn a_python_client_lists_models_and_simulates() {
     // Two Simulate calls, and two Evaluate calls of two points each.
     assert_eq!(worker.simulations(), 6);
 }
+
+/// The number `printed` by Python's `repr`, read back to the same double.
+fn python_number(printed: &str) -> f64 {
+    printed
+        .parse()
+        .unwrap_or_else(|e| panic!("`{printed}` is not a number: {e}"))
+}
+
+#[test]
+fn a_python_client_reads_the_result_from_typed_fields_equal_to_result_json() {
+    if let Some(reason) = python_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let stubs = python_stubs();
+    let dir = tempfile::tempdir().unwrap();
+    let worker = TestWorker::start(1, 16);
+    let coordinator = common::coordinator::Coordinator::start(
+        dir.path(),
+        &[format!("http://{}", worker.address())],
+    );
+    let out = Command::new("python3")
+        .arg(repo().join("tests/python/typed_result_client.py"))
+        .arg(coordinator.server.as_ref().unwrap().address().to_string())
+        .arg(stubs.path())
+        .arg(repo().join("examples/data/furuta_clean.csv"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        out.status.success(),
+        "python client failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.trim_end().ends_with("ok"));
+    let lines: Vec<Vec<&str>> = stdout.lines().map(|l| l.split(' ').collect()).collect();
+    let id = lines.iter().find(|l| l[0] == "id").unwrap()[1];
+    // The document the coordinator wrote for this campaign, read here (not by the client).
+    let path = dir.path().join("api/results").join(id).join("result.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let result: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let bits = |v: &serde_json::Value| v.as_f64().unwrap().to_bits();
+
+    let best = lines.iter().find(|l| l[0] == "best").unwrap();
+    assert_eq!(
+        python_number(best[1]).to_bits(),
+        bits(&result["best"]["objective"])
+    );
+    assert_eq!(best[2], result["best"]["method"]);
+    assert_eq!(best[3], result["best"]["start"].to_string());
+    let parameters: Vec<&Vec<&str>> = lines.iter().filter(|l| l[0] == "parameter").collect();
+    assert_eq!(parameters.len(), 2);
+    for p in parameters {
+        assert_eq!(
+            python_number(p[2]).to_bits(),
+            bits(&result["best"]["parameters"][p[1]]),
+            "{}",
+            p[1]
+        );
+    }
+    let runs: Vec<&Vec<&str>> = lines.iter().filter(|l| l[0] == "run").collect();
+    let expected = result["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), expected.len());
+    for (run, json) in runs.iter().zip(expected) {
+        assert_eq!(run[1], json["method"]);
+        assert_eq!(run[2], json["start"].to_string());
+        assert_eq!(python_number(run[3]).to_bits(), bits(&json["objective"]));
+        assert_eq!(run[4], json["evaluations"].to_string());
+        assert_eq!(run[5], json["iterations"].to_string());
+    }
+    // The server's count of the runs at the best, flag by flag, is result.json's.
+    let flagged = runs.iter().filter(|r| r[6] == "true").count();
+    assert_eq!(
+        flagged as u64,
+        result["runs_at_best"]["count"].as_u64().unwrap()
+    );
+    let counted = lines.iter().find(|l| l[0] == "runs_at_best").unwrap();
+    assert_eq!(counted[1], result["runs_at_best"]["count"].to_string());
+    assert_eq!(counted[2], result["runs_at_best"]["of"].to_string());
+    assert_eq!(result["version"], 1);
+}

@@ -10,7 +10,7 @@ use crate::optim::multistart::{self, Cluster, RunContext, RunOutcome};
 use crate::optim::problem::Progress;
 use crate::optim::screening;
 use crate::optim::space::UnitBox;
-use crate::report;
+use crate::outcome::CalibrationOutcome;
 use crate::store::{
     encoding, hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, MemoryStore, RunBest,
     Store, StoredEvaluator,
@@ -35,6 +35,9 @@ pub struct Calibration {
     pub best_evaluation: Evaluation,
     pub stats: CacheStats,
     pub elapsed: Duration,
+    /// What it found as `result.json` states it, built once from the fields above when the
+    /// calibration ends.
+    pub outcome: CalibrationOutcome,
 }
 
 impl Calibration {
@@ -252,7 +255,7 @@ fn calibrate_measured<E: Evaluator>(
             return Err(e);
         }
     };
-    let calibration = Calibration {
+    let mut calibration = Calibration {
         campaign: campaign.clone(),
         measurement,
         objective,
@@ -264,10 +267,12 @@ fn calibrate_measured<E: Evaluator>(
         best_evaluation,
         stats: evaluator.stats(),
         elapsed: started.elapsed(),
+        outcome: CalibrationOutcome::default(),
     };
+    calibration.outcome = CalibrationOutcome::of(&calibration);
     record.status = CampaignStatus::Finished;
     record.runs = calibration.run_bests();
-    record.result = Some(report::result_json(&calibration));
+    record.result = Some(calibration.outcome.clone());
     store.put_campaign(&id, &record)?;
     Ok(calibration)
 }

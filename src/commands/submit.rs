@@ -384,9 +384,25 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
         super::calibrate::results_root(&args.campaign, args.out.as_deref()).join(&campaign.name);
     std::fs::create_dir_all(&folder)
         .map_err(|e| Failure::internal(format!("{}: {e}", folder.display())))?;
+    let outcome = match &state.result {
+        Some(result) => calib_coordinator::api::result::outcome_of(result),
+        None => {
+            return Err(Failure::internal(format!(
+                "coordinator: campaign {} finished without a result (a coordinator older than \
+                 this client?)",
+                state.id
+            )))
+        }
+    };
+    // The coordinator's own text when it sends it, else the same document from its values.
+    let text = if state.result_json.is_empty() {
+        outcome.to_json_text()
+    } else {
+        state.result_json.clone()
+    };
     let mut written = Vec::new();
     let result = folder.join("result.json");
-    std::fs::write(&result, format!("{}\n", state.result_json))
+    std::fs::write(&result, format!("{text}\n"))
         .map_err(|e| Failure::internal(format!("{}: {e}", result.display())))?;
     written.push(result);
     for (name, svg) in &state.plots {
@@ -400,11 +416,9 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
         written.push(path);
     }
     if args.json {
-        println!("{}", state.result_json);
+        println!("{text}");
     } else {
-        let result: serde_json::Value = serde_json::from_str(&state.result_json)
-            .map_err(|e| Failure::internal(format!("coordinator: result is not JSON: {e}")))?;
-        print!("{}", calib_coordinator::report::table::summary_of(&result));
+        print!("{}", calib_coordinator::report::table::summary_of(&outcome));
         for path in written {
             println!("wrote {}", path.display());
         }

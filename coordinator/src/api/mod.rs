@@ -1,6 +1,7 @@
 //! The `calib.v1.Calibration` gRPC service: campaigns for clients in any language. A thin
 //! layer: messages are checked and converted here, the work is [`crate::campaigns`]'.
 
+pub mod result;
 pub mod spec;
 
 use crate::campaign::MAX_EXPERIMENTS;
@@ -824,22 +825,23 @@ fn phase(p: Phase) -> pb::CampaignPhase {
 }
 
 fn state(s: &Snapshot) -> pb::CampaignState {
-    let runs = match &s.result {
-        Some(result) => report::runs::rows(result),
-        None => report::runs::rows_so_far(&s.runs, &s.free),
+    let (runs, best_parameters) = match &s.result {
+        Some(outcome) => (
+            result::run_messages(outcome),
+            outcome
+                .best
+                .parameters
+                .iter()
+                .map(|(k, v)| (k.to_string(), *v))
+                .collect(),
+        ),
+        None => {
+            let rows = report::runs::rows_so_far(&s.runs, &s.free);
+            let best = report::runs::best_parameters(&rows).into_iter().collect();
+            (rows.into_iter().map(result::row_message).collect(), best)
+        }
     };
-    let best_parameters = match s
-        .result
-        .as_ref()
-        .and_then(|r| r["best"]["parameters"].as_object())
-    {
-        Some(best) => best
-            .iter()
-            .filter_map(|(k, v)| v.as_f64().map(|v| (k.clone(), v)))
-            .collect(),
-        None => report::runs::best_parameters(&runs).into_iter().collect(),
-    };
-    let counts = s.result.as_ref().map(report::runs::counts);
+    let at_best = runs.iter().filter(|r| r.at_best).count() as u64;
     pb::CampaignState {
         campaign: s
             .message
@@ -858,22 +860,18 @@ fn state(s: &Snapshot) -> pb::CampaignState {
                     .collect(),
             })
             .collect(),
-        runs: runs
-            .into_iter()
-            .map(|r| pb::Run {
-                label: r.label,
-                method: r.method,
-                start: r.start as u64,
-                evaluations: r.evaluations,
-                iterations: r.iterations,
-                termination: r.termination,
-                objective: r.objective,
-                parameters: r.parameters.into_iter().collect(),
-                at_best: r.at_best,
-            })
-            .collect(),
-        simulated: counts.map(|c| c.simulated).unwrap_or_default(),
-        from_store: counts.map(|c| c.from_store).unwrap_or_default(),
+        runs_at_best: Some(pb::RunsAtBest {
+            count: at_best,
+            of: runs.len() as u64,
+            tolerance: crate::evidence::BEST_TOLERANCE,
+        }),
+        runs,
+        simulated: s.result.as_ref().map(|o| o.simulated).unwrap_or_default(),
+        from_store: s
+            .result
+            .as_ref()
+            .map(|o| o.from_store())
+            .unwrap_or_default(),
         best_parameters,
         id: s.id.clone(),
         name: s.name.clone(),
@@ -885,8 +883,9 @@ fn state(s: &Snapshot) -> pb::CampaignState {
         result_json: s
             .result
             .as_ref()
-            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
+            .map(|o| o.to_json_text())
             .unwrap_or_default(),
+        result: s.result.as_ref().map(result::result_message),
         plots: s.plots.iter().cloned().collect(),
     }
 }

@@ -69,7 +69,7 @@ impl fmt::Display for Method {
 }
 
 /// A parameter the optimisers search over.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FreeParameter {
     pub name: String,
     /// Position in the model's full parameter vector.
@@ -139,7 +139,7 @@ pub struct OutputMapping {
 }
 
 /// A model input driven by a measured column (linear between samples, or held).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct InputMapping {
     pub model: String,
     pub model_index: usize,

@@ -70,8 +70,8 @@ pub struct Snapshot {
     pub run_best: Vec<f64>,
     pub best_objective: f64,
     pub failure: Option<String>,
-    /// `result.json` once finished.
-    pub result: Option<serde_json::Value>,
+    /// What it found (its `result.json`) once finished.
+    pub result: Option<crate::outcome::CalibrationOutcome>,
     /// The plots `calib calibrate` writes, by file name (SVG text), once finished here.
     pub plots: Vec<(String, String)>,
     /// The API's `Campaign` message it was submitted with (JSON), when it was.
@@ -123,7 +123,7 @@ impl Snapshot {
         s.evaluations = record
             .result
             .as_ref()
-            .and_then(|r| r["evaluations"].as_u64())
+            .map(|r| r.evaluations)
             .or_else(|| record.history.last().map(|p| p.evaluations))
             .unwrap_or_else(|| record.runs.iter().map(|r| r.evaluations as u64).sum());
         s.message = record.message.clone();
@@ -471,14 +471,14 @@ impl Campaigns {
         };
         match outcome {
             Ok(c) => {
-                let (result, plots) = self.report(&id, &c);
+                let plots = self.report(&id, &c);
                 live.state.send_modify(|s| {
                     s.run_best = c.runs.iter().map(|r| r.objective).collect();
                     s.best_objective = c.best_run().objective;
                     s.evaluations = c.evaluations() as u64;
                     s.history.record(s.evaluations, &s.run_best);
                     s.runs = c.run_bests();
-                    s.result = Some(result);
+                    s.result = Some(c.outcome.clone());
                     s.plots = plots;
                 });
                 let kept = live.state.borrow().clone();
@@ -549,14 +549,9 @@ impl Campaigns {
         Ok(())
     }
 
-    /// Write the finished campaign's result.json and plots to `<results>/<id>/`; the result
-    /// and the plots' text.
-    fn report(
-        &self,
-        id: &CampaignId,
-        c: &Calibration,
-    ) -> (serde_json::Value, Vec<(String, String)>) {
-        let result = report::result_json(c);
+    /// Write the finished campaign's result.json and plots to `<results>/<id>/`; the plots'
+    /// text.
+    fn report(&self, id: &CampaignId, c: &Calibration) -> Vec<(String, String)> {
         let folder = self.results.join(hex(id));
         let mut plots = Vec::new();
         match report::write(c, &folder) {
@@ -571,7 +566,7 @@ impl Campaigns {
             }
             Err(e) => tracing::error!(error = %e, "cannot write the campaign's results"),
         }
-        (result, plots)
+        plots
     }
 
     fn mark(&self, id: &CampaignId, status: CampaignStatus, failure: Option<String>) -> Result<()> {

@@ -6,8 +6,8 @@ use super::{sensitivity, uncertainty, Fit};
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::evaluator::Simulator;
+use crate::evidence::runs_at_best;
 use crate::objective::Objective;
-use crate::report::evidence::runs_at_best;
 
 /// Everything the report needs about one calibration.
 pub(super) fn fit_of<E: Simulator>(

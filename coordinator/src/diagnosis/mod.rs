@@ -53,10 +53,10 @@ use crate::calibration::{calibrate, load_measurement};
 use crate::campaign::{Campaign, FreeParameter};
 use crate::error::{Error, Result};
 use crate::evaluator::{Evaluator, Simulator};
+use crate::evidence::RunsAtBest;
 use crate::measurement::Measurement;
 use crate::objective::Objective;
 use crate::optim::problem::Progress;
-use crate::report::evidence::RunsAtBest;
 use crate::store::{MemoryStore, Store};
 
 use fit::fit_of;

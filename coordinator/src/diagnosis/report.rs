@@ -4,9 +4,9 @@
 
 use super::{verdict, Diagnosis, Fit, Verdict};
 use crate::error::{Error, Result};
+use crate::evidence::{self, bound_hits, bound_sentence};
 use crate::report::chart;
 use crate::report::chart::RGBColor;
-use crate::report::evidence::{self, bound_hits, bound_sentence};
 use crate::report::plot::{self, line_plot, sanitize, time_plot, Dash, Series};
 use serde_json::{json, Map, Value};
 use std::fmt::Write;

@@ -31,7 +31,7 @@ pub fn fit(params: &[(&str, f64, f64, f64, f64, bool)]) -> Fit {
         aic: 0.0,
         bic: 0.0,
         evaluations: 1,
-        runs_at_best: crate::report::evidence::runs_at_best(&[1.0]),
+        runs_at_best: crate::evidence::runs_at_best(&[1.0]),
         point: params.iter().map(|p| p.4).collect(),
         free: params
             .iter()

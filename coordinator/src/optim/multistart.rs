@@ -73,7 +73,7 @@ pub struct RunOutcome {
 }
 
 /// Whether a run ended at a minimum it found, or never found one to converge to.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Stop {
     /// Converged, or out of budget while descending: its point is a candidate minimum.

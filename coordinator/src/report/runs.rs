@@ -1,10 +1,9 @@
 //! A campaign's runs as rows (what `calib calibrate` prints per run, and what the web app's
-//! table of runs shows), each named by one label everywhere, and its counts of evaluations
-//! as the summary tells them.
+//! table of runs shows), each named by one label everywhere.
 
 use super::evidence;
+use crate::outcome::CalibrationOutcome;
 use crate::store::RunBest;
-use serde_json::Value;
 
 /// One run (one method from one start) of a campaign.
 #[derive(Debug, Clone, PartialEq)]
@@ -33,38 +32,25 @@ pub fn run_label(method: &str, start: usize) -> String {
     format!("{method} #{start}")
 }
 
-/// The runs of a finished campaign, from its `result.json`, in plan order.
-pub fn rows(result: &Value) -> Vec<RunRow> {
-    let names: Vec<String> = result["free_parameters"]
-        .as_array()
-        .map(|a| {
-            a.iter()
-                .filter_map(|p| p["name"].as_str().map(str::to_string))
-                .collect()
-        })
-        .unwrap_or_default();
-    let mut rows: Vec<RunRow> = result["runs"]
-        .as_array()
-        .map(Vec::as_slice)
-        .unwrap_or_default()
+/// The runs of a finished campaign, from its outcome, in plan order.
+pub fn rows(result: &CalibrationOutcome) -> Vec<RunRow> {
+    let mut rows: Vec<RunRow> = result
+        .runs
         .iter()
-        .map(|r| {
-            let method = r["method"].as_str().unwrap_or_default().to_string();
-            let start = r["start"].as_u64().unwrap_or_default() as usize;
-            RunRow {
-                label: run_label(&method, start),
-                method,
-                start,
-                evaluations: r["evaluations"].as_u64().unwrap_or_default(),
-                iterations: r["iterations"].as_u64().unwrap_or_default(),
-                termination: r["termination"].as_str().unwrap_or_default().to_string(),
-                objective: r["objective"].as_f64().unwrap_or(f64::INFINITY),
-                parameters: names
-                    .iter()
-                    .filter_map(|n| r["parameters"][n].as_f64().map(|v| (n.clone(), v)))
-                    .collect(),
-                at_best: false,
-            }
+        .map(|r| RunRow {
+            label: run_label(&r.method, r.start),
+            method: r.method.clone(),
+            start: r.start,
+            evaluations: r.evaluations as u64,
+            iterations: r.iterations,
+            termination: r.termination.clone(),
+            objective: r.objective,
+            parameters: result
+                .free_parameters
+                .iter()
+                .filter_map(|p| r.parameters.get(&p.name).map(|v| (p.name.clone(), *v)))
+                .collect(),
+            at_best: false,
         })
         .collect();
     mark_best(&mut rows);
@@ -101,46 +87,12 @@ pub fn best_parameters(rows: &[RunRow]) -> Vec<(String, f64)> {
         .unwrap_or_default()
 }
 
-/// Flag the runs within [`evidence::BEST_TOLERANCE`] of the best, as `result.json`'s
-/// `runs_at_best` counts them.
+/// Flag the runs within [`evidence::BEST_TOLERANCE`] of the best, by
+/// [`evidence::at_best_flags`].
 fn mark_best(rows: &mut [RunRow]) {
-    let objectives: Vec<f64> = rows
-        .iter()
-        .map(|r| r.objective)
-        .filter(|v| v.is_finite())
-        .collect();
-    if objectives.is_empty() {
-        return;
-    }
-    let best = objectives.iter().copied().fold(f64::INFINITY, f64::min);
-    let threshold = evidence::best_threshold(best);
-    for r in rows {
-        r.at_best = r.objective <= threshold;
-    }
-}
-
-/// A finished campaign's evaluations as the summary tells them.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Counts {
-    /// Evaluations the optimisers asked for (the nominal point and the screening included).
-    pub evaluations: u64,
-    /// Points simulated.
-    pub simulated: u64,
-    /// Evaluations answered from the store: `evaluations − simulated`. (`result.json`'s
-    /// `cached` counts every answer from the store, also those to points a run looked at
-    /// ahead of asking for them and the best point scored again for its plots, so it is
-    /// larger by those.)
-    pub from_store: u64,
-}
-
-/// The counts of `result.json`.
-pub fn counts(result: &Value) -> Counts {
-    let evaluations = result["evaluations"].as_u64().unwrap_or_default();
-    let simulated = result["simulated"].as_u64().unwrap_or_default();
-    Counts {
-        evaluations,
-        simulated,
-        from_store: evaluations.saturating_sub(simulated),
+    let objectives: Vec<f64> = rows.iter().map(|r| r.objective).collect();
+    for (r, at) in rows.iter_mut().zip(evidence::at_best_flags(&objectives)) {
+        r.at_best = at;
     }
 }
 
@@ -151,17 +103,26 @@ mod tests {
 
     #[test]
     fn rows_name_each_run_and_flag_those_at_the_best_by_the_summarys_rule() {
-        let result = json!({
-            "free_parameters": [{"name": "b"}, {"name": "a"}],
+        let result: CalibrationOutcome = serde_json::from_value(json!({
+            "free_parameters": [
+                {"name": "b", "index": 0, "nominal": 1.0, "min": 0.0, "max": 9.0,
+                 "effect": false, "scale": "lin"},
+                {"name": "a", "index": 1, "nominal": 1.0, "min": 0.0, "max": 9.0,
+                 "effect": false, "scale": "lin"},
+            ],
             "runs": [
                 {"method": "nelder-mead", "start": 0, "objective": 1.0, "evaluations": 10,
-                 "iterations": 5, "termination": "converged", "parameters": {"a": 1.0, "b": 2.0}},
+                 "iterations": 5, "termination": "converged", "start_point": {},
+                 "parameters": {"a": 1.0, "b": 2.0}},
                 {"method": "nelder-mead", "start": 1, "objective": 1.0099, "evaluations": 11,
-                 "iterations": 6, "termination": "budget", "parameters": {"a": 1.5, "b": 2.5}},
+                 "iterations": 6, "termination": "budget", "start_point": {},
+                 "parameters": {"a": 1.5, "b": 2.5}},
                 {"method": "lbfgs", "start": 0, "objective": 1.0101, "evaluations": 12,
-                 "iterations": 7, "termination": "converged", "parameters": {"a": 3.0, "b": 4.0}},
+                 "iterations": 7, "termination": "converged", "start_point": {},
+                 "parameters": {"a": 3.0, "b": 4.0}},
             ],
-        });
+        }))
+        .unwrap();
         let rows = rows(&result);
         let labels: Vec<&str> = rows.iter().map(|r| r.label.as_str()).collect();
         assert_eq!(labels, ["nelder-mead #0", "nelder-mead #1", "lbfgs #0"]);
@@ -206,12 +167,5 @@ mod tests {
         assert!(rows[0].at_best && !rows[1].at_best);
         assert_eq!(best_parameters(&rows), vec![("k".to_string(), 0.5)]);
         assert!(rows[1].parameters.is_empty());
-    }
-
-    #[test]
-    fn counts_add_up_to_the_evaluations() {
-        let c = counts(&json!({"evaluations": 8337, "simulated": 8284, "cached": 66}));
-        assert_eq!(c.evaluations, c.simulated + c.from_store);
-        assert_eq!(c.from_store, 53);
     }
 }

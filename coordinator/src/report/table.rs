@@ -2,9 +2,8 @@
 
 use super::evidence::{self, BEST_TOLERANCE};
 use crate::calibration::Calibration;
-use crate::campaign::FreeParameter;
 use crate::optim::multistart::Stop;
-use serde_json::Value;
+use crate::outcome::{CalibrationOutcome, Named};
 use std::fmt::Write;
 
 /// Marks a value within 1% of its range from a bound, in the run table.
@@ -12,57 +11,21 @@ const AT_BOUND: char = '!';
 
 /// Runs, best first, then the best point and the error before and after.
 pub fn summary(c: &Calibration) -> String {
-    summary_of(&super::result_json(c))
+    summary_of(&c.outcome)
 }
 
-/// The summary of a calibration from its `result.json`: what `calib calibrate` prints, and
-/// `calib submit` for a campaign a coordinator ran.
-pub fn summary_of(result: &Value) -> String {
-    let number = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
-    let count = |v: &Value| v.as_u64().unwrap_or(0);
-    let free: Vec<FreeParameter> = list(&result["free_parameters"])
-        .iter()
-        .map(|p| FreeParameter {
-            name: p["name"].as_str().unwrap_or_default().to_string(),
-            index: count(&p["index"]) as usize,
-            nominal: number(&p["nominal"]),
-            min: number(&p["min"]),
-            max: number(&p["max"]),
-            effect: p["effect"].as_bool().unwrap_or(false),
-            scale: serde_json::from_value(p["scale"].clone()).unwrap_or_default(),
-            experiment: p["experiment"].as_str().map(str::to_string),
-        })
-        .collect();
-    let point =
-        |named: &Value| -> Vec<f64> { free.iter().map(|p| number(&named[&p.name])).collect() };
-    struct Run<'a> {
-        method: &'a str,
-        start: u64,
-        point: Vec<f64>,
-        objective: f64,
-        evaluations: u64,
-        iterations: u64,
-        termination: &'a str,
-        restarts: u64,
-    }
-    let runs: Vec<Run> = list(&result["runs"])
-        .iter()
-        .map(|r| Run {
-            method: r["method"].as_str().unwrap_or_default(),
-            start: count(&r["start"]),
-            point: point(&r["parameters"]),
-            objective: number(&r["objective"]),
-            evaluations: count(&r["evaluations"]),
-            iterations: count(&r["iterations"]),
-            termination: r["termination"].as_str().unwrap_or_default(),
-            restarts: count(&r["restarts"]),
-        })
-        .collect();
-    let best = &result["best"];
-    let best_index = runs
-        .iter()
-        .position(|r| Some(r.method) == best["method"].as_str() && r.start == count(&best["start"]))
-        .unwrap_or(0);
+/// The summary of a calibration from its outcome: what `calib calibrate` prints, and `calib
+/// submit` for a campaign a coordinator ran.
+pub fn summary_of(result: &CalibrationOutcome) -> String {
+    let free = &result.free_parameters;
+    let point = |named: &Named<f64>| -> Vec<f64> {
+        free.iter()
+            .map(|p| named.get(&p.name).copied().unwrap_or(f64::NAN))
+            .collect()
+    };
+    let runs = &result.runs;
+    let best = &result.best;
+    let best_index = result.best_index();
 
     let mut s = String::new();
     let names: Vec<&str> = free.iter().map(|p| p.name.as_str()).collect();
@@ -82,7 +45,7 @@ pub fn summary_of(result: &Value) -> String {
     for i in order {
         let r = &runs[i];
         let _ = write!(s, "{:<24} {:>5} ", r.method, r.start);
-        for (p, v) in free.iter().zip(&r.point) {
+        for (p, v) in free.iter().zip(&point(&r.parameters)) {
             let mark = if evidence::at_bound(*v, p.nominal, p.min, p.max).is_some() {
                 AT_BOUND
             } else {
@@ -107,15 +70,10 @@ pub fn summary_of(result: &Value) -> String {
         "(* best run; {AT_BOUND} on a bound: within {:.0}% of its range from it)",
         100.0 * evidence::BOUND_TOLERANCE
     );
-    let best_point = point(&best["parameters"]);
-    let best_objective = number(&best["objective"]);
+    let best_point = point(&best.parameters);
+    let best_objective = best.objective;
     let _ = writeln!(s);
-    let _ = writeln!(
-        s,
-        "best ({} from start {}):",
-        best["method"].as_str().unwrap_or_default(),
-        count(&best["start"])
-    );
+    let _ = writeln!(s, "best ({} from start {}):", best.method, best.start);
     for (p, v) in free.iter().zip(&best_point) {
         let bound = match evidence::at_bound(*v, p.nominal, p.min, p.max) {
             Some(b) => format!("   at {} bound", b.word()),
@@ -127,10 +85,10 @@ pub fn summary_of(result: &Value) -> String {
             p.name, v, p.nominal
         );
     }
-    for hit in evidence::bound_hits(&free, &best_point) {
+    for hit in evidence::bound_hits(free, &best_point) {
         let _ = writeln!(s, "  note: {}", evidence::bound_sentence(&hit));
     }
-    let nominal = number(&result["nominal_objective"]);
+    let nominal = result.nominal_objective;
     let _ = writeln!(
         s,
         "objective {:.6e} -> {:.6e} ({:.1}x lower)",
@@ -139,23 +97,18 @@ pub fn summary_of(result: &Value) -> String {
         nominal / best_objective
     );
     // One line per compared series: per output, and per experiment when there are several.
-    let experiments = list(&result["experiments"]);
+    let before = |named: &Named<f64>, output: &str| named.get(output).copied().unwrap_or(f64::NAN);
     let mut series: Vec<(String, f64, f64)> = Vec::new();
-    if experiments.is_empty() {
-        if let Some(after) = best["rms"].as_object() {
-            for (output, value) in after {
-                let before = number(&result["nominal_rms"][output]);
-                series.push((output.clone(), before, number(value)));
-            }
+    if result.experiments.is_empty() {
+        for (output, value) in best.rms.iter() {
+            let was = before(&result.nominal_rms, output);
+            series.push((output.to_string(), was, *value));
         }
     } else {
-        for e in experiments {
-            let name = e["name"].as_str().unwrap_or_default();
-            if let Some(after) = e["rms"].as_object() {
-                for (output, value) in after {
-                    let before = number(&e["nominal_rms"][output]);
-                    series.push((format!("{name}: {output}"), before, number(value)));
-                }
+        for e in &result.experiments {
+            for (output, value) in e.rms.iter() {
+                let was = before(&e.nominal_rms, output);
+                series.push((format!("{}: {output}", e.name), was, *value));
             }
         }
     }
@@ -176,14 +129,13 @@ pub fn summary_of(result: &Value) -> String {
             ""
         }
     );
-    let clusters = list(&result["clusters"]);
-    let kind = |k: &Value, of: Stop| serde_json::to_value(of).ok().as_ref() == Some(&k["kind"]);
-    let minima = clusters.iter().filter(|k| kind(k, Stop::Minimum)).count();
+    let clusters = &result.clusters;
+    let minima = clusters.iter().filter(|k| k.kind == Stop::Minimum).count();
     let stalled = |of: Stop| {
         clusters
             .iter()
-            .filter(|k| kind(k, of))
-            .map(|k| list(&k["runs"]).len())
+            .filter(|k| k.kind == of)
+            .map(|k| k.runs.len())
             .sum::<usize>()
     };
     let mut stalls = String::new();
@@ -196,37 +148,40 @@ pub fn summary_of(result: &Value) -> String {
             let _ = write!(stalls, ", {n} {words}");
         }
     }
-    let counted = super::runs::counts(result);
+
     let _ = writeln!(
         s,
         "{} distinct minima found by {} runs{stalls}; {} evaluations, {} simulated, {} from \
          cache, {:.2} s",
         minima,
         runs.len(),
-        counted.evaluations,
-        counted.simulated,
-        counted.from_store,
-        number(&result["elapsed_seconds"])
+        result.evaluations,
+        result.simulated,
+        result.from_store(),
+        result.elapsed_seconds
     );
     for k in clusters
         .iter()
-        .filter(|k| kind(k, Stop::Minimum))
+        .filter(|k| k.kind == Stop::Minimum)
         .take(SHOWN_MINIMA)
     {
         let loose: Vec<String> = free
             .iter()
             .filter_map(|p| {
-                let extent = &k["extent"][&p.name];
-                let (lo, hi) = (number(&extent[0]), number(&extent[1]));
+                let (lo, hi) = k
+                    .extent
+                    .get(&p.name)
+                    .copied()
+                    .unwrap_or((f64::NAN, f64::NAN));
                 (hi - lo > LOOSE * (p.max - p.min))
                     .then(|| format!("{} anywhere in [{lo:.4e}, {hi:.4e}]", p.name))
             })
             .collect();
-        let runs = list(&k["runs"]).len();
+        let runs = k.runs.len();
         let _ = writeln!(
             s,
             "  minimum {:.6e}: {} run{}{}",
-            number(&k["objective"]),
+            k.objective,
             runs,
             if runs == 1 { "" } else { "s" },
             if loose.is_empty() {
@@ -237,11 +192,6 @@ pub fn summary_of(result: &Value) -> String {
         );
     }
     s
-}
-
-/// The elements of a JSON array (none for anything else).
-fn list(v: &Value) -> &[Value] {
-    v.as_array().map_or(&[], Vec::as_slice)
 }
 
 /// Minima listed under the summary, best first.

@@ -378,6 +378,28 @@ mod tests {
     }
 
     #[test]
+    fn a_result_that_does_not_read_as_an_outcome_leaves_the_record_readable() {
+        let record = CampaignRecord {
+            name: "c".into(),
+            spec: String::new(),
+            source: PathBuf::new(),
+            dataset: "00".repeat(32),
+            status: CampaignStatus::Finished,
+            runs: vec![],
+            result: None,
+            failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
+        };
+        let mut value = serde_json::to_value(&record).unwrap();
+        value["result"] = serde_json::json!({ "runs": "not a list" });
+        let mut bytes = vec![1];
+        serde_json::to_writer(&mut bytes, &value).unwrap();
+        assert_eq!(decode_campaign(&bytes).unwrap(), record);
+    }
+
+    #[test]
     fn campaign_records_keep_every_number_bit_for_bit() {
         // Values a result holds (a run's best point and objective) whose shortest decimal
         // text a fast but inexact float parser reads back one ulp off: a campaign resumed
@@ -402,7 +424,18 @@ mod tests {
                 objective: values[1],
                 evaluations: 1,
             }],
-            result: Some(serde_json::json!({ "values": values })),
+            result: Some(crate::outcome::CalibrationOutcome {
+                best: crate::outcome::Best {
+                    parameters: values
+                        .iter()
+                        .enumerate()
+                        .map(|(i, v)| (format!("p{i}"), *v))
+                        .collect(),
+                    objective: values[1],
+                    ..Default::default()
+                },
+                ..Default::default()
+            }),
             failure: None,
             message: None,
             free: Vec::new(),
@@ -412,12 +445,9 @@ mod tests {
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&back.runs[0].point), bits(&values));
         assert_eq!(back.runs[0].objective.to_bits(), values[1].to_bits());
-        let result: Vec<f64> = back.result.unwrap()["values"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|v| v.as_f64().unwrap())
-            .collect();
+        let best = back.result.unwrap().best;
+        let result: Vec<f64> = best.parameters.iter().map(|(_, v)| *v).collect();
         assert_eq!(bits(&result), bits(&values));
+        assert_eq!(best.objective.to_bits(), values[1].to_bits());
     }
 }

@@ -99,9 +99,11 @@ pub struct CampaignRecord {
     /// Per-run best, in run order (filled when the campaign finishes).
     #[serde(default)]
     pub runs: Vec<RunBest>,
-    /// `result.json` of the finished campaign.
-    #[serde(default)]
-    pub result: Option<serde_json::Value>,
+    /// What the finished campaign found (its `result.json`). A result this version cannot
+    /// read (written by a much older one) reads as none, with a warning, rather than making
+    /// the whole record unreadable.
+    #[serde(default, deserialize_with = "readable_result")]
+    pub result: Option<crate::outcome::CalibrationOutcome>,
     /// Why it failed, when it did.
     #[serde(default)]
     pub failure: Option<String>,
@@ -116,6 +118,23 @@ pub struct CampaignRecord {
     /// campaign reopened after the fact.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub history: Vec<ProgressPoint>,
+}
+
+/// A stored result as [`CampaignRecord::result`] keeps it: none when it does not read as
+/// an outcome.
+fn readable_result<'de, D: serde::Deserializer<'de>>(
+    d: D,
+) -> Result<Option<crate::outcome::CalibrationOutcome>, D::Error> {
+    let Some(value) = <Option<serde_json::Value> as serde::Deserialize>::deserialize(d)? else {
+        return Ok(None);
+    };
+    match serde_json::from_value(value) {
+        Ok(outcome) => Ok(Some(outcome)),
+        Err(e) => {
+            tracing::warn!(error = %e, "a stored campaign's result cannot be read: left out");
+            Ok(None)
+        }
+    }
 }
 
 /// One moment of a campaign's progress: evaluations so far and each run's best objective.

@@ -281,11 +281,11 @@ pub fn compare_svg(
                 known.join(", ")
             )));
         };
-        let best = &result["best"]["parameters"];
+        let best = &result.best.parameters;
         let point: Vec<f64> = campaign
             .free
             .iter()
-            .map(|p| best[&p.name].as_f64().unwrap_or(p.nominal))
+            .map(|p| best.get(&p.name).copied().unwrap_or(p.nominal))
             .collect();
         let measurement = crate::calibration::load_measurement(&campaign)
             .map_err(|e| invalid(format!("{place}: {}", public(e))))?;
@@ -330,7 +330,7 @@ pub fn compare_svg(
             label = format!("{label} ({})", &id[..id.len().min(8)]);
         }
         names.push(label.clone());
-        let objective_value = result["best"]["objective"].as_f64().unwrap_or(f64::NAN);
+        let objective_value = result.best.objective;
         fits.push((
             format!("{label}: objective {objective_value:.4e}"),
             grid,

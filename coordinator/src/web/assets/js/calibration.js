@@ -106,12 +106,12 @@ export async function start() {
   }
 }
 
-// The campaign's state in a line: phase, evaluations, best objective, runs at the best (the
-// server flags them, by the rule of result.json's runs_at_best).
+// The campaign's state in a line: phase, evaluations, best objective, runs at the best (as
+// the server counts them, by the rule of result.json's runs_at_best).
 export function describeState(s) {
-  const runs = s.runs || [];
+  const atBest = s.runs_at_best || {};
   let text = `${s.name}: ${PHASES[s.phase] || s.phase}, ${s.evaluations} evaluations, best objective ${fmt(s.best_objective)}`;
-  if (runs.length) text += `, ${runs.filter((r) => r.at_best).length} of ${runs.length} runs at the best`;
+  if (atBest.of) text += `, ${atBest.count || 0} of ${atBest.of} runs at the best`;
   // Why it failed goes to the error box (showFailure), not here.
   return text;
 }
@@ -131,7 +131,7 @@ function showState(s) {
 
 // The free parameters' names in the campaign's order.
 function parameterNames(s) {
-  if (s.result_json) return JSON.parse(s.result_json).free_parameters.map((p) => p.name);
+  if (s.result) return s.result.free_parameters.map((p) => p.name);
   const c = s.campaign || {};
   return [...(c.parameters || []), ...(c.effects || [])].map((p) => p.name);
 }
@@ -256,22 +256,22 @@ export function useValues() {
 export function finish(s) {
   $("cancel").disabled = true;
   $("start").disabled = false;
-  if (s.phase === 2 && s.result_json) showResult(s);
+  if (s.phase === 2 && s.result) showResult(s);
   refreshCampaigns();
 }
 
 export function showResult(s) {
-  const r = JSON.parse(s.result_json);
+  const r = s.result;
   const best = r.best;
   $("result-summary").textContent =
     `objective ${fmt(r.nominal_objective)} at the nominal point, ${fmt(best.objective)} calibrated ` +
     `(${best.method}, start ${best.start}); ${r.runs_at_best.count} of ${r.runs_at_best.of} runs reached the best; ` +
-    `${r.evaluations} evaluations (${s.simulated} simulated, ${s.from_store} from the store).`;
+    `${r.evaluations} evaluations (${r.simulated} simulated, ${r.from_store} from the store).`;
   const body = $("result-parameters").tBodies[0];
   body.replaceChildren();
   for (const p of r.free_parameters) {
     const value = best.parameters[p.name];
-    const bound = best.at_bound[p.name];
+    const bound = (best.at_bound || {})[p.name];
     body.append(el("tr", { "data-parameter": p.name },
       el("th", { scope: "row", text: p.name }),
       el("td", { class: "num", text: fmt(p.nominal, 8) }),
@@ -384,7 +384,7 @@ export async function openCampaign(id) {
     $("result").hidden = true;
     clearProfiles();
     showState(s);
-    if (s.phase === 2 && s.result_json) showResult(s);
+    if (s.phase === 2 && s.result) showResult(s);
     $("result").scrollIntoView({ block: "nearest" });
   } catch (e) {
     showError("calibration-error", e.message);

@@ -26,14 +26,14 @@ export async function compareTicked() {
   }
   try {
     const states = await Promise.all(ids.map((id) => call("GetCampaign", { id })));
-    showComparison(states.filter((s) => s.result_json));
+    showComparison(states.filter((s) => s.result));
   } catch (e) {
     showError("compare-error", e.message);
   }
 }
 
 function showComparison(states) {
-  const results = states.map((s) => JSON.parse(s.result_json));
+  const results = states.map((s) => s.result);
   const table = $("comparison-table");
   const head = el("tr", {}, el("th", { scope: "col", text: "" }));
   for (const s of states) {
@@ -86,7 +86,7 @@ function showComparison(states) {
 async function showOverlays(states) {
   const holder = $("comparison-overlays");
   holder.replaceChildren();
-  const outputs = (s) => Object.keys((JSON.parse(s.result_json).best || {}).rms || {});
+  const outputs = (s) => s.result.outputs || [];
   const shared = outputs(states[0]).filter((o) => states.every((s) => outputs(s).includes(o)));
   for (const output of shared) {
     try {

@@ -2,7 +2,7 @@
 //! objective, and which calibrated values sit on a bound of their range.
 
 use crate::campaign::FreeParameter;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// Relative distance to the best objective within which a run counts as having found it.
 pub const BEST_TOLERANCE: f64 = 0.01;
@@ -16,7 +16,7 @@ pub fn best_threshold(best: f64) -> f64 {
 }
 
 /// How many of the runs reached the best objective within [`BEST_TOLERANCE`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct RunsAtBest {
     pub count: usize,
     pub of: usize,
@@ -34,8 +34,24 @@ pub fn runs_at_best(objectives: &[f64]) -> RunsAtBest {
     }
 }
 
+/// Whether each of `objectives` reached the best within [`BEST_TOLERANCE`], the best
+/// being the least finite one (none did when none is finite): how every table and page
+/// marks the runs at the best.
+pub fn at_best_flags(objectives: &[f64]) -> Vec<bool> {
+    let best = objectives
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    if !best.is_finite() {
+        return vec![false; objectives.len()];
+    }
+    let threshold = best_threshold(best);
+    objectives.iter().map(|&f| f <= threshold).collect()
+}
+
 /// The bound of its range a value sits on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Bound {
     Min,
@@ -159,6 +175,16 @@ mod tests {
                 of: 5,
                 tolerance: 0.01
             }
+        );
+    }
+
+    #[test]
+    fn flags_mark_the_runs_within_one_percent_of_the_least_finite_objective() {
+        let flags = at_best_flags(&[2.0, 1.0, f64::INFINITY, 1.0099, f64::NAN, 1.0101]);
+        assert_eq!(flags, [false, true, false, true, false, false]);
+        assert_eq!(
+            at_best_flags(&[f64::INFINITY, f64::INFINITY]),
+            [false, false]
         );
     }
 
