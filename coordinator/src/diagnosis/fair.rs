@@ -13,14 +13,14 @@
 //! 2. from the best of them, Nelder–Mead and Powell again, repeated while a round lowers the
 //!    objective by more than [`POLISH_RELATIVE`] of itself ([`POLISH_ROUNDS`] at most).
 //!
-//! The same search refits the baseline when it is above the noise floor: a baseline left
-//! short of its own minimum by the campaign's search would let any effect "explain" what a
-//! better fit of the same model removes.
+//! The same search refits the baseline when it is above the noise floor and the campaign's
+//! own runs do not corroborate it ([`corroborated`]): a baseline left short of its own
+//! minimum by the campaign's search would let any effect "explain" what a better fit of the
+//! same model removes.
 
 use super::candidates::refit_campaign;
 use super::fit::fit_of;
 use super::refit::{STALL_RELATIVE, STALL_WINDOW_PER_PARAMETER};
-use super::verdict::MIN_BIC_DECREASE;
 use super::{Candidate, Fit};
 use crate::calibration::{calibrate, Calibration};
 use crate::campaign::{Campaign, FreeParameter, Method};
@@ -29,6 +29,7 @@ use crate::evaluator::{Evaluator, Simulator};
 use crate::objective::Objective;
 use crate::optim::budget::Stall;
 use crate::optim::problem::Progress;
+use crate::report::evidence::best_threshold;
 
 /// Evaluations at most of each run of a fair refit.
 pub const FAIR_BUDGET: usize = 400;
@@ -181,10 +182,18 @@ pub(super) fn fair_refits<E: Evaluator + Simulator>(
     })
 }
 
-/// Whether `better` is a decisively better fit than `fit` of the same parameters: the
-/// likelihood ratio alone (no parameter added) beyond [`MIN_BIC_DECREASE`].
-pub fn decisively_lower(better: &Fit, fit: &Fit) -> bool {
-    let n = better.effective_samples;
-    n * (better.objective.max(f64::MIN_POSITIVE) / fit.objective.max(f64::MIN_POSITIVE)).ln()
-        <= -MIN_BIC_DECREASE
+/// Whether the campaign's own search corroborates its optimum: runs from at least two
+/// different starts reached its best objective (within the tolerance the report counts
+/// "runs at best" with). A baseline that is not corroborated gets a fair refit.
+pub fn corroborated(calibration: &Calibration) -> bool {
+    let threshold = best_threshold(calibration.best_run().objective);
+    let mut starts: Vec<usize> = calibration
+        .runs
+        .iter()
+        .filter(|r| r.objective <= threshold)
+        .map(|r| r.start)
+        .collect();
+    starts.sort_unstable();
+    starts.dedup();
+    starts.len() >= 2
 }

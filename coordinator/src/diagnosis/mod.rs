@@ -2,8 +2,8 @@
 //! lacks.
 //!
 //! 1. **Baseline**: calibrate the campaign as given (multistart) on the fitted window; when
-//!    that leaves more than noise, minimise again with the diagnosis's own search
-//!    ([`fair`]) and keep that fit where it is decisively lower.
+//!    that leaves more than noise and the campaign's runs do not agree on it, minimise again
+//!    with the diagnosis's own search ([`fair`]) and keep that fit where it is lower.
 //! 2. **Residual analysis** ([`residual`]): per output RMS, autocorrelation and a Ljung–Box
 //!    whiteness test, against the noise level estimated from the measured data alone; the
 //!    noise floor is what a perfect model would leave, `Σ_i k_i N σ_i²`.
@@ -227,9 +227,13 @@ where
     // 1. Baseline.
     let calibration = calibrate(&fit_campaign, engine, progress)?;
     let mut baseline = fit_of(&calibration, &[], engine, &holdout_objective)?;
-    // Above the noise floor, the baseline too gets the diagnosis's own search, so that no
-    // effect is credited with what a better fit of the campaign's own parameters removes.
-    if baseline.objective > NOISE_FACTOR * noise_floor && !fit_campaign.free.is_empty() {
+    // Above the noise floor and not corroborated by the campaign's own runs, the baseline
+    // too gets the diagnosis's own search, so that no effect is credited with what a better
+    // fit of the campaign's own parameters removes.
+    if baseline.objective > NOISE_FACTOR * noise_floor
+        && !fit_campaign.free.is_empty()
+        && !fair::corroborated(&calibration)
+    {
         let fair = fair::fair_refit(
             &fit_campaign,
             &baseline,
@@ -246,7 +250,8 @@ where
             to = fair.objective,
             "baseline refitted with the diagnosis's search"
         );
-        if fair::decisively_lower(&fair, &baseline) {
+        // The same model, so a lower minimum is simply the better fit of it.
+        if fair.objective < baseline.objective * (1.0 - fair::POLISH_RELATIVE) {
             baseline = Fit {
                 evaluations: baseline.evaluations + fair.evaluations,
                 ..fair

@@ -275,3 +275,32 @@ fn polish_singles_from_pairs<E: Evaluator + Simulator>(
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnosis::testing::scored;
+
+    fn refits(objectives: &[f64]) -> Vec<Fit> {
+        objectives
+            .iter()
+            .enumerate()
+            .map(|(i, &o)| scored(&[["a", "b", "c"][i]], 3, o, o, 1000.0))
+            .collect()
+    }
+
+    #[test]
+    fn fair_refits_go_to_every_leading_candidate_when_none_settles() {
+        let settles = |f: &Fit| f.objective <= 1.0;
+        assert_eq!(leading_unsettled(&refits(&[5.0, 3.0, 9.0]), settles), [0, 1, 2]);
+    }
+
+    #[test]
+    fn fair_refits_go_only_to_candidates_ranked_above_the_first_that_settles() {
+        let settles = |f: &Fit| f.objective <= 1.0;
+        // The second settles: the first, ranked above it, gets a fair refit; the third not.
+        assert_eq!(leading_unsettled(&refits(&[5.0, 0.9, 9.0]), settles), [0]);
+        // The first settles: nobody else needs one.
+        assert!(leading_unsettled(&refits(&[0.9, 5.0, 9.0]), settles).is_empty());
+    }
+}

@@ -204,6 +204,26 @@ mod tests {
     }
 
     #[test]
+    fn the_selection_does_not_depend_on_the_order_the_refits_ran_in() {
+        let baseline = scored(&[], 2, 10.0, 4.0, N);
+        let mut refits = vec![
+            scored(&["a"], 3, 5.0, 3.0, N),
+            scored(&["b"], 3, 3.0, 2.0, N),
+            scored(&["a", "b"], 4, 2.9, 1.9, N),
+            scored(&["b", "c"], 4, 2.5, 1.5, N),
+        ];
+        assert_eq!(select(&baseline, &refits).unwrap().effects, ["b", "c"]);
+        refits.reverse();
+        assert_eq!(select(&baseline, &refits).unwrap().effects, ["b", "c"]);
+        // Equal objectives: the names decide, not the order.
+        let tied = [
+            scored(&["z"], 3, 3.0, 2.0, N),
+            scored(&["y"], 3, 3.0, 2.0, N),
+        ];
+        assert_eq!(select(&baseline, &tied).unwrap().effects, ["y"]);
+    }
+
+    #[test]
     fn a_pair_may_succeed_where_no_single_does() {
         let baseline = scored(&[], 2, 10.0, 4.0, N);
         let refits = [
