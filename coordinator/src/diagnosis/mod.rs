@@ -227,6 +227,8 @@ where
     // 1. Baseline.
     let calibration = calibrate(&fit_campaign, engine, progress)?;
     let mut baseline = fit_of(&calibration, &[], engine, &holdout_objective)?;
+    // The campaign's own baseline where the fair refit replaced it.
+    let mut replaced: Option<Fit> = None;
     // Above the noise floor and not corroborated by the campaign's own runs, the baseline
     // too gets the diagnosis's own search, so that no effect is credited with what a better
     // fit of the campaign's own parameters removes.
@@ -252,6 +254,7 @@ where
         );
         // The same model, so a lower minimum is simply the better fit of it.
         if fair.objective < baseline.objective * (1.0 - fair::POLISH_RELATIVE) {
+            replaced = Some(baseline.clone());
             baseline = Fit {
                 evaluations: baseline.evaluations + fair.evaluations,
                 ..fair
@@ -274,6 +277,18 @@ where
         &baseline,
         &candidate_specs,
     )?;
+    // Where the fair refit moved the baseline, the campaign's own optimum may lie in another
+    // basin (a joint held stuck in one, moving in the other) where an effect acts that has no
+    // influence at the new one: each candidate keeps the better of its two rankings, with
+    // the point its descent reached there as a start of its refits.
+    if let Some(own) = &replaced {
+        let again = ranking::rank(&fit_campaign, &measurement, engine, own, &candidate_specs)?;
+        for (c, other) in candidates.iter_mut().zip(again) {
+            if other.score > c.score {
+                *c = other;
+            }
+        }
+    }
     candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
 
     let Judgement {

@@ -292,7 +292,10 @@ mod tests {
     #[test]
     fn fair_refits_go_to_every_leading_candidate_when_none_settles() {
         let settles = |f: &Fit| f.objective <= 1.0;
-        assert_eq!(leading_unsettled(&refits(&[5.0, 3.0, 9.0]), settles), [0, 1, 2]);
+        assert_eq!(
+            leading_unsettled(&refits(&[5.0, 3.0, 9.0]), settles),
+            [0, 1, 2]
+        );
     }
 
     #[test]
