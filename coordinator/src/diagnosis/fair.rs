@@ -91,7 +91,7 @@ fn minimise<E: Evaluator>(
         if after < before {
             best = round;
         }
-        if !(after < before * (1.0 - POLISH_RELATIVE)) {
+        if after >= before * (1.0 - POLISH_RELATIVE) || after.is_nan() {
             break;
         }
     }
