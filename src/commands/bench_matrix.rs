@@ -20,9 +20,17 @@ use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;
 
-/// The effects of the matrix: name, the simulator's options, the friction the campaign holds
-/// at 0, and the effect the diagnosis must select (`None`: nothing).
-pub const EFFECTS: [(&str, &[&str], Option<&str>, Option<&str>); 10] = [
+/// A row of the matrix: name, the simulator's options, the friction the campaign holds at 0,
+/// and the effect the diagnosis must select (`None`: nothing).
+pub type Row = (
+    &'static str,
+    &'static [&'static str],
+    Option<&'static str>,
+    Option<&'static str>,
+);
+
+/// The effects of the matrix.
+pub const EFFECTS: [Row; 10] = [
     (
         "viscous-arm",
         &["--arm-viscous", "0.002"],
