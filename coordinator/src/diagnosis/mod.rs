@@ -283,7 +283,10 @@ where
     // the point its descent reached there as a start of its refits.
     if let Some(own) = &replaced {
         let again = ranking::rank(&fit_campaign, &measurement, engine, own, &candidate_specs)?;
-        for (c, other) in candidates.iter_mut().zip(again) {
+        for (c, mut other) in candidates.iter_mut().zip(again) {
+            // Its score as a share of the baseline now in use: what its descent left there.
+            let left = (1.0 - other.score) * own.objective;
+            other.score = (1.0 - left / baseline.objective.max(f64::MIN_POSITIVE)).max(0.0);
             if other.score > c.score {
                 *c = other;
             }
