@@ -16,9 +16,19 @@ pub struct Args {
     /// Campaign to diagnose.
     #[arg(long, default_value = "examples/furuta_viscous_arm.toml")]
     campaign: PathBuf,
+    /// Instead: the robustness matrix, records of every effect (from the independent
+    /// simulator) diagnosed under every search setting (bounds, methods, starts), printed as
+    /// a table of the effect selected and the objective over the noise floor per cell.
+    #[arg(long)]
+    matrix: bool,
+    #[command(flatten)]
+    cells: super::bench_matrix::MatrixArgs,
 }
 
 pub fn run(args: Args) -> Outcome {
+    if args.matrix {
+        return super::bench_matrix::run(args.cells);
+    }
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
     let mut samples: Vec<Duration> = Vec::new();
     let mut last = None;

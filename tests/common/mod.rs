@@ -14,9 +14,11 @@ pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// The shared data folder beside the repository (real record and synthetic records).
+/// The shared data folder beside the repository (real record and synthetic records), or
+/// the folder `CALIB_SHARED_DATA` names (a checkout elsewhere).
 pub fn shared_data() -> PathBuf {
-    repo().join("../shared/data")
+    std::env::var_os("CALIB_SHARED_DATA")
+        .map_or_else(|| repo().join("../shared/data"), PathBuf::from)
 }
 
 /// Skip a test that cannot run here, saying why; under continuous integration (`CI` set, see

@@ -17,9 +17,22 @@ the arm axis, ``theta = 0`` upright. With ``s = sin(theta)``, ``c = cos(theta)``
     [ A    -C c ] [phi'']     [ tau1 - A' theta' phi' - C s theta'^2 ]
     [ -C c  B   ] [theta''] = [ tau2 + A'/2 phi'^2 + m g l s          ]
 
-``tau1 = u(t) - d1 phi' + f1`` and ``tau2 = -d2 theta' + f2``: ``u`` is the motor torque on the
-arm joint (positive in the direction of ``phi``), ``d1``, ``d2`` optional viscous frictions
-and ``f1``, ``f2`` the Coulomb bearing frictions.
+``tau1 = u(t) - d1 phi' - c1 phi' |phi'| - k1 phi + f1`` and
+``tau2 = -d2 theta' - c2 theta' |theta'| - k2 theta + f2``: ``u`` is the motor torque on the
+arm joint (positive in the direction of ``phi``), ``d1``, ``d2`` optional viscous frictions,
+``c1``, ``c2`` optional quadratic drags, ``k1``, ``k2`` optional torsional springs (the torque
+``-k q`` about the joint's zero angle, acting on a stuck joint too, which its friction must
+hold) and ``f1``, ``f2`` the Coulomb bearing frictions.
+
+Sensor effects
+--------------
+Each recorded angle may carry a dead time ``--<joint>-delay d`` (the angle at ``t - d``, the
+start value before ``d``), then a relative gain error and an offset (``(1 + g) y + o``,
+``--<joint>-gain``, ``--<joint>-offset``), before the noise and the quantisation below. These
+are the definitions of the worker's ``delay(...)``, ``gain(...)`` and ``offset(...)``
+effects (worker/src/effects.rs); the spring, drag and friction terms are those of its
+``stiffness.<joint>``, ``quadratic_drag.<joint>`` and ``viscous_friction.<joint>``
+(worker/src/models/furuta.rs).
 
 Stick-slip
 ----------
@@ -119,7 +132,7 @@ def torque_profile(t, amplitude):
 
 
 class Rig:
-    def __init__(self, geometry, friction, viscous):
+    def __init__(self, geometry, friction, viscous, drag=(0.0, 0.0), stiffness=(0.0, 0.0)):
         g = geometry
         m, l1, l = g["pend_mass"], g["arm_length"], g["pend_com"]
         self.a0 = g["arm_inertia"] + m * l1 * l1 + g["pend_Iyy"]
@@ -129,6 +142,8 @@ class Rig:
         self.mgl = m * g["g"] * l
         self.friction = list(friction)
         self.viscous = list(viscous)
+        self.drag = list(drag)
+        self.stiffness = list(stiffness)
 
     def forces(self, y, u):
         """Generalised forces without Coulomb friction, and the mass matrix (A, C c)."""
@@ -138,6 +153,8 @@ class Rig:
         da = 2.0 * self.a1 * s * c
         r1 = u - da * w2 * w1 - self.c * s * w2 * w2 - self.viscous[0] * w1
         r2 = 0.5 * da * w1 * w1 + self.mgl * s - self.viscous[1] * w2
+        r1 -= self.drag[0] * w1 * abs(w1) + self.stiffness[0] * y[0]
+        r2 -= self.drag[1] * w2 * abs(w2) + self.stiffness[1] * y[1]
         return r1, r2, a, self.c * c
 
     def dynamics(self, y, u, modes):
@@ -198,7 +215,7 @@ class Rig:
 
 
 def simulate(rig, y0, times, torque):
-    """States at ``times`` (uniform grid), the motor torque linear between its samples."""
+    """States at ``times`` (increasing), the motor torque linear between its samples."""
     y = np.array(y0, dtype=float)
     out = np.empty((len(times), 4))
     out[0] = y
@@ -286,6 +303,12 @@ def main(argv=None):
     )
     p.add_argument("--arm-viscous", type=float, default=0.0, help="arm viscous friction [N m s/rad]")
     p.add_argument("--pendulum-viscous", type=float, default=0.0, help="pendulum viscous friction [N m s/rad]")
+    for joint in ("arm", "pendulum"):
+        p.add_argument(f"--{joint}-drag", type=float, default=0.0, help=f"{joint} quadratic drag [N m s2/rad2]")
+        p.add_argument(f"--{joint}-stiffness", type=float, default=0.0, help=f"{joint} torsional spring [N m/rad]")
+        p.add_argument(f"--{joint}-offset", type=float, default=0.0, help=f"offset of the recorded {joint} angle [rad]")
+        p.add_argument(f"--{joint}-gain", type=float, default=0.0, help=f"relative gain error of the recorded {joint} angle")
+        p.add_argument(f"--{joint}-delay", type=float, default=0.0, help=f"dead time of the recorded {joint} angle [s]")
     p.add_argument("--no-torque", action="store_true", help="free swing: no motor torque")
     p.add_argument("--amplitude", type=float, default=0.03, help="motor torque amplitude [N m]")
     p.add_argument("--seed", type=int, default=1, help="seed of the measurement noise")
@@ -299,13 +322,33 @@ def main(argv=None):
     n = int(round(args.stop * RATE_HZ))
     times = np.arange(n + 1) / RATE_HZ
     torque = np.zeros(n + 1) if args.no_torque else torque_profile(times, args.amplitude)
-    rig = Rig(RIG, (args.arm_friction, args.pendulum_friction), (args.arm_viscous, args.pendulum_viscous))
+    rig = Rig(
+        RIG,
+        (args.arm_friction, args.pendulum_friction),
+        (args.arm_viscous, args.pendulum_viscous),
+        (args.arm_drag, args.pendulum_drag),
+        (args.arm_stiffness, args.pendulum_stiffness),
+    )
     y0 = (START["phi0"], args.theta0, START["dphi0"], START["dtheta0"])
-    states, stats = simulate(rig, y0, times, torque)
+    delays = (args.arm_delay, args.pendulum_delay)
+    if any(d < 0.0 for d in delays):
+        sys.exit("--arm-delay, --pendulum-delay: a dead time is not negative")
+    # The delayed sampling times too; the torque stays linear between its 100 Hz samples.
+    # (rounded to 1e-9 s, so that a delay of whole samples adds no times a hair apart)
+    grid = np.unique(np.round(np.concatenate([times] + [np.maximum(times - d, 0.0) for d in delays]), 9))
+    states_on_grid, stats = simulate(rig, y0, grid, np.interp(grid, times, torque))
+    states = np.empty((len(times), 4))
+    states[:] = states_on_grid[np.searchsorted(grid, np.round(times, 9))]
+    recorded = np.empty((len(times), 2))
+    for j, (d, g, o) in enumerate(
+        [(args.arm_delay, args.arm_gain, args.arm_offset), (args.pendulum_delay, args.pendulum_gain, args.pendulum_offset)]
+    ):
+        at = np.searchsorted(grid, np.round(np.maximum(times - d, 0.0), 9))
+        recorded[:, j] = (1.0 + g) * states_on_grid[at, j] + o
 
     rng = np.random.default_rng(args.seed)
     step = 2.0 * math.pi / COUNTS_PER_REV
-    angles = states[:, :2]
+    angles = recorded
     if not args.clean:
         angles = np.round((angles + rng.normal(0.0, args.noise, angles.shape)) / step) * step
     recorded_torque = torque + (rng.normal(0.0, args.torque_noise, torque.shape) if args.torque_noise > 0 else 0.0)
@@ -319,6 +362,12 @@ def main(argv=None):
         "start_state": {**START, "theta0": args.theta0},
         "true_friction": {"armFriction": args.arm_friction, "pendulumFriction": args.pendulum_friction},
         "viscous_friction": {"arm": args.arm_viscous, "pendulum": args.pendulum_viscous},
+        "quadratic_drag": {"arm": args.arm_drag, "pendulum": args.pendulum_drag},
+        "stiffness": {"arm": args.arm_stiffness, "pendulum": args.pendulum_stiffness},
+        "sensor": {
+            j: {"offset": getattr(args, f"{j}_offset"), "gain": getattr(args, f"{j}_gain"), "delay": getattr(args, f"{j}_delay")}
+            for j in ("arm", "pendulum")
+        },
         "motor_torque": {
             "amplitude_Nm": 0.0 if args.no_torque else args.amplitude,
             "interpolation": "linear between samples",

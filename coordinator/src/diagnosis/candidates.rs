@@ -171,6 +171,7 @@ mod tests {
             score: 0.5,
             linear_score: 0.5,
             estimate: 0.002,
+            linear_estimate: 0.002,
             step: 1e-5,
             objective: None,
             point: vec![0.0098, 0.0012, 0.0019],

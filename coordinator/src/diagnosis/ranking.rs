@@ -96,6 +96,7 @@ pub fn rank<E: Evaluator + Simulator>(
             score,
             linear_score: score,
             estimate,
+            linear_estimate: estimate,
             step: *step,
             objective: None,
             point: Vec::new(),

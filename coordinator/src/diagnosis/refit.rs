@@ -1,9 +1,11 @@
 //! Steps 4 to 7 of a diagnosis: refit the best candidates, first each alone and locally
-//! (warm-started where the ranking left off, stopped when the objective stops moving), and
-//! when none of those leaves nothing but noise, alone and in pairs with the multistart; then
-//! select and judge ([`super::verdict`]).
+//! (warm-started where the ranking left off, stopped when the objective stops moving); then
+//! fair refits ([`super::fair`]) of those the local refits may have judged too soon; when no
+//! single effect leaves nothing but noise, fair refits of pairs; then select and judge
+//! ([`super::verdict`]).
 
 use super::candidates::refit_campaign;
+use super::fair::fair_refits;
 use super::fit::fit_of;
 use super::verdict::{self, Verdict};
 use super::{Candidate, Fit};
@@ -73,6 +75,18 @@ pub(super) fn local_refit(refit: &Campaign) -> Campaign {
     c
 }
 
+/// Which of the locally refitted candidates (in ranking order) get a fair refit: when none
+/// of them `settles` (leaves nothing but noise), all of them; otherwise those ranked above
+/// the first that settles and left short of it (the ranking believed in them more, so they
+/// are not passed over on one local run). Those ranked below it need no more: a refit can
+/// at best leave noise too.
+pub(super) fn leading_unsettled(refits: &[Fit], settles: impl Fn(&Fit) -> bool) -> Vec<usize> {
+    match refits.iter().position(&settles) {
+        None => (0..refits.len()).collect(),
+        Some(first) => (0..first).filter(|&i| !settles(&refits[i])).collect(),
+    }
+}
+
 /// What steps 4 to 7 conclude.
 pub(super) struct Judgement {
     pub refits: Vec<Fit>,
@@ -109,25 +123,31 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
         .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
         .collect();
     let explains = |f: &Fit| verdict::explains(f, baseline, noise_floor);
-    // First the local refits, all candidates at once. When one of them already leaves
-    // nothing but noise, a multistart could at best find another effect that leaves noise
-    // too, and the selection stays with the local refits.
+    // First the local refits, all candidates at once.
     let local: Vec<Campaign> = refit_campaigns.iter().map(local_refit).collect();
-    let quick = refit_all(&local, &singles, engine, progress, holdout_objective)?;
-    let settled = quick
-        .iter()
-        .any(|f| verdict::improves(f, baseline) && explains(f));
-    let mut refits = if settled {
-        quick
-    } else {
-        refit_all(
-            &refit_campaigns,
-            &singles,
+    let mut refits = refit_all(&local, &singles, engine, progress, holdout_objective)?;
+    // Then fair refits of those the local refits may have judged too soon (see
+    // [`leading_unsettled`]), each kept where it ends lower.
+    let escalate = leading_unsettled(&refits, |f| verdict::improves(f, baseline) && explains(f));
+    if !escalate.is_empty() {
+        let sets: Vec<Vec<&Candidate>> = escalate.iter().map(|&i| vec![top[i]]).collect();
+        let fair = fair_refits(
+            fit_campaign,
+            baseline,
+            &sets,
+            candidate_specs,
+            &refits,
             engine,
             progress,
             holdout_objective,
-        )?
-    };
+        )?;
+        for (i, fit) in escalate.into_iter().zip(fair) {
+            tracing::debug!(effect = %fit.effects[0], local = refits[i].objective, fair = fit.objective, "fair refit");
+            if fit.objective < refits[i].objective {
+                refits[i] = fit;
+            }
+        }
+    }
     // Pairs only when no single effect brings the error down to the noise: a pair cannot
     // beat a single effect that already leaves nothing but noise.
     if !refits
@@ -144,9 +164,12 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
             .iter()
             .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
             .collect();
-        refits.extend(refit_all(
-            &pair_campaigns,
+        refits.extend(fair_refits(
+            fit_campaign,
+            baseline,
             &pairs,
+            candidate_specs,
+            &[],
             engine,
             progress,
             holdout_objective,
@@ -251,4 +274,36 @@ fn polish_singles_from_pairs<E: Evaluator + Simulator>(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnosis::testing::scored;
+
+    fn refits(objectives: &[f64]) -> Vec<Fit> {
+        objectives
+            .iter()
+            .enumerate()
+            .map(|(i, &o)| scored(&[["a", "b", "c"][i]], 3, o, o, 1000.0))
+            .collect()
+    }
+
+    #[test]
+    fn fair_refits_go_to_every_leading_candidate_when_none_settles() {
+        let settles = |f: &Fit| f.objective <= 1.0;
+        assert_eq!(
+            leading_unsettled(&refits(&[5.0, 3.0, 9.0]), settles),
+            [0, 1, 2]
+        );
+    }
+
+    #[test]
+    fn fair_refits_go_only_to_candidates_ranked_above_the_first_that_settles() {
+        let settles = |f: &Fit| f.objective <= 1.0;
+        // The second settles: the first, ranked above it, gets a fair refit; the third not.
+        assert_eq!(leading_unsettled(&refits(&[5.0, 0.9, 9.0]), settles), [0]);
+        // The first settles: nobody else needs one.
+        assert!(leading_unsettled(&refits(&[0.9, 5.0, 9.0]), settles).is_empty());
+    }
 }

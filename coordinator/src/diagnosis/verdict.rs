@@ -53,31 +53,45 @@ pub fn explains(fit: &Fit, baseline: &Fit, noise_floor: f64) -> bool {
         || (baseline.objective - fit.objective) >= NEAR_EXACT * baseline.objective
 }
 
-/// The refit to select: the best single effect that improves on the baseline, replaced by a
-/// pair containing it when the pair improves on it; without such a single, the best pair
+/// The refit to select: the best single effect that improves on the baseline, replaced by
+/// the best pair containing it that improves on it; without such a single, the best pair
 /// that improves on the baseline (a pair may succeed where each effect alone falls short).
+/// "Best" is the lowest refitted objective (between fits of as many parameters, the lowest
+/// information criterion), ties broken by the effects' names: never the order the refits
+/// ran in.
 pub fn select<'a>(baseline: &Fit, refits: &'a [Fit]) -> Option<&'a Fit> {
-    let mut chosen: Option<&Fit> = None;
-    for fit in refits.iter().filter(|f| f.effects.len() == 1) {
-        if improves(fit, baseline) && chosen.is_none_or(|c| fit.objective < c.objective) {
-            chosen = Some(fit);
-        }
+    let lowest = |fits: Vec<&'a Fit>| {
+        fits.into_iter().min_by(|a, b| {
+            a.objective
+                .total_cmp(&b.objective)
+                .then_with(|| a.effects.cmp(&b.effects))
+        })
+    };
+    let single = lowest(
+        refits
+            .iter()
+            .filter(|f| f.effects.len() == 1 && improves(f, baseline))
+            .collect(),
+    );
+    match single {
+        Some(single) => lowest(
+            refits
+                .iter()
+                .filter(|p| {
+                    p.effects.len() == 2
+                        && p.effects.contains(&single.effects[0])
+                        && improves(p, single)
+                })
+                .collect(),
+        )
+        .or(Some(single)),
+        None => lowest(
+            refits
+                .iter()
+                .filter(|p| p.effects.len() == 2 && improves(p, baseline))
+                .collect(),
+        ),
     }
-    if let Some(single) = chosen {
-        for pair in refits.iter().filter(|f| f.effects.len() == 2) {
-            let best_so_far = chosen.unwrap_or(single);
-            if pair.effects.contains(&single.effects[0]) && improves(pair, best_so_far) {
-                chosen = Some(pair);
-            }
-        }
-    } else {
-        for pair in refits.iter().filter(|f| f.effects.len() == 2) {
-            if improves(pair, baseline) && chosen.is_none_or(|c| pair.objective < c.objective) {
-                chosen = Some(pair);
-            }
-        }
-    }
-    chosen
 }
 
 /// The verdict on the `chosen` refit (none: unexplained), and the share of the baseline's
@@ -187,6 +201,26 @@ mod tests {
             scored(&["a", "b"], 4, 2.999, 1.9, N),
         ];
         assert_eq!(select(&baseline, &refits).unwrap().effects, ["b"]);
+    }
+
+    #[test]
+    fn the_selection_does_not_depend_on_the_order_the_refits_ran_in() {
+        let baseline = scored(&[], 2, 10.0, 4.0, N);
+        let mut refits = vec![
+            scored(&["a"], 3, 5.0, 3.0, N),
+            scored(&["b"], 3, 3.0, 2.0, N),
+            scored(&["a", "b"], 4, 2.9, 1.9, N),
+            scored(&["b", "c"], 4, 2.5, 1.5, N),
+        ];
+        assert_eq!(select(&baseline, &refits).unwrap().effects, ["b", "c"]);
+        refits.reverse();
+        assert_eq!(select(&baseline, &refits).unwrap().effects, ["b", "c"]);
+        // Equal objectives: the names decide, not the order.
+        let tied = [
+            scored(&["z"], 3, 3.0, 2.0, N),
+            scored(&["y"], 3, 3.0, 2.0, N),
+        ];
+        assert_eq!(select(&baseline, &tied).unwrap().effects, ["y"]);
     }
 
     #[test]
