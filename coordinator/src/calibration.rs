@@ -52,6 +52,7 @@ impl Calibration {
                 point: r.point.clone(),
                 objective: r.objective,
                 evaluations: r.evaluations,
+                rounds: r.rounds,
             })
             .collect()
     }
@@ -60,6 +61,14 @@ impl Calibration {
     /// included).
     pub fn evaluations(&self) -> usize {
         1 + self.screened + self.runs.iter().map(|r| r.evaluations).sum::<usize>()
+    }
+
+    /// Batches the calibration waited for one after another: the nominal point, the
+    /// screening batch (when it screened), then the runs' rounds as they overlap
+    /// ([`multistart::plan_rounds`]: the longest run's, per group of concurrent runs).
+    pub fn rounds(&self) -> usize {
+        let rounds: Vec<usize> = self.runs.iter().map(|r| r.rounds).collect();
+        1 + usize::from(self.screened > 0) + multistart::plan_rounds(&rounds)
     }
 }
 

@@ -185,9 +185,10 @@ pub fn run(args: Args) -> Outcome {
         campaign.name
     ));
     report.say(format!(
-        "  median {:.1} ms  ({} evaluations, {} iterations, objective {:.4} -> {:.4})  seed: {:.0} s  -> {:.0}x faster",
+        "  median {:.1} ms  ({} evaluations, {} rounds, {} iterations, objective {:.4} -> {:.4})  seed: {:.0} s  -> {:.0}x faster",
         ms(nm),
         run.evaluations,
+        run.rounds,
         run.iterations,
         c.nominal.objective,
         run.objective,
@@ -210,13 +211,15 @@ pub fn run(args: Args) -> Outcome {
         cores
     ));
     report.say(format!(
-        "  median {:.1} ms  ({} evaluations, {} simulated, best objective {:.4})",
+        "  median {:.1} ms  ({} evaluations, {} simulated, {} rounds, best objective {:.4})",
         ms(multi),
         c.evaluations(),
         c.stats.simulated,
+        c.rounds(),
         c.best_run().objective
     ));
     report.figure("multistart_calibration_ms", ms(multi));
+    report.figure("multistart_rounds", c.rounds() as f64);
     report.finish();
     Ok(())
 }

@@ -840,7 +840,16 @@ fn state(s: &Snapshot) -> pb::CampaignState {
         None => report::runs::best_parameters(&runs).into_iter().collect(),
     };
     let counts = s.result.as_ref().map(report::runs::counts);
+    let rounds = s
+        .result
+        .as_ref()
+        .and_then(|r| r["rounds"].as_u64())
+        .unwrap_or_else(|| {
+            let each: Vec<usize> = runs.iter().map(|r| r.rounds as usize).collect();
+            crate::optim::multistart::plan_rounds(&each) as u64
+        });
     pb::CampaignState {
+        rounds,
         campaign: s
             .message
             .clone()
@@ -865,6 +874,7 @@ fn state(s: &Snapshot) -> pb::CampaignState {
                 method: r.method,
                 start: r.start as u64,
                 evaluations: r.evaluations,
+                rounds: r.rounds,
                 iterations: r.iterations,
                 termination: r.termination,
                 objective: r.objective,

@@ -15,6 +15,8 @@ pub struct RunRow {
     /// Index of its start (0 is the nominal point), as `calib calibrate` prints it.
     pub start: usize,
     pub evaluations: u64,
+    /// Batches it sent and waited for, one after another.
+    pub rounds: u64,
     /// Iterations of its method; 0 while it runs.
     pub iterations: u64,
     /// Why it stopped; empty while it runs.
@@ -56,6 +58,7 @@ pub fn rows(result: &Value) -> Vec<RunRow> {
                 method,
                 start,
                 evaluations: r["evaluations"].as_u64().unwrap_or_default(),
+                rounds: r["rounds"].as_u64().unwrap_or_default(),
                 iterations: r["iterations"].as_u64().unwrap_or_default(),
                 termination: r["termination"].as_str().unwrap_or_default().to_string(),
                 objective: r["objective"].as_f64().unwrap_or(f64::INFINITY),
@@ -81,6 +84,7 @@ pub fn rows_so_far(runs: &[RunBest], free: &[String]) -> Vec<RunRow> {
             method: r.method.clone(),
             start: r.start,
             evaluations: r.evaluations as u64,
+            rounds: r.rounds as u64,
             iterations: 0,
             termination: String::new(),
             objective: r.objective,
@@ -193,6 +197,7 @@ mod tests {
                 point: vec![0.5],
                 objective: 2.0,
                 evaluations: 3,
+                rounds: 2,
             },
             RunBest {
                 method: "nelder-mead".into(),
@@ -200,6 +205,7 @@ mod tests {
                 point: vec![],
                 objective: f64::INFINITY,
                 evaluations: 0,
+                rounds: 0,
             },
         ];
         let rows = rows_so_far(&runs, &["k".to_string()]);

@@ -41,6 +41,7 @@ pub fn summary_of(result: &Value) -> String {
         point: Vec<f64>,
         objective: f64,
         evaluations: u64,
+        rounds: u64,
         iterations: u64,
         termination: &'a str,
         restarts: u64,
@@ -53,6 +54,7 @@ pub fn summary_of(result: &Value) -> String {
             point: point(&r["parameters"]),
             objective: number(&r["objective"]),
             evaluations: count(&r["evaluations"]),
+            rounds: count(&r["rounds"]),
             iterations: count(&r["iterations"]),
             termination: r["termination"].as_str().unwrap_or_default(),
             restarts: count(&r["restarts"]),
@@ -76,8 +78,8 @@ pub fn summary_of(result: &Value) -> String {
     }
     let _ = writeln!(
         s,
-        "{:>13} {:>6} {:>6}   termination",
-        "objective", "evals", "iters"
+        "{:>13} {:>6} {:>6} {:>6}   termination",
+        "objective", "evals", "rounds", "iters"
     );
     for i in order {
         let r = &runs[i];
@@ -98,8 +100,8 @@ pub fn summary_of(result: &Value) -> String {
         };
         let _ = writeln!(
             s,
-            "{:>13.6e} {:>6} {:>6} {mark} {}{restarts}",
-            r.objective, r.evaluations, r.iterations, r.termination
+            "{:>13.6e} {:>6} {:>6} {:>6} {mark} {}{restarts}",
+            r.objective, r.evaluations, r.rounds, r.iterations, r.termination
         );
     }
     let _ = writeln!(
@@ -199,11 +201,12 @@ pub fn summary_of(result: &Value) -> String {
     let counted = super::runs::counts(result);
     let _ = writeln!(
         s,
-        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} simulated, {} from \
-         cache, {:.2} s",
+        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} rounds, {} \
+         simulated, {} from cache, {:.2} s",
         minima,
         runs.len(),
         counted.evaluations,
+        count(&result["rounds"]),
         counted.simulated,
         counted.from_store,
         number(&result["elapsed_seconds"])

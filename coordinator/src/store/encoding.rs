@@ -345,6 +345,7 @@ mod tests {
                 point: values.to_vec(),
                 objective: values[1],
                 evaluations: 1,
+                rounds: 1,
             }],
             result: Some(serde_json::json!({ "values": values })),
             failure: None,
