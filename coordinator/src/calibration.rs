@@ -351,6 +351,7 @@ fn search(
         progress,
         screening: &scales,
         stall: campaign.search.stall,
+        cma_population: campaign.search.cma_population,
     };
     let runs = multistart::run_all(&context, &plan).map_err(optimiser_error)?;
     let clusters = multistart::cluster(&runs, &space, CLUSTER_RADIUS);

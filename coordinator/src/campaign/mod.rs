@@ -47,14 +47,24 @@ pub enum Method {
     NelderMead,
     Powell,
     DifferentialEvolution,
+    CmaEs,
 }
 
 impl Method {
+    /// Every method, in the order `--help`, the docs and the benchmarks list them.
+    pub const ALL: [Method; 4] = [
+        Method::NelderMead,
+        Method::Powell,
+        Method::DifferentialEvolution,
+        Method::CmaEs,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             Method::NelderMead => "nelder-mead",
             Method::Powell => "powell",
             Method::DifferentialEvolution => "differential-evolution",
+            Method::CmaEs => "cma-es",
         }
     }
 }
@@ -179,6 +189,10 @@ pub struct Search {
     /// for the default ([`crate::optim::screening::default_count`]), 0 for plain
     /// quasi-random starts.
     pub screening: Option<usize>,
+    /// Smallest population of CMA-ES (`cma_population`); its default `4 + ⌊3 ln n⌋` when
+    /// larger or unset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cma_population: Option<usize>,
     /// Further start points (physical values of the free parameters), tried after the
     /// nominal point; set by diagnosis, not by campaign files.
     pub extra_starts: Vec<Vec<f64>>,

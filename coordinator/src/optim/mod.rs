@@ -12,11 +12,14 @@
 //! * [`DifferentialEvolution`]: differential evolution after Storn and Price
 //!   (rand/1/bin or best/1/bin), a global population-based method
 //!   ([`differential_evolution`]).
+//! * [`cma_es`]: CMA-ES (Hansen's (μ/μ_w, λ)-CMA-ES with IPOP restarts), a
+//!   population-based method whose generation is one batch.
 //! * [`multistart`]: every method from every start point, concurrently; minima clustered.
 //!
 //! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
 
 pub mod budget;
+pub mod cma_es;
 pub mod differential_evolution;
 pub mod multistart;
 pub mod nelder_mead;

@@ -13,7 +13,7 @@ use super::budget::Budgeted;
 use super::budget::{Stall, BUDGET_USED, STALLED};
 use super::problem::{Progress, RunLog, RunProblem};
 use super::space::{self, UnitBox};
-use super::{differential_evolution, nelder_mead, powell};
+use super::{cma_es, differential_evolution, nelder_mead, powell};
 use crate::campaign::Method;
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
@@ -119,6 +119,8 @@ pub struct RunContext<'a> {
     pub screening: &'a [Option<f64>],
     /// Stop each run when its objective stops moving, before its budget is used.
     pub stall: Option<Stall>,
+    /// Smallest population of CMA-ES (the search's `cma_population`).
+    pub cma_population: Option<usize>,
 }
 
 /// Most runs in flight at once. Runs spend their time waiting for evaluations (on this
@@ -203,6 +205,11 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             );
             execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
+        Method::CmaEs => {
+            let inner = cma_es::CmaEs::new(spec.start_unit.clone(), spec.seed)
+                .with_population(context.cma_population.unwrap_or(0));
+            execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
+        }
     };
     let termination = if !log.best_objective.is_finite() || log.best_objective >= f64::MAX {
         Termination::Failures
@@ -275,6 +282,7 @@ impl Termination {
                 Method::NelderMead => "converged: simplex objective spread below tolerance",
                 Method::Powell => "converged: a sweep moved x and f below tolerance",
                 Method::DifferentialEvolution => "converged: population spread below tolerance",
+                Method::CmaEs => "converged: descents ended and restarts stopped improving",
             }
             .into(),
             Self::Collapsed => "converged: simplex diameter below tolerance".into(),
