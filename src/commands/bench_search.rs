@@ -31,6 +31,10 @@ pub struct Args {
     /// Cost of one simulation on one slot, in milliseconds, on the virtual clock.
     #[arg(long, default_value_t = 2.0)]
     cost_ms: f64,
+    /// Also measure CMA-ES with this smallest population (`cma_population`), e.g. as many
+    /// points per round as differential evolution's population.
+    #[arg(long)]
+    cma_population: Option<usize>,
 }
 
 /// Each run's batches in the order it sent them: (points, the run's best objective after).
@@ -76,17 +80,25 @@ struct Measured {
 pub fn run(args: Args) -> Outcome {
     for path in &args.campaigns {
         let campaign = Campaign::load(path).map_err(|e| Failure::input(e.to_string()))?;
-        let mut configurations: Vec<(String, Vec<Method>)> = Method::ALL
+        let mut configurations: Vec<(String, Vec<Method>, Option<usize>)> = Method::ALL
             .iter()
-            .map(|m| (m.name().to_string(), vec![*m]))
+            .map(|m| (m.name().to_string(), vec![*m], None))
             .collect();
+        if let Some(population) = args.cma_population {
+            configurations.push((
+                format!("cma-es, population {population}"),
+                vec![Method::CmaEs],
+                Some(population),
+            ));
+        }
         let mix = campaign.search.methods.clone();
         let names: Vec<&str> = mix.iter().map(|m| m.name()).collect();
-        configurations.push((format!("mix ({})", names.join(", ")), mix));
+        configurations.push((format!("mix ({})", names.join(", ")), mix, None));
         let mut measured = Vec::new();
-        for (label, methods) in configurations {
+        for (label, methods, population) in configurations {
             let mut c = campaign.clone();
             c.search.methods = methods;
+            c.search.cma_population = population.or(c.search.cma_population);
             let batches = Batches::default();
             let calibration = calibration::calibrate(&c, LocalEvaluator, &batches)?;
             measured.push(Measured {

@@ -20,7 +20,8 @@
 //! the population (Auger and Hansen 2005, who draw the restart's mean uniformly in the box;
 //! here the multistart's starts spread the runs, and a larger population from the same start
 //! looks past the local minima near it). The run ends when [`PATIENCE`] restarts in a row
-//! did not improve its best by more than the cost tolerance, after [`MAX_RESTARTS`]
+//! did not improve its best by more than [`super::multistart::EQUAL_OBJECTIVE`] of it (the
+//! share by which the multistart tells two minima apart), after [`MAX_RESTARTS`]
 //! restarts, or when its evaluation budget is used ([`super::budget`]).
 //!
 //! Every random draw comes from one `ChaCha8Rng` seeded by the run: the same seed and
@@ -202,8 +203,10 @@ where
     ) -> Result<(CmaEsState, Option<KV>), Error> {
         let ended = self.generation(problem)?;
         if let Some(reason) = ended {
-            let tolerance = stop::FTOL_REL * self.best.abs() + stop::FTOL_ABS;
-            if self.best < self.best_at_restart - tolerance {
+            // A restart that ends within the multistart's "same minimum" share of the best
+            // before it found that minimum again: it polished the point, found nothing new.
+            let same = super::multistart::EQUAL_OBJECTIVE * self.best_at_restart.abs();
+            if self.best < self.best_at_restart - same {
                 self.idle = 0;
             } else {
                 self.idle += 1;
