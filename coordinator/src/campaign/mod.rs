@@ -477,6 +477,22 @@ seed = 7
         assert_eq!(c.window, (0.0, 40.0));
     }
 
+    #[test]
+    fn cma_es_and_its_population_are_accepted_and_a_wrong_method_lists_it() {
+        let text = GOOD.replace(
+            "methods = [\"nelder-mead\", \"powell\"]",
+            "methods = [\"cma-es\"]\ncma_population = 32",
+        );
+        let c = parse(&text).unwrap();
+        assert_eq!(c.search.methods, vec![Method::CmaEs]);
+        assert_eq!(c.search.cma_population, Some(32));
+        assert_eq!(Method::CmaEs.name(), "cma-es");
+        let e = error_for("\"powell\"]", "\"cma\"]");
+        assert!(e.message.contains("`cma-es`"), "{e}");
+        let e = error_for("seed = 7", "seed = 7\ncma_population = 1");
+        assert_eq!(e.field, "search.cma_population", "{e}");
+    }
+
     fn error_for(from: &str, to: &str) -> CampaignError {
         let text = GOOD.replacen(from, to, 1);
         assert_ne!(text, GOOD, "replacement `{from}` not found");
