@@ -379,6 +379,7 @@ fn a_campaign_on_an_uploaded_fmu_is_watched_cancelled_profiled_and_diagnosed() {
         max_evaluations: Some(100_000),
         seed: 3,
         screening: None,
+        cma_population: None,
     });
     let started = runtime
         .block_on(client.submit_campaign(pb::SubmitCampaignRequest {

@@ -182,3 +182,36 @@ fn nelder_mead_from_200_starts_on_the_seeds_bounds_mostly_reaches_the_optimum() 
         );
     }
 }
+
+/// Each run counts the batches it waited for: differential evolution one per generation and
+/// one for its first population, Nelder–Mead its first simplex as one batch; the campaign
+/// waits for the nominal point, the screening batch and its longest run, and result.json
+/// and the printed table say so.
+#[test]
+fn rounds_count_the_batches_each_run_waited_for() {
+    let dir = tempfile::tempdir().unwrap();
+    let search = "methods = [\"nelder-mead\", \"differential-evolution\"]\nstarts = 2\nmax_evaluations = 200\nseed = 3";
+    let path = write(dir.path(), "clean.toml", &clean_campaign(search));
+    let campaign = Campaign::load(&path).unwrap();
+    let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
+    for r in &c.runs {
+        println!(
+            "{} #{}: {} evaluations, {} rounds, {} iterations",
+            r.method, r.start, r.evaluations, r.rounds, r.iterations
+        );
+        assert!(r.rounds >= 1 && r.rounds < r.evaluations, "{r:?}");
+        if r.method.name() == "differential-evolution" {
+            assert_eq!(r.rounds as u64, r.iterations + 1, "{r:?}");
+        }
+    }
+    assert!(c.screened > 0);
+    let longest = c.runs.iter().map(|r| r.rounds).max().unwrap();
+    assert_eq!(c.rounds(), 2 + longest);
+    let result = calib_coordinator::report::result_json(&c);
+    assert_eq!(result["rounds"].as_u64(), Some(c.rounds() as u64));
+    for (json, r) in result["runs"].as_array().unwrap().iter().zip(&c.runs) {
+        assert_eq!(json["rounds"].as_u64(), Some(r.rounds as u64));
+    }
+    let table = calib_coordinator::report::table::summary_of(&result);
+    assert!(table.contains(&format!("{} rounds", c.rounds())), "{table}");
+}

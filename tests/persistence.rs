@@ -67,16 +67,30 @@ fn a_repeated_campaign_is_served_from_the_store() {
 }
 
 /// A campaign that runs for a few seconds: differential evolution with a large budget.
-fn long_campaign(dir: &Path) -> std::path::PathBuf {
-    let search =
-        "methods = [\"differential-evolution\"]\nstarts = 2\nmax_evaluations = 3000\nseed = 5";
-    write(dir, "long.toml", &clean_campaign(search))
-}
+const LONG_SEARCH: &str =
+    "methods = [\"differential-evolution\"]\nstarts = 2\nmax_evaluations = 3000\nseed = 5";
 
 #[test]
 fn a_calibration_killed_with_sigkill_resumes_without_repeating_a_simulation() {
+    killed_and_resumed(LONG_SEARCH);
+}
+
+/// CMA-ES (large populations, so the campaign lasts a few seconds) killed and resumed: the
+/// same runs, rounds included, bit for bit.
+#[test]
+fn a_cma_es_calibration_killed_with_sigkill_resumes_bit_identically() {
+    killed_and_resumed(
+        "methods = [\"cma-es\"]\nstarts = 2\nmax_evaluations = 3000\nseed = 5\n\
+         cma_population = 48",
+    );
+}
+
+/// Calibrate the clean campaign of `search` once on a fresh store, then again on another
+/// store killed (SIGKILL) a quarter of the way and resumed: the same outcome, and nothing
+/// stored simulated again.
+fn killed_and_resumed(search: &str) {
     let dir = tempfile::tempdir().unwrap();
-    let campaign = long_campaign(dir.path());
+    let campaign = write(dir.path(), "long.toml", &clean_campaign(search));
     let fresh = calibrate_cli(
         &campaign,
         &dir.path().join("fresh-db"),

@@ -798,8 +798,9 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
             >= mid["history_after"].as_u64().unwrap() as usize
     );
 
-    // The table of runs is result.json's runs: methods, starts, evaluations, objectives and
-    // parameters, each run named "<method> #<start>"; the runs at the best as counted there.
+    // The table of runs is result.json's runs: methods, starts, evaluations, rounds,
+    // objectives and parameters, each run named "<method> #<start>"; the runs at the best as
+    // counted there.
     let result: Value = serde_json::from_str(state["result_json"].as_str().unwrap()).unwrap();
     let runs = result["runs"].as_array().unwrap();
     let table = reloaded["runs"].as_array().unwrap();
@@ -818,6 +819,7 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
         assert_eq!(row["method"], method);
         assert_eq!(row["start"], start);
         assert_eq!(row["evaluations"], run["evaluations"]);
+        assert_eq!(row["rounds"], run["rounds"]);
         assert_eq!(row["iterations"], run["iterations"].to_string().as_str());
         assert_eq!(row["termination"], run["termination"]);
         let objective: f64 = row["objective"].as_str().unwrap().parse().unwrap();

@@ -55,6 +55,7 @@ impl Calibration {
                 point: r.point.clone(),
                 objective: r.objective,
                 evaluations: r.evaluations,
+                rounds: r.rounds,
             })
             .collect()
     }
@@ -63,6 +64,14 @@ impl Calibration {
     /// included).
     pub fn evaluations(&self) -> usize {
         1 + self.screened + self.runs.iter().map(|r| r.evaluations).sum::<usize>()
+    }
+
+    /// Batches the calibration waited for one after another: the nominal point, the
+    /// screening batch (when it screened), then the runs' rounds as they overlap
+    /// ([`multistart::plan_rounds`]: the longest run's, per group of concurrent runs).
+    pub fn rounds(&self) -> usize {
+        let rounds: Vec<usize> = self.runs.iter().map(|r| r.rounds).collect();
+        1 + usize::from(self.screened > 0) + multistart::plan_rounds(&rounds)
     }
 }
 
@@ -347,6 +356,7 @@ fn search(
         progress,
         screening: &scales,
         stall: campaign.search.stall,
+        cma_population: campaign.search.cma_population,
     };
     let runs = multistart::run_all(&context, &plan).map_err(optimiser_error)?;
     let clusters = multistart::cluster(&runs, &space, CLUSTER_RADIUS);

@@ -100,6 +100,9 @@ enum Suite {
     Diagnose(super::bench_diagnose::Args),
     /// The cost of a model run as an FMU against the same equations built in.
     Fmu(super::bench_fmu::Args),
+    /// Search methods compared: rounds and evaluations to the optimum, runs reaching it,
+    /// wall time on 1 to 512 simulated workers.
+    Search(super::bench_search::Args),
 }
 
 fn median(mut samples: Vec<Duration>) -> Duration {
@@ -133,6 +136,7 @@ pub fn run(args: Args) -> Outcome {
         Some(Suite::Store(store)) => return super::bench_store::run(store),
         Some(Suite::Diagnose(diagnose)) => return super::bench_diagnose::run(diagnose),
         Some(Suite::Fmu(fmu)) => return super::bench_fmu::run(fmu),
+        Some(Suite::Search(search)) => return super::bench_search::run(search),
         None => {}
     }
     let model = models::find("furuta").expect("furuta is hosted");
@@ -185,9 +189,10 @@ pub fn run(args: Args) -> Outcome {
         campaign.name
     ));
     report.say(format!(
-        "  median {:.1} ms  ({} evaluations, {} iterations, objective {:.4} -> {:.4})  seed: {:.0} s  -> {:.0}x faster",
+        "  median {:.1} ms  ({} evaluations, {} rounds, {} iterations, objective {:.4} -> {:.4})  seed: {:.0} s  -> {:.0}x faster",
         ms(nm),
         run.evaluations,
+        run.rounds,
         run.iterations,
         c.nominal.objective,
         run.objective,
@@ -210,13 +215,15 @@ pub fn run(args: Args) -> Outcome {
         cores
     ));
     report.say(format!(
-        "  median {:.1} ms  ({} evaluations, {} simulated, best objective {:.4})",
+        "  median {:.1} ms  ({} evaluations, {} simulated, {} rounds, best objective {:.4})",
         ms(multi),
         c.evaluations(),
         c.stats.simulated,
+        c.rounds(),
         c.best_run().objective
     ));
     report.figure("multistart_calibration_ms", ms(multi));
+    report.figure("multistart_rounds", c.rounds() as f64);
     report.finish();
     Ok(())
 }

@@ -588,7 +588,7 @@ def page_state(driver):
 
 
 def runs_table(driver):
-    """The table of runs as shown, row by row: label, method, start, evaluations,
+    """The table of runs as shown, row by row: label, method, start, evaluations, rounds,
     objective (its exact value) and each parameter's exact value."""
     rows = []
     for row in driver.find_elements(By.CSS_SELECTOR, "#runs-table tbody tr"):
@@ -598,10 +598,11 @@ def runs_table(driver):
             "method": cells[1].text,
             "start": int(cells[2].text),
             "evaluations": int(cells[3].text),
-            "iterations": cells[4].text,
-            "termination": cells[5].text,
-            "objective": cells[6].get_attribute("data-value"),
-            "at_best": cells[7].text == "at the best",
+            "rounds": int(cells[4].text),
+            "iterations": cells[5].text,
+            "termination": cells[6].text,
+            "objective": cells[7].get_attribute("data-value"),
+            "at_best": cells[8].text == "at the best",
             "parameters": {c.get_attribute("data-parameter"): c.get_attribute("data-value")
                            for c in row.find_elements(By.CSS_SELECTOR, "td[data-parameter]")},
         })

@@ -842,7 +842,15 @@ fn state(s: &Snapshot) -> pb::CampaignState {
         }
     };
     let at_best = runs.iter().filter(|r| r.at_best).count() as u64;
+    let rounds = match &s.result {
+        Some(outcome) => outcome.rounds,
+        None => {
+            let each: Vec<usize> = runs.iter().map(|r| r.rounds as usize).collect();
+            crate::optim::multistart::plan_rounds(&each) as u64
+        }
+    };
     pb::CampaignState {
+        rounds,
         campaign: s
             .message
             .clone()

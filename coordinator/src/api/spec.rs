@@ -138,6 +138,12 @@ pub fn campaign_file_with(
         if let Some(n) = s.screening {
             t.insert("screening".into(), integer("search.screening", n)?);
         }
+        if let Some(n) = s.cma_population {
+            t.insert(
+                "cma_population".into(),
+                integer("search.cma_population", n)?,
+            );
+        }
         root.insert("search".into(), t.into());
     }
     if c.rtol.is_some() || c.atol.is_some() || c.max_steps.is_some() {
@@ -329,6 +335,7 @@ pub fn campaign_message_on(
             max_evaluations: uint(s, "max_evaluations"),
             seed: uint(s, "seed").unwrap_or_default(),
             screening: uint(s, "screening"),
+            cma_population: uint(s, "cma_population"),
         });
     Ok(pb::Campaign {
         name: string(&root, "name"),

@@ -187,6 +187,7 @@ pub(super) struct SearchSection {
     #[serde(default)]
     pub(super) seed: u64,
     pub(super) screening: Option<usize>,
+    pub(super) cma_population: Option<usize>,
 }
 
 /// The methods of a `[search]` that names none.

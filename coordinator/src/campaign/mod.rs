@@ -49,15 +49,26 @@ pub enum Method {
     Powell,
     DifferentialEvolution,
     LevenbergMarquardt,
+    CmaEs,
 }
 
 impl Method {
+    /// Every method, in the order `--help`, the docs and the benchmarks list them.
+    pub const ALL: [Method; 5] = [
+        Method::NelderMead,
+        Method::Powell,
+        Method::DifferentialEvolution,
+        Method::LevenbergMarquardt,
+        Method::CmaEs,
+    ];
+
     pub fn name(self) -> &'static str {
         match self {
             Method::NelderMead => "nelder-mead",
             Method::Powell => "powell",
             Method::DifferentialEvolution => "differential-evolution",
             Method::LevenbergMarquardt => "levenberg-marquardt",
+            Method::CmaEs => "cma-es",
         }
     }
 }
@@ -182,6 +193,10 @@ pub struct Search {
     /// for the default ([`crate::optim::screening::default_count`]), 0 for plain
     /// quasi-random starts.
     pub screening: Option<usize>,
+    /// Smallest population of CMA-ES (`cma_population`); its default `4 + ⌊3 ln n⌋` when
+    /// larger or unset.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cma_population: Option<usize>,
     /// Further start points (physical values of the free parameters), tried after the
     /// nominal point; set by diagnosis, not by campaign files.
     pub extra_starts: Vec<Vec<f64>>,
@@ -470,6 +485,22 @@ seed = 7
             lm.search.methods,
             vec![Method::NelderMead, Method::LevenbergMarquardt]
         );
+    }
+
+    #[test]
+    fn cma_es_and_its_population_are_accepted_and_a_wrong_method_lists_it() {
+        let text = GOOD.replace(
+            "methods = [\"nelder-mead\", \"powell\"]",
+            "methods = [\"cma-es\"]\ncma_population = 32",
+        );
+        let c = parse(&text).unwrap();
+        assert_eq!(c.search.methods, vec![Method::CmaEs]);
+        assert_eq!(c.search.cma_population, Some(32));
+        assert_eq!(Method::CmaEs.name(), "cma-es");
+        let e = error_for("\"powell\"]", "\"cma\"]");
+        assert!(e.message.contains("`cma-es`"), "{e}");
+        let e = error_for("seed = 7", "seed = 7\ncma_population = 1");
+        assert_eq!(e.field, "search.cma_population", "{e}");
     }
 
     fn error_for(from: &str, to: &str) -> CampaignError {

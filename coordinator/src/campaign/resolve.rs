@@ -793,6 +793,7 @@ fn resolve_search(
             max_evaluations: default_max_evaluations(),
             seed: 0,
             screening: None,
+            cma_population: None,
             extra_starts: Vec::new(),
             stall: None,
         });
@@ -824,6 +825,18 @@ fn resolve_search(
             return at.error(span, field, e);
         }
     }
+    if let Some(population) = s.cma_population {
+        if population < 2 || population > s.max_evaluations {
+            return at.error(
+                span,
+                "search.cma_population",
+                format!(
+                    "{population} must lie between 2 and max_evaluations ({})",
+                    s.max_evaluations
+                ),
+            );
+        }
+    }
     if s.max_evaluations < 2 * (free + 1) {
         return at.error(
             span,
@@ -844,6 +857,7 @@ fn resolve_search(
         max_evaluations: s.max_evaluations,
         seed: s.seed,
         screening: s.screening,
+        cma_population: s.cma_population,
         extra_starts: Vec::new(),
         stall: None,
     })

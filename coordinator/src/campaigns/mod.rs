@@ -716,8 +716,17 @@ impl Progress for LiveProgress<'_> {
                     point: Vec::new(),
                     objective: f64::INFINITY,
                     evaluations: 0,
+                    rounds: 0,
                 })
                 .collect();
+        });
+    }
+
+    fn run_round(&self, run: usize) {
+        self.live.state.send_modify(|s| {
+            if let Some(r) = s.runs.get_mut(run) {
+                r.rounds += 1;
+            }
         });
     }
 

@@ -15,11 +15,14 @@
 //! * [`levenberg_marquardt`]: Levenberg–Marquardt on the weighted residuals, bounded to the
 //!   box, for the least-squares objective; its Jacobian and trial steps are one batch per
 //!   iteration.
+//! * [`cma_es`]: CMA-ES (Hansen's (μ/μ_w, λ)-CMA-ES with IPOP restarts), a
+//!   population-based method whose generation is one batch.
 //! * [`multistart`]: every method from every start point, concurrently; minima clustered.
 //!
 //! [`Problem::bulk_cost`]: argmin::core::Problem::bulk_cost
 
 pub mod budget;
+pub mod cma_es;
 pub mod differential_evolution;
 pub mod levenberg_marquardt;
 pub mod multistart;

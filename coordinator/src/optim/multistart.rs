@@ -13,7 +13,7 @@ use super::budget::Budgeted;
 use super::budget::{Stall, BUDGET_USED, STALLED};
 use super::problem::{Progress, RunLog, RunProblem};
 use super::space::{self, UnitBox};
-use super::{differential_evolution, levenberg_marquardt, nelder_mead, powell};
+use super::{cma_es, differential_evolution, levenberg_marquardt, nelder_mead, powell};
 use crate::campaign::Method;
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
@@ -62,6 +62,9 @@ pub struct RunOutcome {
     pub point: Vec<f64>,
     pub objective: f64,
     pub evaluations: usize,
+    /// Batches of evaluations the run sent and waited for, one after another (see
+    /// [`super::problem::RunLog::rounds`]).
+    pub rounds: usize,
     pub iterations: u64,
     /// Why the run stopped: `converged: …` (on which tolerance), `budget`, `plateau` (no
     /// objective spread around any of its starts), `failures` (every simulation failed).
@@ -116,12 +119,25 @@ pub struct RunContext<'a> {
     pub screening: &'a [Option<f64>],
     /// Stop each run when its objective stops moving, before its budget is used.
     pub stall: Option<Stall>,
+    /// Smallest population of CMA-ES (the search's `cma_population`).
+    pub cma_population: Option<usize>,
 }
 
 /// Most runs in flight at once. Runs spend their time waiting for evaluations (on this
 /// machine's cores or on remote workers), so they each get a thread, not a core: enough
 /// concurrent batches to keep every worker busy.
 pub const MAX_CONCURRENT_RUNS: usize = 64;
+
+/// Rounds the runs of a plan take together, given each run's rounds in plan order: runs go
+/// [`MAX_CONCURRENT_RUNS`] at a time ([`run_all`]), each group waiting for its longest run,
+/// so the sum over groups of the group's most rounds. (With at most
+/// [`MAX_CONCURRENT_RUNS`] runs: the longest run's rounds.)
+pub fn plan_rounds(run_rounds: &[usize]) -> usize {
+    run_rounds
+        .chunks(MAX_CONCURRENT_RUNS)
+        .map(|group| group.iter().copied().max().unwrap_or(0))
+        .sum()
+}
 
 /// Run all `runs` concurrently; outcomes in the order of `runs`.
 pub fn run_all(
@@ -197,6 +213,11 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             let inner = levenberg_marquardt::LevenbergMarquardt::new(spec.start_unit.clone())?;
             execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
+        Method::CmaEs => {
+            let inner = cma_es::CmaEs::new(spec.start_unit.clone(), spec.seed)
+                .with_population(context.cma_population.unwrap_or(0));
+            execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
+        }
     };
     let termination = if !log.best_objective.is_finite() || log.best_objective >= f64::MAX {
         Termination::Failures
@@ -210,6 +231,7 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
         point: log.best_point,
         objective: log.best_objective,
         evaluations: log.evaluations,
+        rounds: log.rounds,
         iterations,
         stop: match &termination {
             Termination::Plateau => Stop::Plateau,
@@ -273,6 +295,7 @@ impl Termination {
                 Method::Powell => "converged: a sweep moved x and f below tolerance",
                 Method::DifferentialEvolution => "converged: population spread below tolerance",
                 Method::LevenbergMarquardt => levenberg_marquardt::CONVERGED_OBJECTIVE,
+                Method::CmaEs => "converged: descents ended and restarts stopped improving",
             }
             .into(),
             Self::Collapsed => "converged: simplex diameter below tolerance".into(),
@@ -406,6 +429,7 @@ mod tests {
             point: point.to_vec(),
             objective,
             evaluations: 10,
+            rounds: 4,
             iterations: 3,
             termination: String::new(),
             restarts: 0,
@@ -425,6 +449,16 @@ mod tests {
             experiment: None,
         };
         UnitBox::new(&[free(0), free(1)])
+    }
+
+    #[test]
+    fn a_plans_rounds_are_its_longest_runs_per_group_of_concurrent_runs() {
+        assert_eq!(plan_rounds(&[]), 0);
+        assert_eq!(plan_rounds(&[3, 9, 4]), 9);
+        let mut many = vec![1; MAX_CONCURRENT_RUNS + 2];
+        many[5] = 7;
+        many[MAX_CONCURRENT_RUNS + 1] = 4;
+        assert_eq!(plan_rounds(&many), 7 + 4);
     }
 
     #[test]

@@ -31,6 +31,12 @@ pub trait Progress: Sync {
     fn run_improved(&self, run: usize, point: &[f64], objective: f64) {
         let _ = (run, point, objective);
     }
+
+    /// A run (its index in the campaign's plan) sent a batch and waited for it: one more of
+    /// its rounds ([`RunLog::rounds`]). By default, nothing.
+    fn run_round(&self, run: usize) {
+        let _ = run;
+    }
 }
 
 /// Progress that goes nowhere.
@@ -44,6 +50,9 @@ impl Progress for Silent {
 #[derive(Debug, Clone, Default)]
 pub struct RunLog {
     pub evaluations: usize,
+    /// Batches the run sent and waited for, one after another: a batch of points it had
+    /// already been answered (a peeked simplex it then asks for) is no new round.
+    pub rounds: usize,
     pub best_objective: f64,
     /// Physical values of the free parameters at the best point.
     pub best_point: Vec<f64>,
@@ -61,6 +70,8 @@ pub struct RunProblem<'a> {
     pub log: Mutex<RunLog>,
     /// Index of the run in the campaign's plan, for progress.
     pub run: usize,
+    /// The points of the last [`RunProblem::peek`]: asked for again, they cost no round.
+    peeked: Mutex<Vec<Vec<f64>>>,
 }
 
 impl<'a> RunProblem<'a> {
@@ -79,10 +90,12 @@ impl<'a> RunProblem<'a> {
             progress,
             log: Mutex::new(RunLog {
                 evaluations: 0,
+                rounds: 0,
                 best_objective: f64::INFINITY,
                 best_point: Vec::new(),
             }),
             run: 0,
+            peeked: Mutex::new(Vec::new()),
         }
     }
 
@@ -132,6 +145,7 @@ impl<'a> RunProblem<'a> {
     fn evaluations(&self, units: &[&Vec<f64>], count: bool) -> Result<Vec<Evaluation>, Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
         let evaluations = self.evaluator.evaluate(self.objective, &points)?;
+        self.count_round(units, count);
         if !count {
             return Ok(evaluations);
         }
@@ -154,11 +168,37 @@ impl<'a> RunProblem<'a> {
         Ok(evaluations)
     }
 
+    /// Count a round for a batch just answered, unless every point of it was peeked or
+    /// prefetched (the run already waited for it then); a peek remembers its points.
+    fn count_round(&self, units: &[&Vec<f64>], count: bool) {
+        let mut peeked = self.peeked.lock().expect("peeked lock");
+        let waited = if count {
+            let answered = units.iter().all(|u| peeked.contains(u));
+            if answered {
+                peeked.retain(|p| !units.contains(&p));
+            } else {
+                peeked.clear();
+            }
+            !answered
+        } else {
+            *peeked = units.iter().map(|u| (*u).clone()).collect();
+            true
+        };
+        drop(peeked);
+        if waited {
+            self.log.lock().expect("run log lock").rounds += 1;
+            self.progress.run_round(self.run);
+        }
+    }
+
     /// Evaluate points ahead of the solver asking for them one by one (they are then
     /// answered from the cache); not counted as the run's evaluations until asked for.
     pub fn prefetch(&self, units: &[Vec<f64>]) -> Result<(), Fault> {
         let points: Vec<Vec<f64>> = units.iter().map(|u| self.space.to_physical(u)).collect();
-        self.evaluator.evaluate(self.objective, &points).map(|_| ())
+        self.evaluator.evaluate(self.objective, &points)?;
+        let units: Vec<&Vec<f64>> = units.iter().collect();
+        self.count_round(&units, false);
+        Ok(())
     }
 
     pub fn take_log(&self) -> RunLog {

@@ -32,6 +32,23 @@ impl CostFunction for Rosenbrock {
     }
 }
 
+/// Rastrigin's function with the unit box mapped onto `[-5.12, 5.12]^n`: a regular grid of
+/// local minima about 1 apart; the global minimum 0 sits at the centre `(0.5, …)`.
+pub struct Rastrigin;
+
+impl CostFunction for Rastrigin {
+    type Param = Vec<f64>;
+    type Output = f64;
+    fn cost(&self, u: &Vec<f64>) -> Result<f64, Error> {
+        Ok(u.iter()
+            .map(|v| {
+                let x = 10.24 * v - 5.12;
+                x * x - 10.0 * (std::f64::consts::TAU * x).cos() + 10.0
+            })
+            .sum())
+    }
+}
+
 /// Records every evaluated point and how it was requested.
 pub struct Recorder<O> {
     inner: O,

@@ -46,6 +46,10 @@ pub struct CalibrationOutcome {
     /// Evaluations the optimisers asked for (the nominal point and the screening batch
     /// included).
     pub evaluations: u64,
+    /// Batches of evaluations waited for one after another: the nominal point, the
+    /// screening batch, then per group of concurrent runs its longest run's rounds.
+    #[serde(default)]
+    pub rounds: u64,
     /// Points simulated, points answered from the cache or the store (repeats and the best
     /// point scored again included), simulations that failed.
     pub simulated: u64,
@@ -108,6 +112,9 @@ pub struct Run {
     #[serde(deserialize_with = "infinite_if_null")]
     pub objective: f64,
     pub evaluations: usize,
+    /// Batches of evaluations it sent and waited for, one after another.
+    #[serde(default)]
+    pub rounds: u64,
     #[serde(default)]
     pub iterations: u64,
     #[serde(default)]

@@ -14,6 +14,8 @@ pub struct RunRow {
     /// Index of its start (0 is the nominal point), as `calib calibrate` prints it.
     pub start: usize,
     pub evaluations: u64,
+    /// Batches it sent and waited for, one after another.
+    pub rounds: u64,
     /// Iterations of its method; 0 while it runs.
     pub iterations: u64,
     /// Why it stopped; empty while it runs.
@@ -42,6 +44,7 @@ pub fn rows(result: &CalibrationOutcome) -> Vec<RunRow> {
             method: r.method.clone(),
             start: r.start,
             evaluations: r.evaluations as u64,
+            rounds: r.rounds,
             iterations: r.iterations,
             termination: r.termination.clone(),
             objective: r.objective,
@@ -67,6 +70,7 @@ pub fn rows_so_far(runs: &[RunBest], free: &[String]) -> Vec<RunRow> {
             method: r.method.clone(),
             start: r.start,
             evaluations: r.evaluations as u64,
+            rounds: r.rounds as u64,
             iterations: 0,
             termination: String::new(),
             objective: r.objective,
@@ -154,6 +158,7 @@ mod tests {
                 point: vec![0.5],
                 objective: 2.0,
                 evaluations: 3,
+                rounds: 2,
             },
             RunBest {
                 method: "nelder-mead".into(),
@@ -161,6 +166,7 @@ mod tests {
                 point: vec![],
                 objective: f64::INFINITY,
                 evaluations: 0,
+                rounds: 0,
             },
         ];
         let rows = rows_so_far(&runs, &["k".to_string()]);

@@ -39,8 +39,8 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
     }
     let _ = writeln!(
         s,
-        "{:>13} {:>6} {:>6}   termination",
-        "objective", "evals", "iters"
+        "{:>13} {:>6} {:>6} {:>6}   termination",
+        "objective", "evals", "rounds", "iters"
     );
     for i in order {
         let r = &runs[i];
@@ -61,8 +61,8 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
         };
         let _ = writeln!(
             s,
-            "{:>13.6e} {:>6} {:>6} {mark} {}{restarts}",
-            r.objective, r.evaluations, r.iterations, r.termination
+            "{:>13.6e} {:>6} {:>6} {:>6} {mark} {}{restarts}",
+            r.objective, r.evaluations, r.rounds, r.iterations, r.termination
         );
     }
     let _ = writeln!(
@@ -151,11 +151,12 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
 
     let _ = writeln!(
         s,
-        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} simulated, {} from \
-         cache, {:.2} s",
+        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} rounds, {} \
+         simulated, {} from cache, {:.2} s",
         minima,
         runs.len(),
         result.evaluations,
+        result.rounds,
         result.simulated,
         result.from_store(),
         result.elapsed_seconds

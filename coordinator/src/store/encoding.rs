@@ -423,6 +423,7 @@ mod tests {
                 point: values.to_vec(),
                 objective: values[1],
                 evaluations: 1,
+                rounds: 1,
             }],
             result: Some(crate::outcome::CalibrationOutcome {
                 best: crate::outcome::Best {

@@ -83,6 +83,9 @@ pub struct RunBest {
     pub point: Vec<f64>,
     pub objective: f64,
     pub evaluations: usize,
+    /// Batches it sent and waited for (0 in records written before rounds were counted).
+    #[serde(default)]
+    pub rounds: usize,
 }
 
 /// A campaign as the store keeps it.

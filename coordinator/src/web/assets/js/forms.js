@@ -62,6 +62,7 @@ export function campaignDraft() {
       starts: Math.round(num("starts", 1)),
       max_evaluations: Math.round(num("max-evaluations", 1000)),
       seed: Math.round(num("seed")),
+      ...($("cma-population").value.trim() ? { cma_population: Math.round(num("cma-population")) } : {}),
     },
   };
   if (!app.experiments.length) return { campaign: message, places, local };
@@ -94,7 +95,7 @@ export function placeOf(field, places) {
   let m;
   const simple = {
     "search.methods": "methods", "search.starts": "starts", "search.max_evaluations": "max-evaluations",
-    "search.seed": "seed", "search.screening": "starts", name: "campaign-name",
+    "search.seed": "seed", "search.screening": "starts", "search.cma_population": "cma-population", name: "campaign-name",
     window_start: "window-start", window_stop: "window-stop", window: "window-stop", windows: "window-stop",
     stop_time: "window-stop", outputs: "output-map", parameters: "parameter-pick", effects: "parameter-pick",
     dataset_id: "calibration-context", model: "calibration-context", fmu_id: "calibration-context",

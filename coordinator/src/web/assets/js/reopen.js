@@ -71,6 +71,7 @@ export async function fillForm(message) {
   set("starts", search.starts || 1);
   set("max-evaluations", search.max_evaluations || 1000);
   set("seed", search.seed || 0);
+  set("cma-population", search.cma_population || "");
   // Further experiments, each on its card.
   if (first) set("experiment-name", first.name);
   for (const e of experiments.slice(1)) {

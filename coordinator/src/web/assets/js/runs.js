@@ -1,5 +1,5 @@
 // The table of a campaign's runs: one row per run (method × start) as the server sends them
-// (CampaignState.runs: label, method, start, evaluations, iterations, termination,
+// (CampaignState.runs: label, method, start, evaluations, rounds, iterations, termination,
 // objective, parameters, whether it is at the best), sortable by any column. Runs are named
 // by the server's label, the name the progress plot and the waterfall use.
 import { $, el, fmt } from "./common.js";
@@ -11,6 +11,8 @@ const COLUMNS = [
   ["start", "start", (r) => Number(r.start), (r) => el("td", { class: "num", text: String(r.start) })],
   ["evaluations", "evaluations", (r) => Number(r.evaluations),
     (r) => el("td", { class: "num", "data-value": String(r.evaluations), text: String(r.evaluations) })],
+  ["rounds", "rounds", (r) => Number(r.rounds || 0),
+    (r) => el("td", { class: "num", "data-value": String(r.rounds || 0), text: String(r.rounds || 0) })],
   ["iterations", "iterations", (r) => Number(r.iterations),
     (r) => el("td", { class: "num", text: r.termination ? String(r.iterations) : "—" })],
   ["termination", "termination", (r) => r.termination, (r) => el("td", { text: r.termination || (shown.phase === 1 ? "running" : "stopped before its end") })],
