@@ -103,7 +103,7 @@ fn calibrated(dir: &Path, args: &[&str]) -> Option<Calibrated> {
 }
 
 #[test]
-fn cogging_is_proposed_and_its_refit_reaches_the_noise_floor() {
+fn cogging_is_proposed_and_its_refit_comes_within_twice_the_noise_floor() {
     let dir = tempfile::tempdir().unwrap();
     let Some(c) = calibrated(dir.path(), &["--cogging", "0.006", "--seed", "1"]) else {
         return;
