@@ -291,3 +291,73 @@ pub fn refit_discovered<E: Evaluator>(
         evaluations: calibration.runs.iter().map(|r| r.evaluations).sum(),
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnosis::discovery::{EffectParameter, FoundTerm};
+    use std::path::Path;
+
+    fn example(name: &str) -> Campaign {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples");
+        Campaign::load(&dir.join(name)).unwrap()
+    }
+
+    fn term(parameter: &str, function: &str, estimate: f64) -> FoundTerm {
+        FoundTerm {
+            function: function.into(),
+            parameter: parameter.into(),
+            estimate,
+            ci_low: estimate - 1e-4,
+            ci_high: estimate + 1e-4,
+        }
+    }
+
+    #[test]
+    fn other_models_say_discovery_is_not_available() {
+        let c = example("hx.toml");
+        let e = joint_model(&c, c.base.clone()).err().unwrap().to_string();
+        assert!(e.contains("not available for model `hx"), "{e}");
+        assert!(joint_model(&example("furuta.toml"), vec![]).is_ok());
+    }
+
+    #[test]
+    fn a_sign_term_is_folded_into_the_free_friction() {
+        let c = example("furuta.toml");
+        let k = c.free.iter().position(|p| p.name == "armFriction").unwrap();
+        let start = c.nominal();
+        let parameter = |name: &str, nominal: f64| EffectParameter {
+            name: name.into(),
+            nominal,
+            min: nominal - 1e-3,
+            max: nominal + 1e-3,
+        };
+        let effect = DiscoveredEffect {
+            name: "discovered.armJoint".into(),
+            place: "armJoint".into(),
+            formula: "c1 * sign(armJoint.w) + a1 * sin(8 * armJoint.phi)".into(),
+            parameters: vec![parameter("c1", -0.002), parameter("a1", 0.006)],
+            terms: vec![
+                term("c1", "sign(armJoint.w)", -0.002),
+                term("a1", "sin(8 * armJoint.phi)", 0.006),
+            ],
+            harmonics: vec![],
+        };
+        let (kept, moved, folded) = fold_duplicates(&c, &start, &effect);
+        let kept = kept.unwrap();
+        assert_eq!(folded, ["sign(armJoint.w)"]);
+        assert_eq!(kept.formula, "a1 * sin(8 * armJoint.phi)");
+        assert_eq!(kept.parameters.len(), 1);
+        assert_eq!(moved[k], start[k] + 0.002);
+        // The campaign with the rest: its parameters then the effect's, free.
+        let with = with_discovered(&c, &moved, &kept).unwrap();
+        let names: Vec<_> = with.free.iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(names.last(), Some(&"discovered.armJoint.a1"));
+        assert_eq!(with.free.len(), c.free.len() + 1);
+        assert_eq!(
+            with.base[with.free[k].index],
+            moved[k].clamp(c.free[k].min, c.free[k].max)
+        );
+        assert_eq!(with.window, c.window);
+    }
+}
