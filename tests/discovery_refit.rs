@@ -187,3 +187,54 @@ fn a_clean_record_gets_no_proposal_after_calibration() {
         c.floor
     );
 }
+
+/// `calib diagnose --discover`: the diagnosis finds nothing in the library, discovery proposes
+/// the cogging on the arm, its refit lowers the objective, and the outputs carry it.
+#[test]
+fn diagnose_discover_reports_what_it_found_outside_the_library() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((csv, _)) = furuta_extra_torque_record(
+        dir.path(),
+        "record.csv",
+        &["--cogging", "0.006", "--seed", "1"],
+    ) else {
+        return;
+    };
+    let c = campaign(dir.path(), &csv);
+    let source = c.source.clone().unwrap();
+    let out = dir.path().join("out");
+    let run = calib(&[
+        "diagnose",
+        source.to_str().unwrap(),
+        "--discover",
+        "--json",
+        "--out",
+        out.to_str().unwrap(),
+        "--db",
+        dir.path().join("db").to_str().unwrap(),
+    ]);
+    let json = json_of(&run);
+    assert_ne!(json["verdict"], "explained", "{}", json["verdict"]);
+    let found = &json["found_outside_the_library"];
+    assert_eq!(found["available"], true, "{found}");
+    let block = found["proposals"][0].as_str().unwrap();
+    assert!(block.contains("torque = \"armJoint\""), "{block}");
+    assert!(block.contains("sin(8 * armJoint.phi)"), "{block}");
+    let refit = &found["refits"][0];
+    let (before, after) = (
+        refit["objective_before"].as_f64().unwrap(),
+        refit["objective_after"].as_f64().unwrap(),
+    );
+    eprintln!(
+        "objective {before:.4e} -> {after:.4e}, floor {}",
+        refit["noise_floor"]
+    );
+    assert!(after < 0.1 * before, "{before} -> {after}");
+    let written = out.join("discovery-refit/diagnosis");
+    let md = std::fs::read_to_string(written.join("diagnosis.md")).unwrap();
+    assert!(md.contains("## Found outside the library"), "{md}");
+    let stored: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(written.join("diagnosis.json")).unwrap())
+            .unwrap();
+    assert_eq!(stored["found_outside_the_library"]["proposals"][0], block);
+}
