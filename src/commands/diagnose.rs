@@ -1,3 +1,4 @@
+use super::diagnose_discovery::found_outside_the_library;
 use super::{Failure, Outcome};
 use calib_coordinator::campaign::Campaign;
 use calib_coordinator::diagnosis::{self, report};
@@ -31,6 +32,15 @@ pub struct Args {
     /// profile` does, with the fit's noise level): its 95% interval beside the linearised one.
     #[arg(long)]
     profile: bool,
+    /// After the diagnosis, look outside the effect library (furuta only): estimate the
+    /// torque the final fit still misses on each joint from the record, find the few
+    /// functions of the angles, speeds and inputs it is made of (sparse regression), print
+    /// the formula with each term's 95% interval and the `[[effects]]` block to paste, and
+    /// refit the campaign with it (its objective against the noise floor). Runs whatever
+    /// the verdict; the proposal is never written into the campaign file. Goes into
+    /// diagnosis.json (`found_outside_the_library`) and diagnosis.md. See docs/discovery.md.
+    #[arg(long)]
+    discover: bool,
 }
 
 /// A spinner counting evaluations, drawn only on a terminal.
@@ -81,15 +91,33 @@ pub fn run(args: Args) -> Outcome {
     });
     spinner.0.finish_and_clear();
     let d = result?;
+    let found = if args.discover {
+        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+        bar.set_message("discovering outside the library, refitting the proposal");
+        let spinner = Spinner(bar);
+        let found = match &workers {
+            Some(workers) => found_outside_the_library(&d, &workers.evaluator(), &spinner),
+            None => found_outside_the_library(&d, &LocalEvaluator, &spinner),
+        };
+        spinner.0.finish_and_clear();
+        Some(found?)
+    } else {
+        None
+    };
     // `--out` is a results root, as for `calib calibrate`: one `<name>/` per campaign.
     let out = super::calibrate::results_root(&args.campaign, args.out.as_deref())
         .join(&campaign.name)
         .join("diagnosis");
     let written = report::write(&d, &out)?;
+    let mut json = report::diagnosis_json(&d);
+    if let Some(found) = &found {
+        json["found_outside_the_library"] = found.json.clone();
+        add_to_outputs(&out, &json, &found.text)?;
+    }
     if args.json {
         println!(
             "{}",
-            serde_json::to_string_pretty(&report::diagnosis_json(&d)).expect("plain data")
+            serde_json::to_string_pretty(&json).expect("plain data")
         );
         return Ok(());
     }
@@ -156,6 +184,9 @@ pub fn run(args: Args) -> Outcome {
         d.final_fit.held_out_objective
     );
     println!("\n{}", report::verdict_text(&d));
+    if let Some(found) = &found {
+        println!("\n{}", found.text);
+    }
     println!(
         "{} evaluations, {} simulated, {} from the store ({}); {} trajectories simulated; {:.2} s",
         d.stats.evaluations.requested,
@@ -168,5 +199,22 @@ pub fn run(args: Args) -> Outcome {
     for path in written {
         println!("wrote {}", path.display());
     }
+    Ok(())
+}
+
+/// diagnosis.json with discovery's entry, and diagnosis.md with its section.
+fn add_to_outputs(out: &std::path::Path, json: &serde_json::Value, text: &str) -> Outcome {
+    let fail = |path: &std::path::Path, e: std::io::Error| {
+        Failure::internal(format!("cannot write {}: {e}", path.display()))
+    };
+    let path = out.join("diagnosis.json");
+    let pretty = serde_json::to_string_pretty(json).expect("plain data") + "\n";
+    std::fs::write(&path, pretty).map_err(|e| fail(&path, e))?;
+    let path = out.join("diagnosis.md");
+    let mut md = std::fs::read_to_string(&path).map_err(|e| fail(&path, e))?;
+    md.push_str("\n## Found outside the library\n\n```text\n");
+    md.push_str(text);
+    md.push_str("```\n");
+    std::fs::write(&path, md).map_err(|e| fail(&path, e))?;
     Ok(())
 }

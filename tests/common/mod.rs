@@ -64,6 +64,40 @@ pub fn furuta_driven_record(
     }
 }
 
+/// A record of `tests/python/furuta_extra_torque.py` (the driven rig with a torque on the
+/// arm that the effect library does not hold; 20 s unless `args` say otherwise), written as
+/// `name` into `dir`, and the truth it printed; `None` (with the reason) where python3 or
+/// scipy is missing.
+pub fn furuta_extra_torque_record(
+    dir: &Path,
+    name: &str,
+    args: &[&str],
+) -> Option<(PathBuf, serde_json::Value)> {
+    let csv = dir.join(name);
+    let out = std::process::Command::new("python3")
+        .arg(repo().join("tests/python/furuta_extra_torque.py"))
+        .arg("--out")
+        .arg(&csv)
+        .args(args)
+        .output();
+    match out {
+        Err(e) => {
+            skip(&format!("python3 cannot run: {e}"));
+            None
+        }
+        Ok(out) if !out.status.success() => {
+            let why = String::from_utf8_lossy(&out.stderr);
+            assert!(
+                why.contains("No module named 'scipy'") || why.contains("No module named 'numpy'"),
+                "furuta_extra_torque.py failed: {why}"
+            );
+            skip("scipy is not installed (pip install scipy)");
+            None
+        }
+        Ok(out) => Some((csv, serde_json::from_slice(&out.stdout).unwrap())),
+    }
+}
+
 /// A loopback address that refuses connections for as long as the returned socket lives: the
 /// socket is bound but never listens, so a connection gets a reset and no other process can
 /// take the port meanwhile (where port 1 or 9 may well be served).

@@ -213,17 +213,7 @@ where
 
     // Noise level of each output from the measured data in the fitted window.
     let fit_objective = Objective::new(&fit_campaign, &measurement)?;
-    let noise: Vec<f64> = fit_objective
-        .measured
-        .iter()
-        .map(|m| noise_level(m))
-        .collect();
-    let samples = fit_objective.grid.len() as f64;
-    let noise_floor: f64 = noise
-        .iter()
-        .zip(&fit_objective.weights)
-        .map(|(s, k)| k * samples * s * s)
-        .sum();
+    let (noise, noise_floor) = noise_floor(&fit_objective);
 
     // 1. Baseline.
     let calibration = calibrate(&fit_campaign, engine, progress)?;
@@ -341,6 +331,19 @@ where
         profiles: Vec::new(),
         profile_threshold: None,
     })
+}
+
+/// The noise level of each output, estimated from the measured data on `objective`'s grid,
+/// and the noise floor, what a perfect model would leave: `Σ_i k_i N σ_i²`.
+pub fn noise_floor(objective: &Objective) -> (Vec<f64>, f64) {
+    let noise: Vec<f64> = objective.measured.iter().map(|m| noise_level(m)).collect();
+    let samples = objective.grid.len() as f64;
+    let floor = noise
+        .iter()
+        .zip(&objective.weights)
+        .map(|(s, k)| k * samples * s * s)
+        .sum();
+    (noise, floor)
 }
 
 /// Profile likelihood intervals of the effects the diagnosis selected, around its final

@@ -15,12 +15,16 @@
 pub mod furuta;
 pub mod library;
 pub mod proposal;
+pub mod refit;
 pub mod residual;
 pub mod savgol;
 pub mod stlsq;
 
 pub use furuta::FurutaJoints;
 pub use proposal::{DiscoveredEffect, EffectParameter, FoundHarmonic, FoundTerm};
+pub use refit::{
+    fold_duplicates, joint_model, record_of, refit_discovered, with_discovered, ProposalRefit,
+};
 pub use residual::{JointModel, Record, ResidualOptions};
 
 use library::{Candidate, Kind, LibraryOptions};
