@@ -22,6 +22,7 @@ import json
 import os
 import sys
 
+from selenium.common.exceptions import StaleElementReferenceException
 from selenium.webdriver.common.by import By
 from selenium.webdriver.support.ui import Select
 
@@ -159,6 +160,21 @@ def run_campaign(driver, name, free, evaluations):
     wait(driver).until(lambda d: not by_id(d, "result").get_attribute("hidden"))
 
 
+def tick_every_compare_box(driver):
+    """Tick every campaign's compare box; true once all are ticked. The list is redrawn
+    when a campaign's state changes (ticks kept), so a box found may be gone by the click:
+    then look again."""
+    try:
+        for box in driver.find_elements(By.CSS_SELECTOR, 'input[name="compare"]'):
+            if not box.is_selected():
+                driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
+                box.click()
+        boxes = driver.find_elements(By.CSS_SELECTOR, 'input[name="compare"]')
+        return len(boxes) >= 2 and all(b.is_selected() for b in boxes)
+    except StaleElementReferenceException:
+        return False
+
+
 def compare(url, data, shot, out):
     driver = browser()
     report = {}
@@ -177,10 +193,7 @@ def compare(url, data, shot, out):
 
         press(driver, "refresh-campaigns")
         wait(driver).until(lambda d: len(d.find_elements(By.CSS_SELECTOR, 'input[name="compare"]')) >= 2)
-        for box in driver.find_elements(By.CSS_SELECTOR, 'input[name="compare"]'):
-            if not box.is_selected():
-                driver.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
-                box.click()
+        wait(driver).until(tick_every_compare_box)
         press(driver, "compare")
         wait(driver).until(lambda d: by_id(d, "comparison").is_displayed())
         no_error(driver, "compare-error")
