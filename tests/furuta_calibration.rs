@@ -212,6 +212,6 @@ fn rounds_count_the_batches_each_run_waited_for() {
     for (json, r) in result["runs"].as_array().unwrap().iter().zip(&c.runs) {
         assert_eq!(json["rounds"].as_u64(), Some(r.rounds as u64));
     }
-    let table = calib_coordinator::report::table::summary_of(&result);
+    let table = calib_coordinator::report::table::summary_of(&c.outcome);
     assert!(table.contains(&format!("{} rounds", c.rounds())), "{table}");
 }

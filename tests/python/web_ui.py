@@ -589,23 +589,23 @@ def page_state(driver):
 
 def runs_table(driver):
     """The table of runs as shown, row by row: label, method, start, evaluations, rounds,
-    objective (its exact value) and each parameter's exact value."""
-    rows = []
-    for row in driver.find_elements(By.CSS_SELECTOR, "#runs-table tbody tr"):
-        cells = row.find_elements(By.CSS_SELECTOR, "th, td")
-        rows.append({
-            "label": cells[0].text,
-            "method": cells[1].text,
-            "start": int(cells[2].text),
-            "evaluations": int(cells[3].text),
-            "rounds": int(cells[4].text),
-            "iterations": cells[5].text,
-            "termination": cells[6].text,
-            "objective": cells[7].get_attribute("data-value"),
-            "at_best": cells[8].text == "at the best",
-            "parameters": {c.get_attribute("data-parameter"): c.get_attribute("data-value")
-                           for c in row.find_elements(By.CSS_SELECTOR, "td[data-parameter]")},
-        })
+    objective (its exact value) and each parameter's exact value. Read in one script, so a
+    table redrawn by the campaign's progress is read whole, before or after."""
+    rows = driver.execute_script("""
+        return [...document.querySelectorAll('#runs-table tbody tr')].map((row) => {
+          const cells = [...row.querySelectorAll('th, td')];
+          const text = (i) => cells[i].textContent.trim();
+          return {
+            label: text(0), method: text(1), start: Number(text(2)),
+            evaluations: Number(text(3)), rounds: Number(text(4)),
+            iterations: text(5), termination: text(6),
+            objective: cells[7].getAttribute('data-value'),
+            at_best: text(8) === 'at the best',
+            parameters: Object.fromEntries([...row.querySelectorAll('td[data-parameter]')]
+              .map((c) => [c.getAttribute('data-parameter'), c.getAttribute('data-value')])),
+          };
+        });
+    """)
     return rows
 
 
@@ -657,6 +657,9 @@ def workbench(url, data, shot, out):
             type_into(driver, f"max-{name}", "0.9")
             Select(by_id(driver, f"pscale-{name}")).select_by_value("log10")
         driver.find_element(By.CSS_SELECTOR, 'input[name="method"][value="powell"]').click()
+        # Differential evolution too: thousands of evaluations, so that the campaign still
+        # runs when the page is reloaded, however fast the machine.
+        driver.find_element(By.CSS_SELECTOR, 'input[name="method"][value="differential-evolution"]').click()
         type_into(driver, "campaign-name", "bench")
         type_into(driver, "window-start", "0")
         type_into(driver, "window-stop", "40")
@@ -682,7 +685,9 @@ def workbench(url, data, shot, out):
         wait(driver, LONG).until(lambda d: d.find_elements(By.CSS_SELECTOR, "#progress-plot svg")
                                  and "bench" in by_id(d, "calibration-status").text)
         mid["after"] = page_state(driver)
-        mid["history_after"] = len(json.loads(get_campaign(driver, first))["history"])
+        state_after = json.loads(get_campaign(driver, first))
+        mid["history_after"] = len(state_after["history"])
+        mid["evaluations_after"] = state_after["evaluations"]
 
         # Finished, then reloaded again: the same again, with the result.
         wait(driver, LONG).until(lambda d: by_id(d, "result").is_displayed()
