@@ -200,44 +200,10 @@ fn cogging_is_found_after_calibrating_the_frictions() {
     ) else {
         return;
     };
-    let text = format!(
-        r#"name = "cogging"
-[model]
-name = "furuta"
-[measurement]
-file = "{}"
-time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[inputs]]
-model = "armTorque"
-measured = "motor_torque_Nm"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 1e-4
-max = 0.9
-scale = "log10"
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 1e-4
-max = 0.9
-scale = "log10"
-[window]
-start = 0.0
-stop = 20.0
-[search]
-methods = ["nelder-mead"]
-starts = 3
-max_evaluations = 600
-seed = 1
-"#,
-        dir.path().join("cogging.csv").display()
+    let text = driven_friction_campaign(
+        "cogging",
+        &dir.path().join("cogging.csv"),
+        "methods = [\"nelder-mead\"]\nstarts = 3\nmax_evaluations = 600\nseed = 1",
     );
     let campaign = Campaign::load(&write(dir.path(), "cogging.toml", &text)).unwrap();
     let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();

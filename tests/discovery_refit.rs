@@ -21,44 +21,10 @@ use std::path::Path;
 
 /// The two bearing frictions free, from nominal values off the truth, on `csv`.
 fn campaign(dir: &Path, csv: &Path) -> Campaign {
-    let text = format!(
-        r#"name = "discovery-refit"
-[model]
-name = "furuta"
-[measurement]
-file = "{}"
-time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[inputs]]
-model = "armTorque"
-measured = "motor_torque_Nm"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 1e-4
-max = 0.9
-scale = "log10"
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 1e-4
-max = 0.9
-scale = "log10"
-[window]
-start = 0.0
-stop = 20.0
-[search]
-methods = ["nelder-mead", "levenberg-marquardt"]
-starts = 3
-max_evaluations = 600
-seed = 1
-"#,
-        csv.display()
+    let text = driven_friction_campaign(
+        "discovery-refit",
+        csv,
+        "methods = [\"nelder-mead\", \"levenberg-marquardt\"]\nstarts = 3\nmax_evaluations = 600\nseed = 1",
     );
     Campaign::load(&write(dir, "campaign.toml", &text)).unwrap()
 }

@@ -205,6 +205,48 @@ stop = 40.0
     )
 }
 
+/// A campaign for a record of the rig driven by its measured motor torque (the independent
+/// simulator's `furuta_driven.py` columns), the two bearing frictions free on log10 bounds
+/// from nominal values off the truth, fitted over 0–20 s; `search` is the `[search]` body.
+pub fn driven_friction_campaign(name: &str, csv: &Path, search: &str) -> String {
+    format!(
+        r#"name = "{name}"
+[model]
+name = "furuta"
+[measurement]
+file = "{}"
+time_column = "time_s"
+[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "pendulum_angle_rad"
+[[inputs]]
+model = "armTorque"
+measured = "motor_torque_Nm"
+[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 1e-4
+max = 0.9
+scale = "log10"
+[[parameters]]
+name = "pendulumFriction"
+nominal = 0.002
+min = 1e-4
+max = 0.9
+scale = "log10"
+[window]
+start = 0.0
+stop = 20.0
+[search]
+{search}
+"#,
+        csv.display()
+    )
+}
+
 /// Write `text` as `name` in `dir` and return its path.
 pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     let path = dir.join(name);
