@@ -6,28 +6,15 @@
 mod common;
 
 use calib_coordinator::campaign::Campaign;
+use calib_coordinator::diagnosis::matrix::{parameter_toml, search_toml, synthetic_campaign};
 use calib_coordinator::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Silent;
 use common::*;
 
-fn parameter(name: &str, nominal: f64, bounds: &str, log_min: f64) -> String {
-    match bounds {
-        "linear" => format!(
-            "[[parameters]]\nname = \"{name}\"\nnominal = {nominal:?}\nmin = 0.0\nmax = 0.9\n"
-        ),
-        _ => format!(
-            "[[parameters]]\nname = \"{name}\"\nnominal = {nominal:?}\nmin = {log_min:?}\nmax = 0.9\nscale = \"log10\"\n"
-        ),
-    }
-}
-
-fn search(methods: &str, starts: usize) -> String {
-    format!("[search]\nmethods = {methods}\nstarts = {starts}\nmax_evaluations = 600\nseed = 1\n")
-}
-
-const NM: &str = r#"["nelder-mead"]"#;
-const NM_POWELL: &str = r#"["nelder-mead", "powell"]"#;
+/// Settings of the matrix, by its keys.
+const NM: &str = "nm";
+const NM_POWELL: &str = "nm+powell";
 
 /// Diagnose a 40 s free swing of the independent simulator carrying `args`, both frictions
 /// free (one held at 0 with `hold`) on `bounds` ("linear": [0, 0.9]; "log10": [1e-4, 0.9]),
@@ -43,38 +30,7 @@ fn diagnose_record(
     let mut all = vec!["--no-torque", "--seed", "1"];
     all.extend(args);
     let (csv, _truth) = furuta_driven_record(dir.path(), "record.csv", 40.0, &all)?;
-    let mut text = format!(
-        r#"name = "cell"
-[model]
-name = "furuta"
-stop_time = 40.0
-[model.parameters]
-{}
-[measurement]
-file = "{}"
-time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[window]
-start = 0.0
-stop = 30.0
-[diagnosis]
-holdout_start = 30.01
-holdout_stop = 40.0
-"#,
-        hold.map_or(String::new(), |h| format!("{h} = 0.0")),
-        csv.display()
-    );
-    for (name, nominal) in [("armFriction", 0.012), ("pendulumFriction", 0.002)] {
-        if Some(name) != hold {
-            text.push_str(&parameter(name, nominal, bounds, 1e-4));
-        }
-    }
-    text.push_str(&search(methods, starts));
+    let text = synthetic_campaign(&csv, hold, bounds, methods, starts);
     let campaign = Campaign::parse(&text, &dir.path().join("cell.toml")).unwrap();
     Some(diagnose(&campaign, &LocalEvaluator, &Silent).unwrap())
 }
@@ -262,10 +218,10 @@ fn the_naive_model_from_one_start_leads_back_to_both_coulomb_frictions() {
         ("viscous_friction.pendulum", 0.0001),
     ] {
         text.push_str(
-            &parameter(name, nominal, "log10", 1e-5).replace("[[parameters]]", "[[effects]]"),
+            &parameter_toml(name, nominal, "log10", 1e-5).replace("[[parameters]]", "[[effects]]"),
         );
     }
-    text.push_str(&search(NM, 1));
+    text.push_str(&search_toml(NM, 1));
     let dir = tempfile::tempdir().unwrap();
     let campaign = Campaign::parse(&text, &dir.path().join("naive.toml")).unwrap();
     let d = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();

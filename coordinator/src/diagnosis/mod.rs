@@ -38,6 +38,7 @@ pub mod discovery;
 pub mod fair;
 pub mod fit;
 pub mod linear;
+pub mod matrix;
 pub mod ranking;
 pub mod refit;
 pub mod report;
