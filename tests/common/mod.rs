@@ -38,30 +38,10 @@ pub fn furuta_driven_record(
     stop: f64,
     args: &[&str],
 ) -> Option<(PathBuf, serde_json::Value)> {
-    let csv = dir.join(name);
-    let out = std::process::Command::new("python3")
-        .arg(repo().join("tests/python/furuta_driven.py"))
-        .arg("--out")
-        .arg(&csv)
-        .args(["--stop", &stop.to_string()])
-        .args(args)
-        .output();
-    match out {
-        Err(e) => {
-            skip(&format!("python3 cannot run: {e}"));
-            None
-        }
-        Ok(out) if !out.status.success() => {
-            let why = String::from_utf8_lossy(&out.stderr);
-            assert!(
-                why.contains("No module named 'scipy'") || why.contains("No module named 'numpy'"),
-                "furuta_driven.py failed: {why}"
-            );
-            skip("scipy is not installed (pip install scipy)");
-            None
-        }
-        Ok(out) => Some((csv, serde_json::from_slice(&out.stdout).unwrap())),
-    }
+    let stop = stop.to_string();
+    let mut all = vec!["--stop", stop.as_str()];
+    all.extend(args);
+    simulator_record("furuta_driven.py", &dir.join(name), &all)
 }
 
 /// A record of `tests/python/furuta_extra_torque.py` (the driven rig with a torque on the
@@ -73,11 +53,20 @@ pub fn furuta_extra_torque_record(
     name: &str,
     args: &[&str],
 ) -> Option<(PathBuf, serde_json::Value)> {
-    let csv = dir.join(name);
+    simulator_record("furuta_extra_torque.py", &dir.join(name), args)
+}
+
+/// Run the independent simulator `tests/python/<script>` writing `csv`, and the truth it
+/// printed; `None` (with the reason) where python3 or scipy is missing.
+fn simulator_record(
+    script: &str,
+    csv: &Path,
+    args: &[&str],
+) -> Option<(PathBuf, serde_json::Value)> {
     let out = std::process::Command::new("python3")
-        .arg(repo().join("tests/python/furuta_extra_torque.py"))
+        .arg(repo().join("tests/python").join(script))
         .arg("--out")
-        .arg(&csv)
+        .arg(csv)
         .args(args)
         .output();
     match out {
@@ -89,12 +78,15 @@ pub fn furuta_extra_torque_record(
             let why = String::from_utf8_lossy(&out.stderr);
             assert!(
                 why.contains("No module named 'scipy'") || why.contains("No module named 'numpy'"),
-                "furuta_extra_torque.py failed: {why}"
+                "{script} failed: {why}"
             );
             skip("scipy is not installed (pip install scipy)");
             None
         }
-        Ok(out) => Some((csv, serde_json::from_slice(&out.stdout).unwrap())),
+        Ok(out) => Some((
+            csv.to_path_buf(),
+            serde_json::from_slice(&out.stdout).unwrap(),
+        )),
     }
 }
 
