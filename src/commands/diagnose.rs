@@ -1,6 +1,6 @@
-use super::diagnose_discovery::found_outside_the_library;
 use super::{Failure, Outcome};
 use calib_coordinator::campaign::Campaign;
+use calib_coordinator::diagnosis::outside::{found_outside_the_library, Found};
 use calib_coordinator::diagnosis::{self, report};
 use calib_coordinator::evaluator::LocalEvaluator;
 use calib_coordinator::optim::problem::Progress;
@@ -111,8 +111,8 @@ pub fn run(args: Args) -> Outcome {
     let written = report::write(&d, &out)?;
     let mut json = report::diagnosis_json(&d);
     if let Some(found) = &found {
-        json["found_outside_the_library"] = found.json.clone();
-        add_to_outputs(&out, &json, &found.text)?;
+        json["found_outside_the_library"] = found.json();
+        add_to_outputs(&out, &json, found)?;
     }
     if args.json {
         println!(
@@ -185,7 +185,7 @@ pub fn run(args: Args) -> Outcome {
     );
     println!("\n{}", report::verdict_text(&d));
     if let Some(found) = &found {
-        println!("\n{}", found.text);
+        println!("\n{}", found.text());
     }
     println!(
         "{} evaluations, {} simulated, {} from the store ({}); {} trajectories simulated; {:.2} s",
@@ -203,7 +203,7 @@ pub fn run(args: Args) -> Outcome {
 }
 
 /// diagnosis.json with discovery's entry, and diagnosis.md with its section.
-fn add_to_outputs(out: &std::path::Path, json: &serde_json::Value, text: &str) -> Outcome {
+fn add_to_outputs(out: &std::path::Path, json: &serde_json::Value, found: &Found) -> Outcome {
     let fail = |path: &std::path::Path, e: std::io::Error| {
         Failure::internal(format!("cannot write {}: {e}", path.display()))
     };
@@ -212,9 +212,7 @@ fn add_to_outputs(out: &std::path::Path, json: &serde_json::Value, text: &str) -
     std::fs::write(&path, pretty).map_err(|e| fail(&path, e))?;
     let path = out.join("diagnosis.md");
     let mut md = std::fs::read_to_string(&path).map_err(|e| fail(&path, e))?;
-    md.push_str("\n## Found outside the library\n\n```text\n");
-    md.push_str(text);
-    md.push_str("```\n");
+    md.push_str(&found.markdown());
     std::fs::write(&path, md).map_err(|e| fail(&path, e))?;
     Ok(())
 }

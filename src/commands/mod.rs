@@ -11,7 +11,6 @@ pub mod calibrate;
 pub mod coordinator;
 pub mod cpu;
 pub mod diagnose;
-pub mod diagnose_discovery;
 pub mod fmu;
 pub mod health;
 pub mod models;

@@ -39,6 +39,7 @@ pub mod fair;
 pub mod fit;
 pub mod linear;
 pub mod matrix;
+pub mod outside;
 pub mod ranking;
 pub mod refit;
 pub mod report;
