@@ -800,7 +800,10 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
     let diagnose = |client: &mut CalibrationClient<Channel>| {
         coordinator.runtime.block_on(async {
             let mut stream = client
-                .diagnose(pb::DiagnoseRequest { id: id.clone() })
+                .diagnose(pb::DiagnoseRequest {
+                    id: id.clone(),
+                    discover: false,
+                })
                 .await?
                 .into_inner();
             let mut states = Vec::new();
@@ -834,7 +837,10 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
     assert_eq!(again[0].report_json, done.report_json);
     let unknown = coordinator.runtime.block_on(async {
         client
-            .diagnose(pb::DiagnoseRequest { id: "0".repeat(64) })
+            .diagnose(pb::DiagnoseRequest {
+                id: "0".repeat(64),
+                discover: false,
+            })
             .await
             .map(|_| ())
     });

@@ -515,7 +515,7 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
     );
 
     type Change = fn(&mut pb::Campaign);
-    let cases: [(Change, &str, &str); 12] = [
+    let cases: [(Change, &str, &str); 13] = [
         (
             |m| m.search.as_mut().unwrap().methods.clear(),
             "search.methods",
@@ -573,6 +573,25 @@ fn validate_campaign_names_the_field_of_each_problem_and_submit_refuses_the_same
             |m| m.dataset_id = "0".repeat(64),
             "dataset_id",
             "upload the measurement again",
+        ),
+        // An effect defined by a formula is named in the message's own list.
+        (
+            |m| {
+                m.defined_effects.push(pb::DefinedEffect {
+                    name: "cogging.arm".into(),
+                    torque: "armJoint".into(),
+                    formula: "a * sin(8 * armJoint.ph)".into(),
+                    parameters: vec![pb::DefinedEffectParameter {
+                        name: "a".into(),
+                        min: -0.02,
+                        max: 0.02,
+                        ..Default::default()
+                    }],
+                    ..Default::default()
+                })
+            },
+            "defined_effects[0].formula",
+            "armJoint.phi",
         ),
     ];
     for (change, field, fragment) in cases {

@@ -450,6 +450,7 @@ fn a_campaign_on_an_uploaded_fmu_is_watched_cancelled_profiled_and_diagnosed() {
         let mut stream = client
             .diagnose(pb::DiagnoseRequest {
                 id: submitted.id.clone(),
+                discover: false,
             })
             .await
             .unwrap()

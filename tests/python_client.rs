@@ -215,3 +215,55 @@ fn a_python_client_reads_the_result_from_typed_fields_equal_to_result_json() {
     assert_eq!(counted[2], result["runs_at_best"]["of"].to_string());
     assert_eq!(result["version"], 1);
 }
+
+/// Discovery through the API from Python: on a record with a cogging torque on the arm (the
+/// independent simulator `tests/python/furuta_extra_torque.py`), a diagnosis asked to look
+/// outside the library answers the proposal as typed messages: the multiple 8 found, the
+/// amplitude interval holding the truth 0.006, each term with its interval and bounds, the
+/// refit against the noise floor, equal to report_json's values; the refitted effect added
+/// to the campaign is accepted (`tests/python/discovery_client.py`).
+#[test]
+fn a_python_client_reads_what_discovery_found_outside_the_library() {
+    if let Some(reason) = python_missing() {
+        common::skip(&reason);
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let Some((record, _)) = common::furuta_extra_torque_record(
+        dir.path(),
+        "cogging.csv",
+        &["--cogging", "0.006", "--seed", "1"],
+    ) else {
+        return;
+    };
+    let stubs = python_stubs();
+    let worker = TestWorker::start(2, 64);
+    let coordinator = common::coordinator::Coordinator::start(
+        dir.path(),
+        &[format!("http://{}", worker.address())],
+    );
+    let out = Command::new("python3")
+        .arg(repo().join("tests/python/discovery_client.py"))
+        .arg(coordinator.server.as_ref().unwrap().address().to_string())
+        .arg(stubs.path())
+        .arg(&record)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    println!("{stdout}");
+    assert!(
+        out.status.success(),
+        "python client failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.trim_end().ends_with("ok"));
+    let harmonic: Vec<&str> = stdout
+        .lines()
+        .find(|l| l.starts_with("harmonic "))
+        .unwrap()
+        .split(' ')
+        .collect();
+    assert_eq!(harmonic[1..3], ["armJoint.phi", "8"]);
+    let (low, high) = (python_number(harmonic[4]), python_number(harmonic[5]));
+    assert!(low <= 0.006 && 0.006 <= high, "[{low}, {high}]");
+}

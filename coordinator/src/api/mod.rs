@@ -1,6 +1,8 @@
 //! The `calib.v1.Calibration` gRPC service: campaigns for clients in any language. A thin
 //! layer: messages are checked and converted here, the work is [`crate::campaigns`]'.
 
+pub mod defined_effects;
+pub mod discovery;
 pub mod result;
 pub mod spec;
 
@@ -208,7 +210,11 @@ impl CalibrationApi {
             .await
         {
             Ok(()) => Ok(Vec::new()),
-            Err(s) if refused(&s) => Ok(vec![Problem::of_refusal(&s)]),
+            Err(s) if refused(&s) => {
+                let mut problem = Problem::of_refusal(&s);
+                problem.field = defined_effects::message_field(c, &problem.field);
+                Ok(vec![problem])
+            }
             Err(s) => Err(s),
         }
     }
@@ -937,6 +943,7 @@ fn diagnosis_state(s: &DiagnosisSnapshot) -> pb::DiagnosisState {
             .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
             .unwrap_or_default(),
         files: s.files.iter().cloned().collect(),
+        found_outside_the_library: s.found.as_deref().map(discovery::found_message),
     }
 }
 
@@ -1092,7 +1099,8 @@ impl Calibration for CalibrationApi {
         let message = serde_json::to_value(&campaign).ok();
         let (id, started) = self
             .blocking(move || campaigns.submit_message(&text, key.as_deref(), message))
-            .await?;
+            .await
+            .map_err(|s| defined_effects::refusal_in_message_fields(&campaign, s))?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
     }
 
@@ -1139,11 +1147,12 @@ impl Calibration for CalibrationApi {
         &self,
         request: Request<pb::DiagnoseRequest>,
     ) -> Result<Response<Self::DiagnoseStream>, Status> {
-        let id = request.into_inner().id;
+        let pb::DiagnoseRequest { id, discover } = request.into_inner();
         let campaigns = self.campaigns.clone();
         let watched = {
             let id = id.clone();
-            self.blocking(move || campaigns.diagnose(&id)).await?
+            self.blocking(move || campaigns.diagnose(&id, discover))
+                .await?
         };
         let receiver = watched.ok_or_else(|| not_found(&id))?;
         Ok(Response::new(follow(receiver, diagnosis_state, |s| {

@@ -98,8 +98,10 @@ pub fn campaign_file_with(
         root.insert("inputs".into(), inputs(&c.inputs).into());
     }
     root.insert("parameters".into(), parameters(&c.parameters).into());
-    if !c.effects.is_empty() {
-        root.insert("effects".into(), parameters(&c.effects).into());
+    if !c.effects.is_empty() || !c.defined_effects.is_empty() {
+        let mut effects = parameters(&c.effects);
+        effects.extend(super::defined_effects::tables(&c.defined_effects));
+        root.insert("effects".into(), effects.into());
     }
     if c.window_start != 0.0 || c.window_stop != 0.0 {
         let mut w = Table::new();
@@ -355,7 +357,13 @@ pub fn campaign_message_on(
         outputs: output_messages(&list("outputs")),
         inputs: input_messages(&list("inputs")),
         parameters: parameters("parameters"),
-        effects: parameters("effects"),
+        effects: parameter_messages(
+            &list("effects")
+                .into_iter()
+                .filter(|e| !super::defined_effects::is_defined(e))
+                .collect::<Vec<_>>(),
+        ),
+        defined_effects: super::defined_effects::messages(&list("effects")),
         window_start: float(&window, "start").unwrap_or_default(),
         window_stop: float(&window, "stop").unwrap_or_default(),
         windows: window_messages(root.get("windows")),

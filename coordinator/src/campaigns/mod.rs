@@ -158,7 +158,8 @@ pub struct Campaigns {
     keys: Mutex<HashMap<String, CampaignId>>,
     /// Held while a record is read, changed and written back here.
     records: Mutex<()>,
-    diagnoses: Mutex<HashMap<CampaignId, watch::Sender<diagnoses::DiagnosisSnapshot>>>,
+    /// By campaign, and whether discovery follows the diagnosis.
+    diagnoses: Mutex<HashMap<(CampaignId, bool), watch::Sender<diagnoses::DiagnosisSnapshot>>>,
     analyses: Mutex<HashMap<[u8; 32], watch::Sender<analyses::AnalysisSnapshot>>>,
 }
 

@@ -387,14 +387,17 @@ async fn watch_campaign(
     Ok(events(stream))
 }
 
-/// `GET /api/v1/Diagnose/{id}`: the `Diagnose` stream as Server-Sent Events.
+/// `GET /api/v1/Diagnose/{id}[?discover=true]`: the `Diagnose` stream as Server-Sent
+/// Events.
 async fn diagnose(
     State(app): State<WebApp>,
     Path(id): Path<String>,
+    RawQuery(query): RawQuery,
 ) -> Result<EventStream, ApiError> {
+    let discover = query_value(query.as_deref(), "discover") == "true";
     let stream = app
         .calibration
-        .diagnose(Request::new(pb::DiagnoseRequest { id }))
+        .diagnose(Request::new(pb::DiagnoseRequest { id, discover }))
         .await?
         .into_inner();
     Ok(events(stream))

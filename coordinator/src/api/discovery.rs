@@ -1,0 +1,132 @@
+//! What discovery found outside the effect library ([`crate::diagnosis::outside`]) as the
+//! API's typed `FoundOutsideLibrary`: every figure computed here, on the server, for clients
+//! that only show them.
+
+use crate::diagnosis::discovery::{
+    DiscoveredEffect, EffectParameter, FoundHarmonic, FoundTerm, JointDiscovery, ProposalRefit,
+};
+use crate::diagnosis::outside::{formula_in_words, words, Found};
+use calib_proto::v1 as pb;
+
+/// `found` as `DiagnosisState.found_outside_the_library` carries it.
+pub fn found_message(found: &Found) -> pb::FoundOutsideLibrary {
+    let Some(discovery) = found
+        .discovery
+        .as_ref()
+        .filter(|_| found.unavailable.is_none())
+    else {
+        return pb::FoundOutsideLibrary {
+            available: false,
+            reason: found.unavailable.clone().unwrap_or_default(),
+            ..Default::default()
+        };
+    };
+    let joint_of = |effect: &DiscoveredEffect| {
+        discovery
+            .joints
+            .iter()
+            .find(|j| j.proposal.as_ref().is_some_and(|p| p.name == effect.name))
+    };
+    pb::FoundOutsideLibrary {
+        available: true,
+        reason: String::new(),
+        searched: discovery.joints.iter().map(search_message).collect(),
+        proposals: found
+            .proposals()
+            .into_iter()
+            .map(|(effect, refit)| proposal_message(effect, joint_of(effect), refit))
+            .collect(),
+    }
+}
+
+fn search_message(j: &JointDiscovery) -> pb::DiscoverySearch {
+    pb::DiscoverySearch {
+        torque: j.joint.clone(),
+        samples: j.samples as u64,
+        effective_samples: j.effective_samples,
+        candidates: j.candidates as u64,
+        library: j.library as u64,
+        residual_rms: j.residual_rms,
+        remaining_rms: j.remaining_rms,
+    }
+}
+
+fn proposal_message(
+    effect: &DiscoveredEffect,
+    joint: Option<&JointDiscovery>,
+    refit: Option<&ProposalRefit>,
+) -> pb::DiscoveredEffect {
+    pb::DiscoveredEffect {
+        name: effect.name.clone(),
+        // Discovery finds generalized torques on joints (the only place it inverts).
+        torque: effect.place.clone(),
+        output: String::new(),
+        formula: effect.formula.clone(),
+        formula_words: formula_in_words(effect),
+        terms: effect
+            .terms
+            .iter()
+            .map(|t| term_message(t, &effect.parameters))
+            .collect(),
+        harmonics: effect.harmonics.iter().map(harmonic_message).collect(),
+        residual_rms: joint.map_or(f64::NAN, |j| j.residual_rms),
+        remaining_rms: joint.map_or(f64::NAN, |j| j.remaining_rms),
+        effects_toml: effect.to_toml(),
+        refit: refit.map(refit_message),
+    }
+}
+
+fn term_message(t: &FoundTerm, parameters: &[EffectParameter]) -> pb::DiscoveredTerm {
+    let bounds = parameters.iter().find(|p| p.name == t.parameter);
+    pb::DiscoveredTerm {
+        function: t.function.clone(),
+        words: words(&t.function),
+        parameter: t.parameter.clone(),
+        estimate: t.estimate,
+        ci_low: t.ci_low,
+        ci_high: t.ci_high,
+        min: bounds.map_or(f64::NAN, |p| p.min),
+        max: bounds.map_or(f64::NAN, |p| p.max),
+    }
+}
+
+fn harmonic_message(h: &FoundHarmonic) -> pb::DiscoveredHarmonic {
+    pb::DiscoveredHarmonic {
+        angle: h.angle.clone(),
+        multiple: u32::try_from(h.multiple).unwrap_or(u32::MAX),
+        amplitude: h.amplitude,
+        ci_low: h.ci_low,
+        ci_high: h.ci_high,
+        phase: h.phase,
+    }
+}
+
+/// The refit of a proposal; its `effect` field is the proposal less the folded terms, as a
+/// campaign takes it.
+fn refit_message(r: &ProposalRefit) -> pb::ProposalRefit {
+    // The block refitted, as the message a campaign takes: the same text, the same values.
+    let kept = super::defined_effects::from_block(&r.toml)
+        .ok()
+        .and_then(|mut effects| effects.pop());
+    pb::ProposalRefit {
+        objective_before: r.objective_before,
+        objective_after: r.objective_after,
+        noise_floor: r.noise_floor,
+        ratio_before: r.ratio_before(),
+        ratio_after: r.ratio_after(),
+        folded: r.folded.clone(),
+        parameters: r
+            .parameters
+            .iter()
+            .map(|p| pb::RefitParameter {
+                name: p.name.clone(),
+                value: p.value,
+                min: p.min,
+                max: p.max,
+            })
+            .collect(),
+        evaluations: r.evaluations as u64,
+        effect: kept,
+        effects_toml: r.toml.clone(),
+    }
+}
