@@ -6,6 +6,7 @@
     python3 web_ui.py fmu URL MODEL.fmu RECORD.csv DROPPED.fmu OUT.json
     python3 web_ui.py experiments URL SWING.csv DRIVEN.csv SCREENSHOTS_DIR OUT.json
     python3 web_ui.py workbench URL DATA.csv RUNS_TABLE.png OUT.json
+    python3 web_ui.py discovery URL RECORD.csv SCREENSHOT.png OUT.json   (web_discovery.py)
 
 `workflow`: the seed's whole job on the Furuta record: the Model tab (furuta, its start
 angle, a 40 s simulation), the Measurement tab (upload, plots), the Calibration tab (map the
@@ -772,5 +773,8 @@ if __name__ == "__main__":
         experiments(*args)
     elif mode == "workbench":
         workbench(*args)
+    elif mode == "discovery":
+        from web_discovery import discovery  # noqa: E402  (the sibling script, which imports this one)
+        discovery(*args)
     else:
         raise SystemExit(f"unknown mode {mode}")

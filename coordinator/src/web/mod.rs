@@ -62,6 +62,8 @@ const SCRIPTS: &[(&str, &str)] = &[
     ("experiments.js", include_str!("assets/js/experiments.js")),
     ("analysis.js", include_str!("assets/js/analysis.js")),
     ("diagnosis.js", include_str!("assets/js/diagnosis.js")),
+    ("discovery.js", include_str!("assets/js/discovery.js")),
+    ("effects.js", include_str!("assets/js/effects.js")),
     ("route.js", include_str!("assets/js/route.js")),
     ("runs.js", include_str!("assets/js/runs.js")),
     ("reopen.js", include_str!("assets/js/reopen.js")),

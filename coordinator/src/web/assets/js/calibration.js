@@ -133,7 +133,9 @@ function showState(s) {
 function parameterNames(s) {
   if (s.result) return s.result.free_parameters.map((p) => p.name);
   const c = s.campaign || {};
-  return [...(c.parameters || []), ...(c.effects || [])].map((p) => p.name);
+  const defined = (c.defined_effects || []).flatMap((e) =>
+    (e.parameters || []).filter((p) => !p.fixed && !e.fixed).map((p) => ({ name: `${e.name}.${p.name}` })));
+  return [...(c.parameters || []), ...(c.effects || []), ...defined].map((p) => p.name);
 }
 
 // A failed campaign's reason, in the error box.

@@ -14,6 +14,7 @@ export const app = {
   plotDue: false,
   started: false,     // the tabs' contents are loaded (after the login, if one is asked)
   experiments: [],    // further records: {key, prefix, dataset, card, fixed}
+  definedEffects: [], // effects defined by a formula in the form (DefinedEffect messages)
   nextExperiment: 0,  // key of the next experiment added
 };
 

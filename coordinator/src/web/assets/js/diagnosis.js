@@ -1,5 +1,6 @@
 // ---- Diagnosis tab ----------------------------------------------------------------------
 import { $, PHASES, el, figure, fmt, follow, showError } from "./common.js";
+import { clearDiscovery, showDiscovery } from "./discovery.js";
 
 export async function diagnose() {
   showError("diagnosis-error", "");
@@ -8,12 +9,15 @@ export async function diagnose() {
   $("verdict").hidden = true;
   $("candidates").hidden = true;
   $("diagnosis-plots").replaceChildren();
+  clearDiscovery();
   $("diagnose").disabled = true;
-  $("diagnosis-status").textContent = "diagnosing…";
+  const discover = $("diagnosis-discover").checked;
+  $("diagnosis-status").textContent = discover ? "diagnosing, then looking outside the library…" : "diagnosing…";
   try {
-    await follow(`/api/v1/Diagnose/${id}`, (d) => {
+    await follow(`/api/v1/Diagnose/${id}${discover ? "?discover=true" : ""}`, (d) => {
       $("diagnosis-status").textContent = `${PHASES[d.phase] || d.phase}, ${d.evaluations} evaluations` + (d.failure ? ` (${d.failure})` : "");
       if (d.phase === 2 && d.report_json) showDiagnosis(d);
+      if (d.phase === 2 && d.found_outside_the_library) showDiscovery(d.found_outside_the_library, d.campaign_id);
       if (d.phase === 3) showError("diagnosis-error", d.failure);
     });
   } catch (e) {

@@ -57,6 +57,7 @@ export function campaignDraft() {
     parameters,
     window_start: windowStart,
     window_stop: windowStop,
+    defined_effects: app.definedEffects,
     search: {
       methods,
       starts: Math.round(num("starts", 1)),
@@ -111,6 +112,9 @@ export function placeOf(field, places) {
     const name = places.parameters[+m[1]];
     if (name === undefined) return "parameter-pick";
     return `${{ min: "min", max: "max", nominal: "nominal", scale: "pscale" }[m[2]] || "free"}-${name}`;
+  }
+  if ((m = field.match(/^defined_effects\[(\d+)\]/))) {
+    return $(`defined-${m[1]}`) ? `defined-${m[1]}` : "defined-effects";
   }
   if ((m = field.match(/^inputs\[(\d+)\]/))) {
     const name = places.inputs[+m[1]];

@@ -4,6 +4,7 @@
 // starts is a new campaign; the old one stays as it was.
 import { renderCalibration } from "./calibration.js";
 import { $, app, call, fmt, modelInputs } from "./common.js";
+import { setDefinedEffects } from "./effects.js";
 import { addExperiment, addFixedValue, renderExperiments } from "./experiments.js";
 import { fetchDataset, showDataset } from "./measurement.js";
 import { addFmuModels, chooseModel } from "./model.js";
@@ -57,6 +58,8 @@ export async function fillForm(message) {
       set(`pscale-${p.name}`, m.scale || "lin");
     }
   }
+  // Effects defined by a formula.
+  setDefinedEffects(message.defined_effects);
   // The window and the inputs of the first record.
   const window = first && first.windows && first.windows.length ? first.windows[0]
     : { start: message.window_start, stop: message.window_stop };
