@@ -215,7 +215,10 @@ parameters = [ { name = "a", nominal = 0.001, min = -0.02, max = 0.02 },
         let message = campaign_message(text, "d").unwrap();
         assert_eq!(message.effects.len(), 1);
         assert_eq!(message.defined_effects.len(), 1);
-        assert_eq!(message.defined_effects[0].formula, "a * sin(k * armJoint.phi)");
+        assert_eq!(
+            message.defined_effects[0].formula,
+            "a * sin(k * armJoint.phi)"
+        );
         let file = campaign_file(&message, Path::new("/data/x.csv"), "time").unwrap();
         let back = Campaign::parse(&file, Path::new("/srv/c.toml")).unwrap();
         let original = Campaign::parse(text, Path::new("/c/x.toml")).unwrap();

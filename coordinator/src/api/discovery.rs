@@ -130,3 +130,115 @@ fn refit_message(r: &ProposalRefit) -> pb::ProposalRefit {
         effects_toml: r.toml.clone(),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::diagnosis::discovery::refit::RefitParameter;
+    use crate::diagnosis::discovery::{Discovery, EffectParameter};
+
+    fn term(parameter: &str, function: &str, estimate: f64) -> FoundTerm {
+        FoundTerm {
+            function: function.into(),
+            parameter: parameter.into(),
+            estimate,
+            ci_low: estimate - 1e-3,
+            ci_high: estimate + 1e-3,
+        }
+    }
+
+    fn parameter(name: &str, nominal: f64) -> EffectParameter {
+        EffectParameter {
+            name: name.into(),
+            nominal,
+            min: nominal - 3e-3,
+            max: nominal + 3e-3,
+        }
+    }
+
+    /// A proposal with a term folded into the friction: every term with its interval and
+    /// bounds, the refit's ratios, and the effect to add being the block refitted.
+    #[test]
+    fn a_proposal_and_its_refit_as_messages() {
+        let effect = DiscoveredEffect {
+            name: "discovered.armJoint".into(),
+            place: "armJoint".into(),
+            formula: "c1 * sign(armJoint.w) + a1 * sin(8 * armJoint.phi)".into(),
+            parameters: vec![parameter("c1", -0.004), parameter("a1", 0.006)],
+            terms: vec![
+                term("c1", "sign(armJoint.w)", -0.004),
+                term("a1", "sin(8 * armJoint.phi)", 0.006),
+            ],
+            harmonics: vec![],
+        };
+        let kept = DiscoveredEffect {
+            formula: "a1 * sin(8 * armJoint.phi)".into(),
+            parameters: vec![parameter("a1", 0.006)],
+            terms: vec![term("a1", "sin(8 * armJoint.phi)", 0.006)],
+            ..effect.clone()
+        };
+        let joint = JointDiscovery {
+            joint: "armJoint".into(),
+            samples: 700,
+            effective_samples: 120.0,
+            candidates: 130,
+            library: 200,
+            threshold: 0.1,
+            cross_validation: vec![],
+            residual_rms: 6e-3,
+            remaining_rms: 2e-3,
+            terms: effect.terms.clone(),
+            harmonics: vec![],
+            proposal: Some(effect.clone()),
+        };
+        let refit = ProposalRefit {
+            effect: effect.name.clone(),
+            toml: kept.to_toml(),
+            folded: vec!["sign(armJoint.w)".into()],
+            objective_before: 300.0,
+            objective_after: 3.0,
+            noise_floor: 0.01,
+            parameters: vec![RefitParameter {
+                name: "discovered.armJoint.a1".into(),
+                value: 0.0059,
+                min: 0.003,
+                max: 0.009,
+            }],
+            evaluations: 500,
+        };
+        let found = Found {
+            unavailable: None,
+            discovery: Some(Discovery {
+                joints: vec![joint],
+            }),
+            refits: vec![refit],
+        };
+        let m = found_message(&found);
+        assert!(m.available);
+        assert_eq!(m.searched[0].torque, "armJoint");
+        let p = &m.proposals[0];
+        assert_eq!((p.torque.as_str(), p.residual_rms), ("armJoint", 6e-3));
+        assert_eq!(
+            p.terms[1].words,
+            "the sine of 8 periods per turn of armJoint.phi"
+        );
+        // The bounds are the proposal's parameter's.
+        let bounds = &effect.parameters[1];
+        assert_eq!((p.terms[1].min, p.terms[1].max), (bounds.min, bounds.max));
+        assert!(p.formula_words.starts_with("c1 times a constant torque"));
+        let r = p.refit.as_ref().unwrap();
+        assert_eq!((r.ratio_before, r.ratio_after), (300.0 / 0.01, 3.0 / 0.01));
+        let e = r.effect.as_ref().unwrap();
+        assert_eq!(e.formula, "a1 * sin(8 * armJoint.phi)");
+        assert_eq!(e.parameters.len(), 1);
+        assert_eq!(e.parameters[0].nominal, Some(0.006));
+
+        let nothing = found_message(&Found {
+            unavailable: Some("discovery is not available for model `hx_lowfi`".into()),
+            discovery: None,
+            refits: vec![],
+        });
+        assert!(!nothing.available && nothing.proposals.is_empty());
+        assert!(nothing.reason.contains("hx_lowfi"));
+    }
+}
