@@ -1,6 +1,8 @@
 //! The integration tests of the `calib` package, in one test program: one module per
 //! subject (the file of the same name), the shared harness in `common/`. One program links
-//! the workspace once instead of once per file.
+//! the workspace once instead of once per file. A new subject is a file here and its `mod`
+//! line below; it reaches the harness as `crate::common`. `cargo test --test it <file>::`
+//! runs one subject.
 //!
 //! A subject that changes what the whole process shares (its environment, where its FMUs run)
 //! is a program of its own beside this folder: `tests/fmu_containment.rs`.
