@@ -5,6 +5,10 @@
 //! its working folder is private and removed afterwards; where the kernel has Landlock its
 //! files are confined. And an archive that lies about a size is refused by `calib models`.
 
+// Its own test program, not a module of `it/`: it sets the FMU deadline in its environment
+// and has every FMU of the process run in child processes of the calib binary.
+#[allow(dead_code, unused_imports)]
+#[path = "it/common/mod.rs"]
 mod common;
 #[path = "../worker/tests/common/zips.rs"]
 mod zips;

@@ -15,7 +15,7 @@ other argument. The terms, positive in the direction of the arm angle ``phi``:
 
 The truth printed on stdout (and written with ``--truth``) is that of ``furuta_driven.py``
 with an ``extra_arm_torque`` entry naming the terms and their values. The records it writes
-serve the discovery tests (tests/discovery.rs).
+serve the discovery tests (tests/it/discovery.rs).
 """
 
 import argparse

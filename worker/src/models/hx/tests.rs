@@ -578,7 +578,7 @@ fn the_five_boundary_conditions_are_inputs() {
 }
 
 /// Undriven, a simulation is the one it always was: no signal, the same bits (the
-/// fingerprints of `worker/tests/solver_fingerprints.rs` pin them across versions).
+/// fingerprints of `worker/tests/it/solver_fingerprints.rs` pin them across versions).
 #[test]
 fn undriven_runs_are_the_plain_simulation() {
     for model in [highfi(), lowfi()] {

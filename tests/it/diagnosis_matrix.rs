@@ -1,0 +1,237 @@
+//! The same verdict whatever search settings a user picks: records of the independent
+//! simulator (`tests/python/furuta_driven.py`, scipy, no code shared with the worker), one per
+//! effect, each diagnosed under one setting of bounds, methods and starts. The full matrix
+//! (every effect under every setting) is `calib bench diagnose --matrix`.
+
+use crate::common::*;
+use calib_coordinator::campaign::Campaign;
+use calib_coordinator::diagnosis::matrix::{parameter_toml, search_toml, synthetic_campaign};
+use calib_coordinator::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
+use calib_coordinator::evaluator::LocalEvaluator;
+use calib_coordinator::optim::problem::Silent;
+
+/// Settings of the matrix, by its keys.
+const NM: &str = "nm";
+const NM_POWELL: &str = "nm+powell";
+
+/// Diagnose a 40 s free swing of the independent simulator carrying `args`, both frictions
+/// free (one held at 0 with `hold`) on `bounds` ("linear": [0, 0.9]; "log10": [1e-4, 0.9]),
+/// fitted on 0–30 s and checked on 30–40 s; `None` where python3 or scipy is missing.
+fn diagnose_record(
+    args: &[&str],
+    hold: Option<&str>,
+    bounds: &str,
+    methods: &str,
+    starts: usize,
+) -> Option<Diagnosis> {
+    let dir = tempfile::tempdir().unwrap();
+    let mut all = vec!["--no-torque", "--seed", "1"];
+    all.extend(args);
+    let (csv, _truth) = furuta_driven_record(dir.path(), "record.csv", 40.0, &all)?;
+    let text = synthetic_campaign(&csv, hold, bounds, methods, starts);
+    let campaign = Campaign::parse(&text, &dir.path().join("cell.toml")).unwrap();
+    Some(diagnose(&campaign, &LocalEvaluator, &Silent).unwrap())
+}
+
+/// The cell's diagnosis selects exactly `expected` (nothing for `None`) and ends within
+/// 1.5× the noise floor: the floor the diagnosis estimates from the data, and the record's
+/// own (2 outputs, 0.002 rad noise, 4096 counts).
+fn assert_cell(d: &Diagnosis, expected: Option<&str>, what: &str) {
+    let floor = synthetic_noise_floor(2, d.final_fit.residual[0].samples);
+    println!(
+        "{what}: selected {:?}, {:.4e} -> {:.4e} ({:.3}x the estimated floor {:.4e}, {:.3}x the record's {:.4e}), {} simulations, ranked {:?}",
+        d.selected,
+        d.baseline.objective,
+        d.final_fit.objective,
+        d.final_fit.objective / d.noise_floor,
+        d.noise_floor,
+        d.final_fit.objective / floor,
+        floor,
+        d.stats.evaluations.simulated + d.stats.trajectories,
+        d.candidates
+            .iter()
+            .take(4)
+            .map(|c| (&c.effect, c.score, c.objective))
+            .collect::<Vec<_>>()
+    );
+    let want: Vec<String> = expected.into_iter().map(String::from).collect();
+    assert_eq!(d.selected, want, "{what}");
+    assert!(
+        d.final_fit.objective <= NOISE_FACTOR * d.noise_floor,
+        "{what}: {} is {:.2}x the estimated noise floor",
+        d.final_fit.objective,
+        d.final_fit.objective / d.noise_floor
+    );
+    assert!(
+        d.final_fit.objective <= NOISE_FACTOR * floor,
+        "{what}: {} is {:.2}x the record's noise floor",
+        d.final_fit.objective,
+        d.final_fit.objective / floor
+    );
+    assert!(d.explained(), "{what}: verdict {:?}", d.verdict);
+}
+
+fn cell(args: &[&str], hold: Option<&str>, settings: (&str, &str, usize), expected: Option<&str>) {
+    let (bounds, methods, starts) = settings;
+    let what = format!("{args:?} hold {hold:?}, {bounds} bounds, {methods}, {starts} start(s)");
+    if let Some(d) = diagnose_record(args, hold, bounds, methods, starts) {
+        assert_cell(&d, expected, &what);
+    }
+}
+
+/// The spring on the arm, under the settings where the local refits alone selected
+/// `offset(armJoint.phi)` and ended at 351x the noise floor.
+#[test]
+fn a_spring_on_the_arm_is_found_on_wide_linear_bounds() {
+    cell(
+        &["--arm-stiffness", "0.01"],
+        None,
+        ("linear", NM_POWELL, 4),
+        Some("stiffness.arm"),
+    );
+}
+
+#[test]
+fn a_spring_on_the_arm_is_found_from_one_start() {
+    cell(
+        &["--arm-stiffness", "0.01"],
+        None,
+        ("log10", NM, 1),
+        Some("stiffness.arm"),
+    );
+}
+
+#[test]
+fn viscous_arm_friction_from_one_start_on_log_bounds() {
+    cell(
+        &["--arm-viscous", "0.002"],
+        None,
+        ("log10", NM, 1),
+        Some("viscous_friction.arm"),
+    );
+}
+
+#[test]
+fn viscous_pendulum_friction_by_nelder_mead_alone() {
+    cell(
+        &["--pendulum-viscous", "0.0003"],
+        None,
+        ("linear", NM, 4),
+        Some("viscous_friction.pendulum"),
+    );
+}
+
+#[test]
+fn coulomb_arm_friction_on_log_bounds() {
+    cell(
+        &[],
+        Some("armFriction"),
+        ("log10", NM_POWELL, 1),
+        Some("coulomb_friction.arm"),
+    );
+}
+
+#[test]
+fn coulomb_pendulum_friction_from_one_start() {
+    cell(
+        &[],
+        Some("pendulumFriction"),
+        ("linear", NM, 1),
+        Some("coulomb_friction.pendulum"),
+    );
+}
+
+#[test]
+fn quadratic_drag_on_the_arm() {
+    cell(
+        &["--arm-drag", "0.003"],
+        None,
+        ("log10", NM_POWELL, 4),
+        Some("quadratic_drag.arm"),
+    );
+}
+
+#[test]
+fn an_offset_of_the_arm_sensor() {
+    cell(
+        &["--arm-offset", "0.05"],
+        None,
+        ("linear", NM_POWELL, 1),
+        Some("offset(armJoint.phi)"),
+    );
+}
+
+#[test]
+fn a_dead_time_of_the_arm_sensor() {
+    cell(
+        &["--arm-delay", "0.08"],
+        None,
+        ("log10", NM, 4),
+        Some("delay(armJoint.phi)"),
+    );
+}
+
+#[test]
+fn a_gain_error_of_the_arm_sensor() {
+    cell(
+        &["--arm-gain", "0.1"],
+        None,
+        ("linear", NM, 1),
+        Some("gain(armJoint.phi)"),
+    );
+}
+
+#[test]
+fn a_clean_record_needs_nothing_from_one_start() {
+    cell(&[], None, ("linear", NM, 1), None);
+}
+
+/// The real rig with the viscous-only model, both viscous coefficients on log10 bounds
+/// [1e-5, 0.9], one Nelder–Mead start: both Coulomb frictions, below the seed's 2.729.
+#[test]
+fn the_naive_model_from_one_start_leads_back_to_both_coulomb_frictions() {
+    let Some(data) = real_record() else {
+        return;
+    };
+    let source = std::fs::read_to_string(repo().join("examples/furuta_real_naive.toml")).unwrap();
+    let mut text = String::new();
+    let mut skip_section = false;
+    for line in source.lines() {
+        if line.starts_with('[') {
+            skip_section = line == "[[effects]]" || line == "[search]";
+        }
+        if !skip_section {
+            text.push_str(line);
+            text.push('\n');
+        }
+    }
+    let text = text.replace(
+        "../../shared/data/real/FurutaData.mat",
+        data.to_str().unwrap(),
+    );
+    assert!(text.contains(data.to_str().unwrap()));
+    let mut text = text;
+    for (name, nominal) in [
+        ("viscous_friction.arm", 0.001),
+        ("viscous_friction.pendulum", 0.0001),
+    ] {
+        text.push_str(
+            &parameter_toml(name, nominal, "log10", 1e-5).replace("[[parameters]]", "[[effects]]"),
+        );
+    }
+    text.push_str(&search_toml(NM, 1));
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = Campaign::parse(&text, &dir.path().join("naive.toml")).unwrap();
+    let d = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();
+    println!(
+        "naive, log10, one start: {:.4} -> {:.4}, selected {:?}",
+        d.baseline.objective, d.final_fit.objective, d.selected
+    );
+    let mut selected = d.selected.clone();
+    selected.sort();
+    assert_eq!(
+        selected,
+        ["coulomb_friction.arm", "coulomb_friction.pendulum"]
+    );
+    assert!(d.final_fit.objective < 2.729, "{}", d.final_fit.objective);
+}
