@@ -1,7 +1,8 @@
 use super::{Failure, Outcome};
 use calib_coordinator::campaign::Campaign;
 use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::sensitivity::{self, report, Methods, Settings, DEFAULT_SAMPLES};
+use calib_coordinator::outcome::CalibrationOutcome;
+use calib_coordinator::sensitivity::{self, local, report, Methods, Settings, DEFAULT_SAMPLES};
 use calib_coordinator::store::SledStore;
 use std::path::PathBuf;
 
@@ -42,6 +43,15 @@ pub struct Args {
     /// again [default: results/.calib-db beside the campaign file].
     #[arg(long, value_name = "DIR")]
     db: Option<PathBuf>,
+    /// A calibration's result.json: also take the local sensitivity of each output to each
+    /// parameter at its best point, so that a parameter is called fixable only when it is
+    /// negligible both over the bounds and at the fit [default: the result the store holds
+    /// for this campaign, when `calib calibrate` recorded one there].
+    #[arg(long, value_name = "RESULT.json", conflicts_with = "no_fit")]
+    at: Option<PathBuf>,
+    /// Judge over the bounds alone, even where the store holds a result of the campaign.
+    #[arg(long)]
+    no_fit: bool,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -51,6 +61,16 @@ pub fn run(args: Args) -> Outcome {
         .clone()
         .unwrap_or_else(|| super::calibrate::default_db(&args.campaign));
     let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
+    // The fit's point first: a result that does not fit the campaign is refused before the
+    // designs run.
+    let fit = match fit_result(&args, &campaign, &store)? {
+        Some((outcome, source)) => {
+            let point = local::best_point(&campaign, &outcome, &source)
+                .map_err(|e| Failure::input(e.to_string()))?;
+            Some((point, outcome.best.objective, source))
+        }
+        None => None,
+    };
     let settings = Settings {
         methods: match args.method {
             None => Methods::Both,
@@ -84,6 +104,17 @@ pub fn run(args: Args) -> Outcome {
             })
         }
     }?;
+    let mut result = result;
+    if let Some((point, objective, source)) = fit {
+        let at_fit = match &args.workers.workers {
+            None => local::at_fit(&campaign, &LocalEvaluator, &point, objective, source),
+            Some(list) => {
+                let workers = args.workers.connect(list)?;
+                local::at_fit(&campaign, &workers.evaluator(), &point, objective, source)
+            }
+        }?;
+        result.at_fit = Some(at_fit);
+    }
     let dir = super::calibrate::results_root(&args.campaign, args.out.as_deref())
         .join(&campaign.name)
         .join("sensitivity");
@@ -100,4 +131,22 @@ pub fn run(args: Args) -> Outcome {
         }
     }
     Ok(())
+}
+
+/// The calibration result whose best point the local sensitivities are taken at, and how
+/// to name it: `--at`'s file, else the store's result of the campaign, unless `--no-fit`.
+fn fit_result(
+    args: &Args,
+    campaign: &Campaign,
+    store: &SledStore,
+) -> Result<Option<(CalibrationOutcome, String)>, Failure> {
+    if args.no_fit {
+        return Ok(None);
+    }
+    if let Some(path) = &args.at {
+        let outcome = local::read_result(path).map_err(|e| Failure::input(e.to_string()))?;
+        return Ok(Some((outcome, path.display().to_string())));
+    }
+    let stored = local::stored_result(campaign, store)?;
+    Ok(stored.map(|o| (o, format!("the stored calibration of {}", campaign.name))))
 }

@@ -43,6 +43,7 @@ mod profile;
 mod python_client;
 mod security;
 mod sensitivity;
+mod sensitivity_at_fit;
 mod slurm;
 mod user_effects;
 mod web_api;

@@ -19,7 +19,9 @@
 //!    (locally, then with the diagnosis's own search where that is not conclusive) and in
 //!    pairs, starting from the baseline optimum. Every search after the baseline is the
 //!    diagnosis's own, whatever methods and starts the campaign asked for, so the verdict
-//!    does not hang on them.
+//!    does not hang on them. When that leaves more than noise ([`escalation`]), the
+//!    candidates are ranked again from the other minima the campaign's runs found, and the
+//!    selected effects get one more at a time (ranked from their refit), within a bound.
 //! 5. **Select** ([`verdict`]) by the Bayesian information criterion computed with the effective number of
 //!    independent samples of the residual (correlated residuals carry less information than
 //!    their count suggests), requiring a decrease of at least 10 (very strong evidence,
@@ -35,6 +37,7 @@
 
 pub mod candidates;
 pub mod discovery;
+pub mod escalation;
 pub mod fair;
 pub mod fit;
 pub mod linear;
@@ -276,14 +279,7 @@ where
     // the point its descent reached there as a start of its refits.
     if let Some(own) = &replaced {
         let again = ranking::rank(&fit_campaign, &measurement, engine, own, &candidate_specs)?;
-        for (c, mut other) in candidates.iter_mut().zip(again) {
-            // Its score as a share of the baseline now in use: what its descent left there.
-            let left = (1.0 - other.score) * own.objective;
-            other.score = (1.0 - left / baseline.objective.max(f64::MIN_POSITIVE)).max(0.0);
-            if other.score > c.score {
-                *c = other;
-            }
-        }
+        escalation::adopt_better(&mut candidates, again, own.objective, baseline.objective);
     }
     candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
 
@@ -302,7 +298,7 @@ where
             explained_fraction: 1.0,
         }
     } else {
-        refit_and_select(
+        let first = refit_and_select(
             &fit_campaign,
             &measurement,
             engine,
@@ -312,7 +308,18 @@ where
             &candidate_specs,
             &holdout_objective,
             noise_floor,
-        )?
+        )?;
+        let setting = escalation::Setting {
+            fit_campaign: &fit_campaign,
+            measurement: &measurement,
+            engine,
+            progress,
+            baseline: &baseline,
+            specs: &candidate_specs,
+            holdout: &holdout_objective,
+            noise_floor,
+        };
+        escalation::escalate(&setting, first, &calibration, &mut candidates)?
     };
     Ok(Diagnosis {
         campaign: fit_campaign,

@@ -53,12 +53,12 @@ pub fn explains(fit: &Fit, baseline: &Fit, noise_floor: f64) -> bool {
         || (baseline.objective - fit.objective) >= NEAR_EXACT * baseline.objective
 }
 
-/// The refit to select: the best single effect that improves on the baseline, replaced by
-/// the best pair containing it that improves on it; without such a single, the best pair
-/// that improves on the baseline (a pair may succeed where each effect alone falls short).
-/// "Best" is the lowest refitted objective (between fits of as many parameters, the lowest
-/// information criterion), ties broken by the effects' names: never the order the refits
-/// ran in.
+/// The refit to select: the best single effect that improves on the baseline (without such
+/// a single, the best pair that does: a pair may succeed where each effect alone falls
+/// short), then, as long as one improves on the set chosen so far, the best refit of one
+/// effect more that contains it. "Best" is the lowest refitted objective (between fits of as
+/// many parameters, the lowest information criterion), ties broken by the effects' names:
+/// never the order the refits ran in.
 pub fn select<'a>(baseline: &Fit, refits: &'a [Fit]) -> Option<&'a Fit> {
     let lowest = |fits: Vec<&'a Fit>| {
         fits.into_iter().min_by(|a, b| {
@@ -67,31 +67,20 @@ pub fn select<'a>(baseline: &Fit, refits: &'a [Fit]) -> Option<&'a Fit> {
                 .then_with(|| a.effects.cmp(&b.effects))
         })
     };
-    let single = lowest(
-        refits
-            .iter()
-            .filter(|f| f.effects.len() == 1 && improves(f, baseline))
-            .collect(),
-    );
-    match single {
-        Some(single) => lowest(
+    let of_size = |n: usize, over: &Fit| -> Option<&'a Fit> {
+        lowest(
             refits
                 .iter()
-                .filter(|p| {
-                    p.effects.len() == 2
-                        && p.effects.contains(&single.effects[0])
-                        && improves(p, single)
-                })
+                .filter(|f| f.effects.len() == n && improves(f, over))
+                .filter(|f| over.effects.iter().all(|e| f.effects.contains(e)))
                 .collect(),
         )
-        .or(Some(single)),
-        None => lowest(
-            refits
-                .iter()
-                .filter(|p| p.effects.len() == 2 && improves(p, baseline))
-                .collect(),
-        ),
+    };
+    let mut chosen = of_size(1, baseline).or_else(|| of_size(2, baseline))?;
+    while let Some(richer) = of_size(chosen.effects.len() + 1, chosen) {
+        chosen = richer;
     }
+    Some(chosen)
 }
 
 /// The verdict on the `chosen` refit (none: unexplained), and the share of the baseline's
@@ -221,6 +210,28 @@ mod tests {
             scored(&["y"], 3, 3.0, 2.0, N),
         ];
         assert_eq!(select(&baseline, &tied).unwrap().effects, ["y"]);
+    }
+
+    #[test]
+    fn one_effect_more_is_added_while_it_improves_on_the_set_chosen_so_far() {
+        let baseline = scored(&[], 2, 10.0, 4.0, N);
+        let refits = [
+            scored(&["a"], 3, 5.0, 3.0, N),
+            scored(&["a", "b"], 4, 3.0, 2.0, N),
+            // Lower still, but without the pair chosen before it: not a step from it.
+            scored(&["a", "c", "d"], 5, 0.5, 0.5, N),
+            scored(&["a", "b", "c"], 5, 1.0, 1.0, N),
+            // Contains the pair, but worse on the held-out window.
+            scored(&["a", "b", "d"], 5, 0.9, 2.5, N),
+        ];
+        assert_eq!(select(&baseline, &refits).unwrap().effects, ["a", "b", "c"]);
+        // Without the pair, the triples are not reached from the single.
+        let no_pair: Vec<Fit> = refits
+            .iter()
+            .filter(|f| f.effects.len() != 2)
+            .cloned()
+            .collect();
+        assert_eq!(select(&baseline, &no_pair).unwrap().effects, ["a"]);
     }
 
     #[test]

@@ -8,6 +8,7 @@
 //! quantity to analyse: the Morris effects that need the point, and the Sobol base samples
 //! with a failed point, are left out and counted.
 
+pub mod local;
 pub mod report;
 pub mod sampling;
 
@@ -106,6 +107,9 @@ pub struct Sensitivity {
     /// Sobol base samples left out because one of their points failed.
     pub sobol_excluded: usize,
     pub stats: CacheStats,
+    /// Local sensitivities at a calibration's best point, when there is one
+    /// ([`local::at_fit`]).
+    pub at_fit: Option<local::AtFit>,
 }
 
 impl Sensitivity {
@@ -159,12 +163,17 @@ impl Sensitivity {
     }
 
     /// The parameters that can be held fixed (not influential on the objective nor on any
-    /// output), in campaign order.
+    /// output, over the bounds nor, when there are local sensitivities, at the fit), in
+    /// campaign order.
     pub fn fixable(&self) -> Vec<&str> {
         (0..self.parameters.len())
-            .filter(|&i| !self.influential(i))
+            .filter(|&i| self.is_fixable(i))
             .map(|i| self.parameters[i].as_str())
             .collect()
+    }
+
+    fn is_fixable(&self, i: usize) -> bool {
+        !self.influential(i) && !self.influential_at_fit(i)
     }
 
     /// The most influential parameter on quantity `q` (largest total index, else μ*).
@@ -198,7 +207,7 @@ impl Sensitivity {
     /// whose bounds hide their small values (see [`Self::crowded_at_the_bottom`]).
     pub fn conclusion(&self) -> String {
         let mut sentence = self.fixable_sentence();
-        for i in (0..self.parameters.len()).filter(|&i| !self.influential(i)) {
+        for i in (0..self.parameters.len()).filter(|&i| self.is_fixable(i)) {
             if self.crowded_at_the_bottom(i) {
                 let (min, max) = self.bounds[i];
                 sentence.push_str(&format!(
@@ -227,15 +236,20 @@ impl Sensitivity {
         } else {
             ""
         };
+        let at_fit = if self.at_fit.is_some() {
+            format!(" and a local index at the fit below {INFLUENTIAL_TOTAL}")
+        } else {
+            String::new()
+        };
         let rule = format!("{index} on the objective{outputs} {below}");
         let mut sentence = match fixable.len() {
-            0 => format!("No parameter can be held fixed: none has a {rule}."),
+            0 => format!("No parameter can be held fixed: none has a {rule}{at_fit}."),
             1 => format!(
-                "{} can be held fixed: its {rule} over the bounds.",
+                "{} can be held fixed: its {rule} over the bounds{at_fit}.",
                 fixable[0]
             ),
             _ => format!(
-                "{} can be held fixed: each has a {rule} over the bounds.",
+                "{} can be held fixed: each has a {rule} over the bounds{at_fit}.",
                 fixable.join(", ")
             ),
         };
@@ -252,6 +266,7 @@ impl Sensitivity {
                 ));
             }
         }
+        sentence.push_str(&self.kept_at_fit_sentences());
         sentence
     }
 }
@@ -386,6 +401,7 @@ pub fn analyse_reporting<E: Evaluator>(
         sobol_failed: 0,
         sobol_excluded: 0,
         stats: CacheStats::default(),
+        at_fit: None,
     };
     if settings.methods.morris() {
         let design = sampling::morris_design(dim, settings.samples, settings.seed);

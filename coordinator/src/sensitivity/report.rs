@@ -72,6 +72,20 @@ pub fn sensitivity_json(s: &Sensitivity) -> Value {
                 .map(|q| (s.quantities[q].name.clone(), statistics(s, q, i)))
                 .collect();
             p.insert("outputs".into(), Value::Object(outputs));
+            if let Some(a) = &s.at_fit {
+                let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
+                    .map(|q| (s.quantities[q].name.clone(), number(a.indices[q][i])))
+                    .collect();
+                p.insert(
+                    "at_fit".into(),
+                    json!({"objective": number(a.indices[0][i]), "outputs": outputs}),
+                );
+                p.insert(
+                    "kept_at_fit".into(),
+                    s.kept_at_fit(i)
+                        .map_or(Value::Null, |q| json!(s.quantities[q].name)),
+                );
+            }
             Value::Object(p)
         })
         .collect();
@@ -100,6 +114,15 @@ pub fn sensitivity_json(s: &Sensitivity) -> Value {
             "confidence": 0.95,
         },
         "influential_total": super::INFLUENTIAL_TOTAL,
+        "at_fit": s.at_fit.as_ref().map_or(Value::Null, |a| json!({
+            "source": a.source,
+            "objective": number(a.objective),
+            "parameters": s.parameters.iter().zip(&a.point)
+                .map(|(n, v)| (n.clone(), number(*v)))
+                .collect::<serde_json::Map<String, Value>>(),
+            "unit_step": super::local::UNIT_STEP,
+            "simulated": a.simulated,
+        })),
         "parameters": parameters,
         "fixable": s.fixable(),
         "conclusion": s.conclusion(),
@@ -154,6 +177,9 @@ pub fn table(s: &Sensitivity) -> String {
         }
         let _ = writeln!(out);
     }
+    if let Some(a) = &s.at_fit {
+        table_at_fit(&mut out, s, a, width);
+    }
     let _ = writeln!(
         out,
         "{} evaluations ({} simulated, {} from the store); failed: {} of the Morris points, \
@@ -167,6 +193,29 @@ pub fn table(s: &Sensitivity) -> String {
     );
     let _ = writeln!(out, "{}", s.conclusion());
     out
+}
+
+/// The block of the local indices at the fit: one column per quantity.
+fn table_at_fit(out: &mut String, s: &Sensitivity, a: &super::local::AtFit, width: usize) {
+    let _ = writeln!(
+        out,
+        "at the fit ({}, objective {:.6e}): local index, each parameter's share of the squared \
+         sensitivities",
+        a.source, a.objective
+    );
+    let mut header = format!("  {:<width$} {:>12}", "parameter", "value");
+    for q in &s.quantities {
+        header.push_str(&format!(" {:>14}", q.name));
+    }
+    let _ = writeln!(out, "{header}");
+    for (i, name) in s.parameters.iter().enumerate() {
+        let mut row = format!("  {name:<width$} {:>12.6e}", a.point[i]);
+        for q in &a.indices {
+            row.push_str(&format!(" {:>14.3}", q[i]));
+        }
+        let _ = writeln!(out, "{row}");
+    }
+    let _ = writeln!(out);
 }
 
 /// Write `sensitivity.json` and one bar chart per quantity into `dir` (created).
@@ -301,6 +350,7 @@ mod tests {
             sobol_failed: 0,
             sobol_excluded: 0,
             stats: CacheStats::default(),
+            at_fit: None,
         }
     }
 
