@@ -155,25 +155,7 @@ fn summary(found: &Discovery, refits: &[ProposalRefit]) -> String {
         s.push('\n');
     }
     for r in refits {
-        if !r.folded.is_empty() {
-            s.push_str(&format!(
-                "  refit of {}: {} folded into the joint's own friction\n",
-                r.effect,
-                r.folded.join(", ")
-            ));
-        }
-        s.push_str(&format!(
-            "  refit of {}: objective {:.4e} -> {:.4e}, {:.3} -> {:.3} times the noise floor ({:.4e})\n",
-            r.effect,
-            r.objective_before,
-            r.objective_after,
-            r.ratio_before(),
-            r.ratio_after(),
-            r.noise_floor
-        ));
-        for p in &r.parameters {
-            s.push_str(&format!("    {:<28} {:>13.6e}\n", p.name, p.value));
-        }
+        s.push_str(&r.summary());
     }
     s
 }
@@ -194,31 +176,8 @@ pub fn formula_in_words(effect: &DiscoveredEffect) -> String {
         .join(", plus ")
 }
 
-/// A function of the library in words.
-pub fn words(function: &str) -> String {
-    if let Some(inner) = function
-        .strip_prefix("sign(")
-        .and_then(|f| f.strip_suffix(')'))
-    {
-        return format!("a constant torque along the motion of {inner} (a dry friction's sign)");
-    }
-    for (f, what) in [("sin(", "sine"), ("cos(", "cosine")] {
-        if let Some(inner) = function.strip_prefix(f).and_then(|f| f.strip_suffix(')')) {
-            if let Some((m, angle)) = inner.split_once(" * ") {
-                return format!("the {what} of {m} periods per turn of {angle}");
-            }
-            return format!("the {what} of {inner}");
-        }
-    }
-    if function.starts_with("abs(") {
-        return "a drag growing with the square of the speed".into();
-    }
-    if function == "1" {
-        return "a constant torque".into();
-    }
-    let factors: Vec<&str> = function.split(" * ").collect();
-    format!("the product of {}", factors.join(", "))
-}
+/// A function of the library in words (one wording for the proposal and its refit).
+pub use super::discovery::words::function_in_words as words;
 
 #[cfg(test)]
 mod tests {
@@ -254,7 +213,7 @@ mod tests {
             formula_in_words(&effect),
             "a1 times the sine of 8 periods per turn of armJoint.phi, plus c1 times a constant \
              torque along the motion of armJoint.w (a dry friction's sign), plus c2 (a constant \
-             torque), plus c3 times the product of armJoint.w, armJoint.w, armJoint.w"
+             torque), plus c3 times the cube of armJoint.w"
         );
         assert_eq!(words("cos(armJoint.phi)"), "the cosine of armJoint.phi");
     }

@@ -307,6 +307,24 @@ pub fn profile_around(
     evaluator: &dyn Evaluator,
     max_steps: usize,
 ) -> Result<Vec<ParameterProfile>> {
+    profile_around_with(
+        around,
+        which,
+        evaluator,
+        max_steps,
+        walk::Reoptimisation::default(),
+    )
+}
+
+/// [`profile_around`], re-optimising the other parameters at each profile point as
+/// `reoptimisation` says.
+pub fn profile_around_with(
+    around: &Around,
+    which: &[usize],
+    evaluator: &dyn Evaluator,
+    max_steps: usize,
+    reoptimisation: walk::Reoptimisation,
+) -> Result<Vec<ParameterProfile>> {
     let space = UnitBox::new(around.free);
     let best = space.to_unit(around.point);
     let n = around.free.len();
@@ -357,6 +375,7 @@ pub fn profile_around(
         slopes,
         max_steps,
         failure: FAILURE_PENALTY,
+        reoptimisation,
     };
     let sides: Vec<Result<Side>> = std::thread::scope(|scope| {
         let handles: Vec<_> = which

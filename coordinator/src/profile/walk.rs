@@ -12,7 +12,11 @@
 //!   kept as it is: re-optimising could only lower a value that is far under the threshold.
 //!   A parameter without any effect therefore costs one evaluation per step. Otherwise
 //!   Powell's method (the calibration's, in the unit box of the other coordinates) minimises
-//!   from the warm start, to a tolerance of [`FTOL`]·Δ on the objective.
+//!   from the warm start, to a tolerance of [`FTOL`]·Δ on the objective. Its line searches
+//!   start at each coordinate's linearised deviation, or at [`Reoptimisation::min_step`] of
+//!   the box when that is larger: an objective that is rough on small scales (a stick–slip
+//!   model whose events come and go with the parameters) needs brackets wider than the
+//!   roughness, which its linearised deviations do not give.
 //! * **Steps.** The first is half the linearised standard deviation (at most
 //!   [`FIRST_STEP_MAX`] of the box, and that when the deviation is unknown). After a point
 //!   at distance `d` with rise `r < Δ`, a quadratic profile would cross at `d·√(Δ/r)`; the
@@ -54,6 +58,40 @@ pub const REFINEMENTS: usize = 3;
 /// Default most steps per side.
 pub const DEFAULT_MAX_STEPS: usize = 30;
 
+/// How the other coordinates are re-optimised at a profile point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reoptimisation {
+    /// Smallest first step of Powell's line searches, in the unit box.
+    pub min_step: f64,
+    /// Evaluations of one re-optimisation: `fixed + per_coordinate · (n − 1)`.
+    pub fixed: u64,
+    pub per_coordinate: u64,
+}
+
+impl Default for Reoptimisation {
+    /// Steps of the linearised deviations (down to 10⁻⁹ of the box), the default budget:
+    /// what a smooth objective needs.
+    fn default() -> Self {
+        Reoptimisation {
+            min_step: 1e-9,
+            fixed: 60,
+            per_coordinate: 40,
+        }
+    }
+}
+
+impl Reoptimisation {
+    /// For objectives rough on small scales: line searches start at 1% of the box at least,
+    /// with 100 more evaluations per coordinate re-optimised.
+    pub fn rough() -> Self {
+        Reoptimisation {
+            min_step: 1e-2,
+            fixed: 100,
+            per_coordinate: 100,
+        }
+    }
+}
+
 /// What a walk needs.
 pub struct Problem<'a> {
     pub batch: &'a Batch<'a>,
@@ -71,6 +109,7 @@ pub struct Problem<'a> {
     pub max_steps: usize,
     /// Objectives at or above this are failed simulations.
     pub failure: f64,
+    pub reoptimisation: Reoptimisation,
 }
 
 /// One point of a profile.
@@ -209,7 +248,7 @@ impl Walker<'_, '_> {
             .map(|&j| {
                 let s = p.std[j];
                 if s.is_finite() && s > 0.0 {
-                    s.clamp(1e-9, 0.25)
+                    s.clamp(p.reoptimisation.min_step.min(0.25), 0.25)
                 } else {
                     0.05
                 }
@@ -226,7 +265,8 @@ impl Walker<'_, '_> {
             .and_then(|s| s.with_xtol(xtol))
             .and_then(|s| s.with_ftol(0.0, FTOL))
             .map_err(|e| Error::Optimiser(e.to_string()))?;
-        let budget = 60 + 40 * others.len() as u64;
+        let r = p.reoptimisation;
+        let budget = r.fixed + r.per_coordinate * others.len() as u64;
         let result = Executor::new(cost, Budgeted::new(solver, budget, None))
             .configure(|state| state.param(reduced).max_iters(100_000).counting(true))
             .run();

@@ -5,10 +5,12 @@
 //! Grammar, loosest first: `+ -`, `* /`, unary `-`, `^` (right-associative, binds tighter
 //! than unary minus: `-x^2` is `-(x^2)`). Atoms: numbers (`12`, `0.5`, `1e-3`), names
 //! (letters, digits, `_`, dotted parts as `armJoint.phi`), calls of the functions
-//! [`FUNCTIONS`] and `pow(a, b)`, parentheses.
+//! [`FUNCTIONS`] and `pow(a, b)`, parentheses. `sign(0)` is 0 (and `sign(x)` ±1 elsewhere):
+//! a term `c * sign(armJoint.w)` drives a joint at rest with nothing, as it reads in
+//! mathematics, rather than with `c`.
 
 use exmex::prelude::*;
-use exmex::FlatEx;
+use exmex::{FlatEx, FloatOpsFactory, MakeOperators, Operator};
 
 /// Functions of one argument a formula may call (`pow(a, b)` takes two).
 pub const FUNCTIONS: [&str; 7] = ["sin", "cos", "exp", "abs", "sign", "sqrt", "tanh"];
@@ -242,6 +244,19 @@ fn parse(text: &str) -> Result<Node, FormulaError> {
 }
 
 /// Every name the formula reads, with the character position (from 0) where it first is.
+/// Whether the formula `text` calls the function `function` (false when it does not parse).
+pub fn calls(text: &str, function: &str) -> bool {
+    fn walk(node: &Node, function: &str) -> bool {
+        match node {
+            Node::Number(_) | Node::Name(..) => false,
+            Node::Neg(a) => walk(a, function),
+            Node::Binary(_, a, b) => walk(a, function) || walk(b, function),
+            Node::Call(f, args) => f == function || args.iter().any(|a| walk(a, function)),
+        }
+    }
+    parse(text).is_ok_and(|node| walk(&node, function))
+}
+
 fn names(node: &Node, out: &mut Vec<(String, usize)>) {
     match node {
         Node::Number(_) => {}
@@ -282,7 +297,7 @@ fn emit(node: &Node, out: &mut String) {
             out,
         ),
         Node::Call(f, args) => {
-            let f = if f == "sign" { "signum" } else { f.as_str() };
+            let f = if f == "sign" { "sign0" } else { f.as_str() };
             out.push_str(&format!("({f}("));
             emit(&args[0], out);
             out.push_str("))");
@@ -290,10 +305,31 @@ fn emit(node: &Node, out: &mut String) {
     }
 }
 
+/// The sign with `sign(0) = 0` (`f64::signum` gives ±1 at ±0).
+fn sign(x: f64) -> f64 {
+    if x == 0.0 {
+        0.0
+    } else {
+        x.signum()
+    }
+}
+
+/// exmex's operators for floats, and [`sign`] as `sign0` (what `sign` compiles to).
+#[derive(Clone, Debug)]
+struct Operators;
+
+impl MakeOperators<f64> for Operators {
+    fn make<'a>() -> Vec<Operator<'a, f64>> {
+        let mut ops = FloatOpsFactory::<f64>::make();
+        ops.push(Operator::make_unary("sign0", sign));
+        ops
+    }
+}
+
 /// A formula compiled, its names bound to slots of the caller's choosing.
 #[derive(Clone, Debug)]
 pub struct Compiled {
-    expr: FlatEx<f64>,
+    expr: FlatEx<f64, Operators>,
     /// For each variable of `expr` (in its order), the index of the caller's name.
     slots: Vec<usize>,
 }
@@ -320,7 +356,7 @@ impl Compiled {
         }
         let mut source = String::new();
         emit(&node, &mut source);
-        let expr = FlatEx::<f64>::parse(&source)
+        let expr = FlatEx::<f64, Operators>::parse(&source)
             .map_err(|e| FormulaError::at(0, format!("cannot compile: {e}")))?;
         let slots = expr
             .var_names()
@@ -380,6 +416,20 @@ mod tests {
         let x: f64 = -2.0;
         let want = x.signum() * x.abs().sqrt() + x.tanh() + (-0.013f64).exp() + 0.3f64.cos();
         assert_eq!(f.eval(&v), want);
+    }
+
+    #[test]
+    fn the_sign_of_zero_is_zero() {
+        let k = known(&["x"]);
+        let f = Compiled::new("sign(x)", &k).unwrap();
+        let values: Vec<f64> = [-3.0, -0.0, 0.0, 1e-300, 2.0]
+            .iter()
+            .map(|&x| f.eval(&[x]))
+            .collect();
+        assert_eq!(values, [-1.0, 0.0, 0.0, 1.0, 1.0]);
+        assert!(f.eval(&[f64::NAN]).is_nan());
+        assert!(calls("a * sign(x) + 1", "sign"));
+        assert!(!calls("a * sin(x)", "sign") && !calls("sign(", "sign"));
     }
 
     #[test]

@@ -19,7 +19,7 @@ mod formula;
 mod model;
 pub mod wire;
 
-pub use formula::{Compiled, FormulaError, FUNCTIONS};
+pub use formula::{calls, Compiled, FormulaError, FUNCTIONS};
 pub use model::WithUserEffects;
 
 use crate::content_hash::ContentHasher;
@@ -106,6 +106,11 @@ pub fn hash_into(h: &mut ContentHasher, effects: &[UserEffect]) {
             .count(e.parameters.len());
         for p in &e.parameters {
             h.text(&p.name).values(&[p.nominal, p.min, p.max]);
+        }
+        // `sign(0)` was +1 before it was 0: a formula calling `sign` is another objective
+        // now, so no value computed under the old rule is replayed from a store.
+        if calls(&e.formula, "sign") {
+            h.text("sign(0) = 0");
         }
     }
 }

@@ -10,21 +10,29 @@
 //!    cross-validation and the one-standard-error rule; least squares on the support with
 //!    intervals widened for correlated residuals; terms not significant at 95% dropped;
 //! 4. [`proposal`]: the terms as an `[[effects]]` block, parameters bounded by their widened
-//!    intervals. Nothing is added to a campaign: it is a proposal to refit.
+//!    intervals. Nothing is added to a campaign: it is a proposal to refit;
+//! 5. on a campaign ([`campaign`]): the record from its measurement mapping, and [`refit`]:
+//!    the campaign recalibrated with the proposal (harmonics as amplitude and phase,
+//!    [`polar`]) on growing windows, then its parameters' profile intervals ([`profile`]).
 
+pub mod campaign;
 pub mod furuta;
 pub mod library;
+pub mod polar;
+pub mod profile;
 pub mod proposal;
 pub mod refit;
 pub mod residual;
 pub mod savgol;
 pub mod stlsq;
+pub mod words;
 
+pub use campaign::{fold_duplicates, joint_model, record_of, with_discovered};
 pub use furuta::FurutaJoints;
+pub use polar::amplitude_phase;
+pub use profile::{EffectInterval, OutputResidual};
 pub use proposal::{DiscoveredEffect, EffectParameter, FoundHarmonic, FoundTerm};
-pub use refit::{
-    fold_duplicates, joint_model, record_of, refit_discovered, with_discovered, ProposalRefit,
-};
+pub use refit::{refit_discovered, ProposalRefit, RefitParameter, RefitStage};
 pub use residual::{JointModel, Record, ResidualOptions};
 
 use library::{Candidate, Kind, LibraryOptions};

@@ -42,6 +42,7 @@ fn problem<'a>(batch: &'a Batch<'a>, best: Vec<f64>, f0: f64, std: Vec<f64>) -> 
         slopes: vec![vec![0.0; n]; n],
         max_steps: DEFAULT_MAX_STEPS,
         failure: 1e30,
+        reoptimisation: Reoptimisation::default(),
     }
 }
 
