@@ -205,6 +205,7 @@ mod tests {
                 max: 0.009,
             }],
             evaluations: 500,
+            ..ProposalRefit::default()
         };
         let found = Found {
             unavailable: None,

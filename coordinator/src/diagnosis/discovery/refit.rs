@@ -60,7 +60,7 @@ pub struct RefitStage {
 }
 
 /// The calibration of a campaign with a discovered effect added.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Default, Serialize)]
 pub struct ProposalRefit {
     pub effect: String,
     /// The `[[effects]]` block refitted (empty when every term was folded): harmonics as
