@@ -69,7 +69,7 @@ fn calibrated(dir: &Path, args: &[&str]) -> Option<Calibrated> {
 /// Print what the refit did: each window, the objective against the floor, the residual
 /// and the profile intervals.
 fn print_refit(refit: &ProposalRefit) {
-    eprintln!("{}", refit.refitted_toml);
+    eprintln!("{}", refit.toml);
     for s in &refit.stages {
         eprintln!(
             "stage [{:.2}, {:.2}] s: objective {:.5e} (by {}, {} evaluations)",

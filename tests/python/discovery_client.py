@@ -111,11 +111,12 @@ assert math.isclose(r.ratio_before, r.objective_before / r.noise_floor, rel_tol=
 assert math.isclose(r.ratio_after, r.objective_after / r.noise_floor, rel_tol=1e-12), r
 names = [q.name for q in r.parameters]
 assert names[:2] == ["armFriction", "pendulumFriction"], names
-assert "discovered.armJoint.a1" in names, names
+# The harmonic refitted as an amplitude and a phase of the multiple found.
+assert "discovered.armJoint.amp1" in names, names
 # The effect refitted, as a campaign takes it, is the block shown.
 e = r.effect
 assert e.name == "discovered.armJoint" and e.torque == "armJoint", e
-assert "sin(8 * armJoint.phi)" in e.formula and e.formula in r.effects_toml, (e.formula, r.effects_toml)
+assert "sin(8 * armJoint.phi + phase1)" in e.formula and e.formula in r.effects_toml, (e.formula, r.effects_toml)
 assert [q.name for q in e.parameters] == [n.split(".")[-1] for n in names[2:]], (e.parameters, names)
 for q in e.parameters:
     assert q.min < q.nominal < q.max, q

@@ -64,10 +64,9 @@ pub struct RefitStage {
 pub struct ProposalRefit {
     pub effect: String,
     /// The `[[effects]]` block refitted (empty when every term was folded): harmonics as
-    /// amplitude and phase, started at discovery's estimates.
+    /// amplitude and phase, the refitted values as nominal values (what a campaign takes to
+    /// start where the refit ended), the bounds the refit had.
     pub toml: String,
-    /// The same block with the refitted values as nominal values.
-    pub refitted_toml: String,
     /// Terms folded into the campaign's own parameters (a Coulomb friction's error shows
     /// as `sign(<joint>.w)`) instead of refitted as part of the effect.
     pub folded: Vec<String>,
@@ -160,7 +159,7 @@ pub fn refit_discovered<E: Evaluator>(
             max: p.max,
         })
         .collect();
-    let refitted_toml = kept.as_ref().map_or_else(String::new, |k| {
+    let toml = kept.as_ref().map_or_else(String::new, |k| {
         let mut k = k.clone();
         for p in &mut k.parameters {
             let full = format!("{}.{}", k.name, p.name);
@@ -172,10 +171,7 @@ pub fn refit_discovered<E: Evaluator>(
     });
     Ok(ProposalRefit {
         effect: effect.name.clone(),
-        toml: kept
-            .as_ref()
-            .map_or_else(String::new, DiscoveredEffect::to_toml),
-        refitted_toml,
+        toml,
         folded,
         objective_before,
         objective_after: objective,

@@ -137,9 +137,9 @@ pub fn refit_summary(r: &ProposalRefit) -> String {
             if o.white { "white" } else { "structured" }
         ));
     }
-    if !r.refitted_toml.is_empty() {
+    if !r.toml.is_empty() {
         s.push_str("\n  the block with the refitted values:\n\n");
-        s.push_str(&r.refitted_toml);
+        s.push_str(&r.toml);
         s.push('\n');
     }
     s
