@@ -69,7 +69,7 @@ pub(super) fn escalate<E: Evaluator + Simulator>(
     s: &Setting<E>,
     first: Judgement,
     calibration: &Calibration,
-    candidates: &mut Vec<Candidate>,
+    candidates: &mut [Candidate],
 ) -> Result<Judgement> {
     if matches!(
         first.verdict,
@@ -78,60 +78,8 @@ pub(super) fn escalate<E: Evaluator + Simulator>(
         return Ok(first);
     }
     let mut refits = first.refits;
-    let basins = other_basins(s, calibration)?;
-    if !basins.is_empty() {
-        let leading = |c: &[Candidate]| -> Vec<String> {
-            c.iter()
-                .filter(|c| c.score > 0.0)
-                .take(s.fit_campaign.diagnosis.refit)
-                .map(|c| c.effect.clone())
-                .collect()
-        };
-        let before = leading(candidates);
-        for basin in &basins {
-            let again = ranking::rank(s.fit_campaign, s.measurement, s.engine, basin, s.specs)?;
-            adopt_better(candidates, again, basin.objective, s.baseline.objective);
-        }
-        candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
-        let after = leading(candidates);
-        tracing::info!(
-            basins = basins.len(),
-            ?before,
-            ?after,
-            "ranked from other basins"
-        );
-        if after != before {
-            let again = refit_and_select(
-                s.fit_campaign,
-                s.measurement,
-                s.engine,
-                s.progress,
-                s.baseline,
-                candidates,
-                s.specs,
-                s.holdout,
-                s.noise_floor,
-            )?;
-            merge(&mut refits, again.refits);
-        }
-    }
-    for _ in 0..FORWARD_STEPS {
-        let Some(chosen) = verdict::select(s.baseline, &refits).cloned() else {
-            break;
-        };
-        if s.explains(&chosen) {
-            break;
-        }
-        let more = forward(s, &chosen, &refits)?;
-        if more.is_empty() {
-            break;
-        }
-        merge(&mut refits, more);
-        let now = verdict::select(s.baseline, &refits).map(|f| f.effects.clone());
-        if now.as_ref() == Some(&chosen.effects) {
-            break;
-        }
-    }
+    from_other_basins(s, calibration, candidates, &mut refits)?;
+    forward_steps(s, &mut refits)?;
     for c in candidates.iter_mut() {
         if let Some(f) = refits
             .iter()
@@ -153,6 +101,79 @@ pub(super) fn escalate<E: Evaluator + Simulator>(
         verdict,
         explained_fraction,
     })
+}
+
+/// Step (a): rank the candidates again from the other basins of the campaign's runs
+/// ([`other_basins`]), each keeping its better score; where that changes which candidates
+/// lead, refit them as the first ones were, into `refits`.
+fn from_other_basins<E: Evaluator + Simulator>(
+    s: &Setting<E>,
+    calibration: &Calibration,
+    candidates: &mut [Candidate],
+    refits: &mut Vec<Fit>,
+) -> Result<()> {
+    let basins = other_basins(s, calibration)?;
+    if basins.is_empty() {
+        return Ok(());
+    }
+    let leading = |c: &[Candidate]| -> Vec<String> {
+        c.iter()
+            .filter(|c| c.score > 0.0)
+            .take(s.fit_campaign.diagnosis.refit)
+            .map(|c| c.effect.clone())
+            .collect()
+    };
+    let before = leading(candidates);
+    for basin in &basins {
+        let again = ranking::rank(s.fit_campaign, s.measurement, s.engine, basin, s.specs)?;
+        adopt_better(candidates, again, basin.objective, s.baseline.objective);
+    }
+    candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let after = leading(candidates);
+    tracing::info!(
+        basins = basins.len(),
+        ?before,
+        ?after,
+        "ranked from other basins"
+    );
+    if after != before {
+        let again = refit_and_select(
+            s.fit_campaign,
+            s.measurement,
+            s.engine,
+            s.progress,
+            s.baseline,
+            candidates,
+            s.specs,
+            s.holdout,
+            s.noise_floor,
+        )?;
+        merge(refits, again.refits);
+    }
+    Ok(())
+}
+
+/// Step (b): while the selected refit leaves more than noise, one effect more ([`forward`]),
+/// at most [`FORWARD_STEPS`] times; stops as soon as a step changes nothing.
+fn forward_steps<E: Evaluator + Simulator>(s: &Setting<E>, refits: &mut Vec<Fit>) -> Result<()> {
+    for _ in 0..FORWARD_STEPS {
+        let Some(chosen) = verdict::select(s.baseline, refits).cloned() else {
+            break;
+        };
+        if s.explains(&chosen) {
+            break;
+        }
+        let more = forward(s, &chosen, refits)?;
+        if more.is_empty() {
+            break;
+        }
+        merge(refits, more);
+        let now = verdict::select(s.baseline, refits).map(|f| f.effects.clone());
+        if now.as_ref() == Some(&chosen.effects) {
+            break;
+        }
+    }
+    Ok(())
 }
 
 /// Each candidate keeps the better of its ranking and `again`'s (made from a minimum of
