@@ -2,7 +2,6 @@
 //! negligible both over its bounds (Sobol, Morris) and at the calibration's best point (the
 //! local sensitivity of each output), and names the output that keeps it in.
 
-
 use crate::common::*;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
