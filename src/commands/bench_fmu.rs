@@ -4,7 +4,7 @@
 //! The model is the Reference FMUs' VanDerPol (`../shared/fmus/build.sh OUT 2` builds it);
 //! the built-in twin integrates the same right-hand side, written in Rust, with the same
 //! Dormand–Prince and tolerances, and gives the same trajectory bit for bit
-//! (`worker/tests/fmu_reference.rs`).
+//! (`worker/tests/it/fmu_reference.rs`).
 
 use super::{Failure, Outcome};
 use calib_worker::fmu::{self, Interface};
