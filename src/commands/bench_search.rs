@@ -35,6 +35,37 @@ pub struct Args {
     /// points per round as differential evolution's population.
     #[arg(long)]
     cma_population: Option<usize>,
+    /// Also measure this mix of methods, comma-separated (e.g. a campaign's former default,
+    /// `--mix nelder-mead,powell,differential-evolution`); may be given more than once.
+    #[arg(long = "mix", value_name = "METHODS", value_parser = parse_mix)]
+    mixes: Vec<Vec<Method>>,
+    /// Leave out the rows of each method alone: the campaign's own mix and `--mix` only.
+    #[arg(long)]
+    mixes_only: bool,
+    /// Print the table on standard error and the rows as JSON on standard output.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `a,b,c` as methods, naming the valid ones when a name is not.
+fn parse_mix(text: &str) -> Result<Vec<Method>, String> {
+    text.split(',')
+        .map(|name| {
+            let name = name.trim();
+            Method::ALL
+                .into_iter()
+                .find(|m| m.name() == name)
+                .ok_or_else(|| {
+                    let valid: Vec<&str> = Method::ALL.iter().map(|m| m.name()).collect();
+                    format!("unknown method `{name}`: one of {}", valid.join(", "))
+                })
+        })
+        .collect()
+}
+
+fn mix_label(methods: &[Method]) -> String {
+    let names: Vec<&str> = methods.iter().map(|m| m.name()).collect();
+    format!("mix ({})", names.join(", "))
 }
 
 /// Each run's batches in the order it sent them: (points, the run's best objective after).
@@ -78,22 +109,29 @@ struct Measured {
 }
 
 pub fn run(args: Args) -> Outcome {
+    let mut rows = Vec::new();
     for path in &args.campaigns {
         let campaign = Campaign::load(path).map_err(|e| Failure::input(e.to_string()))?;
-        let mut configurations: Vec<(String, Vec<Method>, Option<usize>)> = Method::ALL
-            .iter()
-            .map(|m| (m.name().to_string(), vec![*m], None))
-            .collect();
-        if let Some(population) = args.cma_population {
+        let mut configurations: Vec<(String, Vec<Method>, Option<usize>)> = if args.mixes_only {
+            Vec::new()
+        } else {
+            Method::ALL
+                .iter()
+                .map(|m| (m.name().to_string(), vec![*m], None))
+                .collect()
+        };
+        if let (Some(population), false) = (args.cma_population, args.mixes_only) {
             configurations.push((
                 format!("cma-es, population {population}"),
                 vec![Method::CmaEs],
                 Some(population),
             ));
         }
-        let mix = campaign.search.methods.clone();
-        let names: Vec<&str> = mix.iter().map(|m| m.name()).collect();
-        configurations.push((format!("mix ({})", names.join(", ")), mix, None));
+        for mix in &args.mixes {
+            configurations.push((mix_label(mix), mix.clone(), None));
+        }
+        let own = campaign.search.methods.clone();
+        configurations.push((format!("{} (the campaign's)", mix_label(&own)), own, None));
         let mut measured = Vec::new();
         for (label, methods, population) in configurations {
             let mut c = campaign.clone();
@@ -108,35 +146,56 @@ pub fn run(args: Args) -> Outcome {
                 runs: batches.runs.into_inner().expect("batches lock"),
             });
         }
-        print_table(&campaign, &measured, &args);
+        rows.extend(print_table(&campaign, &measured, &args));
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&serde_json::Value::Array(rows)).expect("plain data")
+        );
     }
     Ok(())
 }
 
-fn print_table(campaign: &Campaign, measured: &[Measured], args: &Args) {
+/// Print the campaign's table (on standard error under `--json`) and return its rows as JSON.
+fn print_table(campaign: &Campaign, measured: &[Measured], args: &Args) -> Vec<serde_json::Value> {
+    let say = |line: &str| {
+        if args.json {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
+    let mut rows = Vec::new();
     let best = measured
         .iter()
         .map(|m| m.calibration.best_run().objective)
         .fold(f64::INFINITY, f64::min);
     let threshold = best + 0.01 * best.abs();
-    println!(
+    say(&format!(
         "{}: {} starts, {} evaluations per run; best objective {best:.6e}; within 1%: <= {threshold:.6e}",
         campaign.name, campaign.search.starts, campaign.search.max_evaluations
-    );
+    ));
+    let width = measured
+        .iter()
+        .map(|m| m.label.len())
+        .max()
+        .unwrap_or(0)
+        .max(44);
     let mut head = format!(
-        "  {:<44} {:>12} {:>7} {:>7} {:>9} {:>7}",
+        "  {:<width$} {:>16} {:>7} {:>7} {:>9} {:>7}",
         "methods", "best", "rounds", "to 1%", "evals", "at 1%"
     );
     for n in &args.workers {
         head.push_str(&format!(" {:>10}", format!("{n} w [s]")));
     }
-    println!("{head}");
+    say(&head);
     for m in measured {
         let c = &m.calibration;
         let at_best = c.runs.iter().filter(|r| r.objective <= threshold).count();
         let to_best = rounds_to(m, threshold).map_or("-".to_string(), |r| r.to_string());
         let mut line = format!(
-            "  {:<44} {:>12.6e} {:>7} {:>7} {:>9} {:>7}",
+            "  {:<width$} {:>16.10e} {:>7} {:>7} {:>9} {:>7}",
             m.label,
             c.best_run().objective,
             c.rounds(),
@@ -144,17 +203,32 @@ fn print_table(campaign: &Campaign, measured: &[Measured], args: &Args) {
             c.evaluations(),
             format!("{at_best}/{}", c.runs.len())
         );
+        let mut walls = serde_json::Map::new();
         for &n in &args.workers {
-            line.push_str(&format!(" {:>10.3}", wall_time(m, n, args.cost_ms / 1e3)));
+            let wall = wall_time(m, n, args.cost_ms / 1e3);
+            line.push_str(&format!(" {wall:>10.3}"));
+            walls.insert(n.to_string(), serde_json::json!(wall));
         }
-        println!("{line}");
+        say(&line);
+        rows.push(serde_json::json!({
+            "campaign": campaign.name,
+            "label": m.label,
+            "best_objective": c.best_run().objective,
+            "rounds": c.rounds(),
+            "rounds_to_1_percent": rounds_to(m, threshold),
+            "evaluations": c.evaluations(),
+            "runs_within_1_percent": at_best,
+            "runs": c.runs.len(),
+            "wall_seconds": walls,
+        }));
     }
-    println!(
+    say(&format!(
         "  (rounds: batches waited for one after another; to 1%: rounds until a run first \
          came within 1% of the best; at 1%: runs ending there; N w: wall time on N workers, \
          {} ms per simulation)",
         args.cost_ms
-    );
+    ));
+    rows
 }
 
 /// Rounds until the first run came within `threshold`: the rounds before the runs (nominal

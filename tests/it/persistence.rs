@@ -83,6 +83,15 @@ fn a_cma_es_calibration_killed_with_sigkill_resumes_bit_identically() {
     );
 }
 
+/// Levenberg–Marquardt (many starts, so the campaign lasts a few seconds) killed and resumed:
+/// the same runs, rounds included, bit for bit, its residual entries served from the store.
+#[test]
+fn a_levenberg_marquardt_calibration_killed_with_sigkill_resumes_bit_identically() {
+    killed_and_resumed(
+        "methods = [\"levenberg-marquardt\"]\nstarts = 32\nmax_evaluations = 400\nseed = 5",
+    );
+}
+
 /// Calibrate the clean campaign of `search` once on a fresh store, then again on another
 /// store killed (SIGKILL) a quarter of the way and resumed: the same outcome, and nothing
 /// stored simulated again.
