@@ -329,3 +329,43 @@ fn residuals_of_several_experiments_are_concatenated_alike_everywhere() {
         assert_eq!(bits(&a.residuals), bits(&b.residuals));
     }
 }
+
+/// On log10 scales (bounds [1e-5, 0.9], four decades and more) Levenberg–Marquardt, whose
+/// differences and steps are taken on the scale, ends at the frictions it finds on linear
+/// bounds (to 1e-6, relative) and never leaves the bounds; so does CMA-ES, to 1e-4.
+#[test]
+fn on_log10_scales_the_new_methods_end_at_the_linear_optimum() {
+    let dir = tempfile::tempdir().unwrap();
+    let campaign = |file: &str, method: &str, log: bool| {
+        let mut text = clean_campaign(&one_start(method, 3000));
+        if log {
+            text = text.replace(
+                "min = 0.0\nmax = 0.9",
+                "min = 1e-5\nmax = 0.9\nscale = \"log10\"",
+            );
+            assert_eq!(text.matches("log10").count(), 2);
+        }
+        Campaign::load(&write(dir.path(), file, &text)).unwrap()
+    };
+    let linear = calibrate(
+        &campaign("lin.toml", "levenberg-marquardt", false),
+        LocalEvaluator,
+        &Silent,
+    )
+    .unwrap();
+    for (method, tolerance) in [("levenberg-marquardt", 1e-6), ("cma-es", 1e-4)] {
+        let c = campaign(&format!("{method}.toml"), method, true);
+        let bounds = c.free.clone();
+        let log = calibrate(&c, LocalEvaluator, &Silent).unwrap();
+        let (a, b) = (log.best_run(), linear.best_run());
+        println!(
+            "{method} on log10 scales: {:?} {:.12e} `{}`; LM on linear bounds {:?} {:.12e}",
+            a.point, a.objective, a.termination, b.point, b.objective
+        );
+        for (k, (x, y)) in a.point.iter().zip(&b.point).enumerate() {
+            assert!(relative(*x, *y) <= tolerance, "{method}: {x} vs {y}");
+            assert!(*x >= bounds[k].min && *x <= bounds[k].max);
+        }
+        assert!(relative(a.objective, b.objective) <= tolerance);
+    }
+}
