@@ -19,6 +19,7 @@ pub mod optim;
 pub mod outcome;
 pub mod profile;
 pub mod report;
+pub mod residuals;
 pub mod sensitivity;
 pub mod server;
 pub mod store;

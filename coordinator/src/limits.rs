@@ -8,7 +8,8 @@
 //! keeps the worst request a coordinator accepts to memory it can hold: the figures in each
 //! constant's documentation are that worst case.
 
-pub use crate::campaigns::datasets::MAX_DATASET_BYTES;
+/// Largest dataset (a measurement file) an upload may bring (256 MiB).
+pub const MAX_DATASET_BYTES: usize = 256 << 20;
 
 /// Most starts per method (`search.starts`). Each start beyond the nominal one is placed by
 /// [`POINTS_PER_START`](crate::optim::screening::POINTS_PER_START) (40) screening points,
@@ -99,7 +100,6 @@ pub const MAX_MAT_VALUES: usize = 1 << 24;
 const _: () = {
     assert!(MAX_SCREENING < 1 << 16);
     assert!(2 * MAX_FREE_PARAMETERS <= sobol_burley::NUM_DIMENSIONS as usize);
-    assert!(MAX_SENSITIVITY_SAMPLES <= crate::sensitivity::sampling::SALTELLI_MAX_SAMPLES);
 };
 
 /// A campaign's count of `what` checked against its bound: `Err` says the value and the

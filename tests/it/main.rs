@@ -14,6 +14,7 @@ mod real_tool_fmus;
 mod reference_fmus;
 
 mod api;
+mod architecture;
 mod campaign_history;
 mod campaign_requests;
 mod cli;

@@ -205,7 +205,7 @@ pub struct Search {
     /// Stop each run once its objective stops moving; set by diagnosis for its refits,
     /// not by campaign files.
     #[serde(skip)]
-    pub stall: Option<crate::optim::budget::Stall>,
+    pub stall: Option<Stall>,
 }
 
 /// A campaign checked against the model it names.
@@ -327,4 +327,13 @@ impl Campaign {
             .chain(self.more.iter().cloned())
             .collect()
     }
+}
+
+/// Stop a run once its best objective has not fallen by more than `relative` (of itself)
+/// over the last `window` evaluations: the objective has stopped moving, and the rest of
+/// the budget would buy nothing a report can see (the optimisers' budget applies it).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stall {
+    pub window: u64,
+    pub relative: f64,
 }

@@ -10,8 +10,7 @@ use calib_worker::content_hash::ContentHasher;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
-/// Largest upload accepted.
-pub const MAX_DATASET_BYTES: usize = 256 << 20;
+use crate::limits::MAX_DATASET_BYTES;
 
 /// What a dataset holds.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -6,10 +6,10 @@
 use super::{Campaigns, Phase};
 use crate::campaign::Campaign;
 use crate::diagnosis::outside::{found_outside_the_library, Found};
-use crate::diagnosis::stored::StoredEngine;
 use crate::diagnosis::{self, report, Diagnosis};
 use crate::error::{Error, Result};
 use crate::optim::problem::Progress;
+use crate::store::engine::StoredEngine;
 use crate::store::{hex, unhex32, CampaignId};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;

@@ -21,6 +21,7 @@ pub mod datasets;
 pub mod diagnoses;
 pub mod fmus;
 pub mod history;
+pub mod resume;
 
 use crate::calibration::{self, Calibration};
 use crate::campaign::Campaign;

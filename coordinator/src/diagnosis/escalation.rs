@@ -22,7 +22,6 @@
 use super::fair::fair_refits;
 use super::ranking;
 use super::refit::{refit_and_select, Judgement};
-use super::sensitivity::stack;
 use super::verdict;
 use super::{Candidate, Fit};
 use crate::calibration::Calibration;
@@ -33,6 +32,7 @@ use crate::measurement::Measurement;
 use crate::objective::Objective;
 use crate::optim::multistart::Stop;
 use crate::optim::problem::Progress;
+use crate::residuals::jacobian::stack;
 
 /// Other minima of the campaign's runs the candidates are ranked from, at most.
 pub const OTHER_BASINS: usize = 3;

@@ -1,13 +1,14 @@
 //! What a diagnosis keeps of one calibration: the residual, its statistics, the held-out
 //! error, the information criteria and the parameters' confidence intervals.
 
-use super::residual::{self, effective_samples, ResidualStats};
-use super::{sensitivity, uncertainty, Fit};
+use super::Fit;
 use crate::calibration::Calibration;
 use crate::error::{Error, Result};
 use crate::evaluator::Simulator;
 use crate::evidence::runs_at_best;
 use crate::objective::Objective;
+use crate::residuals::whiteness::{self, effective_samples, ResidualStats};
+use crate::residuals::{jacobian, uncertainty};
 
 /// Everything the report needs about one calibration.
 pub(super) fn fit_of<E: Simulator>(
@@ -54,14 +55,14 @@ pub(super) fn fit_of<E: Simulator>(
     let pooled: Vec<f64> = residual_series.iter().flatten().copied().collect();
     let rho1 = residual_series
         .iter()
-        .map(|r| residual::autocorrelation(r, 1)[0])
+        .map(|r| whiteness::autocorrelation(r, 1)[0])
         .fold(0.0, f64::max);
     let total_samples = pooled.len();
     let n_eff = effective_samples(total_samples, rho1);
     let k = point.len() as f64;
     let sse = best.objective.max(f64::MIN_POSITIVE);
     let log_likelihood_term = n_eff * (sse / total_samples as f64).ln();
-    let jacobian = sensitivity::parameter_jacobian(engine, objective, &campaign.free, &point)?;
+    let jacobian = jacobian::parameter_jacobian(engine, objective, &campaign.free, &point)?;
     let (parameters, correlation) = uncertainty::intervals(
         &campaign.free,
         &point,

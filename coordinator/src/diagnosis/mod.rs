@@ -40,16 +40,11 @@ pub mod discovery;
 pub mod escalation;
 pub mod fair;
 pub mod fit;
-pub mod linear;
 pub mod matrix;
 pub mod outside;
 pub mod ranking;
 pub mod refit;
 pub mod report;
-pub mod residual;
-pub mod sensitivity;
-pub mod stored;
-pub mod uncertainty;
 pub mod verdict;
 pub mod window;
 
@@ -70,13 +65,13 @@ use crate::objective::Objective;
 use crate::optim::problem::Progress;
 use crate::store::{MemoryStore, Store};
 
+use crate::residuals::uncertainty::Interval;
+use crate::residuals::whiteness::{noise_level, ResidualStats};
+use crate::store::engine::{EngineStats, StoredEngine};
 use fit::fit_of;
 use refit::{refit_and_select, Judgement};
-use residual::{noise_level, ResidualStats};
 use serde::Serialize;
 use std::time::{Duration, Instant};
-use stored::{EngineStats, StoredEngine};
-use uncertainty::Interval;
 use window::with_window;
 
 /// One calibration of the diagnosis: the baseline or a refit with effects added.

@@ -11,13 +11,14 @@
 //! making a joint stick), and the descent separates effects whose first-order signatures look
 //! alike (viscous friction and quadratic drag on a joint, say).
 
-use super::linear::{dot, Basis, LeastSquares};
-use super::{sensitivity, Candidate, Fit};
+use super::{Candidate, Fit};
 use crate::campaign::{Campaign, FreeParameter};
 use crate::error::{Error, Result};
 use crate::evaluator::{Evaluator, Simulator};
 use crate::measurement::Measurement;
 use crate::objective::Objective;
+use crate::residuals::jacobian;
+use crate::residuals::linear::{dot, Basis, LeastSquares};
 use calib_worker::effects::OutputEffect;
 
 /// Most Gauss–Newton steps per candidate.
@@ -52,7 +53,7 @@ pub fn rank<E: Evaluator + Simulator>(
     extended.free.extend(specs.iter().cloned());
     let objective = Objective::new(&extended, measurement)?;
     let base_objective = Objective::new(campaign, measurement)?;
-    let residual: Vec<f64> = sensitivity::stack(&baseline.residual_series, &objective.weights);
+    let residual: Vec<f64> = jacobian::stack(&baseline.residual_series, &objective.weights);
     let residual_rms = (dot(&residual, &residual) / residual.len().max(1) as f64).sqrt();
     let dt = median_step(&objective.grid);
     let steps: Vec<f64> = specs
@@ -60,8 +61,8 @@ pub fn rank<E: Evaluator + Simulator>(
         .map(|s| initial_step(s, residual_rms, dt))
         .collect();
     let jacobian =
-        sensitivity::parameter_jacobian(engine, &base_objective, &campaign.free, &baseline.point)?;
-    let sens = sensitivity::candidate_sensitivities(
+        jacobian::parameter_jacobian(engine, &base_objective, &campaign.free, &baseline.point)?;
+    let sens = jacobian::candidate_sensitivities(
         engine,
         &objective,
         specs,
@@ -206,7 +207,7 @@ fn descend<E: Evaluator + Simulator>(
     };
     for iteration in 0..GAUSS_NEWTON_STEPS {
         if iteration > 0 || !given {
-            let j = match sensitivity::parameter_jacobian(engine, objective, free, &point) {
+            let j = match jacobian::parameter_jacobian(engine, objective, free, &point) {
                 Ok(j) => j,
                 Err(Error::Fault(fault)) => return Err(fault.into()),
                 Err(_) => break,
@@ -217,8 +218,8 @@ fn descend<E: Evaluator + Simulator>(
             else {
                 break;
             };
-            let model = sensitivity::stack(&series, &objective.weights);
-            let measured = sensitivity::stack(&objective.measured, &objective.weights);
+            let model = jacobian::stack(&series, &objective.weights);
+            let measured = jacobian::stack(&objective.measured, &objective.weights);
             residual = measured.iter().zip(&model).map(|(w, y)| w - y).collect();
             columns = j.columns;
         }

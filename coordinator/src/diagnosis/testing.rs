@@ -1,8 +1,8 @@
 //! Fits made up for the unit tests of the diagnosis.
 
-use super::uncertainty::Interval;
 use super::Fit;
 use crate::campaign::FreeParameter;
+use crate::residuals::uncertainty::Interval;
 
 /// A fit of `(name, nominal, min, max, value, effect)` parameters.
 pub fn fit(params: &[(&str, f64, f64, f64, f64, bool)]) -> Fit {

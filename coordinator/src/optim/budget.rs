@@ -8,14 +8,7 @@ pub const BUDGET_USED: &str = "evaluation budget used";
 /// The words of a stall's termination.
 pub const STALLED: &str = "objective stopped moving";
 
-/// Stop a run once its best objective has not fallen by more than `relative` (of itself)
-/// over the last `window` evaluations: the objective has stopped moving, and the rest of
-/// the budget would buy nothing a report can see.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Stall {
-    pub window: u64,
-    pub relative: f64,
-}
+pub use crate::campaign::Stall;
 
 /// Wraps a solver so that it stops at the first iteration boundary at which the problem has
 /// been evaluated `max_evaluations` times or more, or, with a [`Stall`] rule, at which its

@@ -8,7 +8,6 @@
 //! layout `calib` wrote before the file carried a version; a result stored without one
 //! reads as that version.
 
-mod build;
 mod named;
 
 pub use named::{Entry, Named};

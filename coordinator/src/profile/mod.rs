@@ -16,9 +16,9 @@
 //! const`, and the profile likelihood ratio of one parameter fixed at `v`,
 //! `(f_prof(v) − f(p̂)) / σ²`, is χ²-distributed with one degree of freedom (S. S. Wilks,
 //! Ann. Math. Statist. 9 (1938) 60–62). `σ²` is estimated as the linearised intervals of
-//! the diagnosis estimate it ([`crate::diagnosis::uncertainty`]): `s² = f(p̂) / (N − n)`,
+//! the diagnosis estimate it ([`crate::residuals::uncertainty`]): `s² = f(p̂) / (N − n)`,
 //! and a residual whose lag-1 autocorrelation leaves `N_eff` independent samples
-//! ([`crate::diagnosis::residual::effective_samples`]) carries `N_eff / N` of the
+//! ([`crate::residuals::whiteness::effective_samples`]) carries `N_eff / N` of the
 //! information its curvature suggests, so
 //!
 //! `Δ = χ²₁(0.95) · s² · N / N_eff`, with `χ²₁(0.95) = 3.841459 = 1.959964²`,
@@ -44,16 +44,16 @@ pub mod walk;
 
 use crate::calibration::{calibrate_with_store, load_measurement};
 use crate::campaign::{Campaign, FreeParameter, Scale};
-use crate::diagnosis::residual::{autocorrelation, effective_samples};
-use crate::diagnosis::sensitivity::parameter_jacobian;
-use crate::diagnosis::stored::{EngineStats, StoredEngine};
-use crate::diagnosis::uncertainty::{self, Interval};
 use crate::error::{Error, Result};
 use crate::evaluator::{CacheStats, Evaluator, Simulator};
 use crate::limits::{MAX_FREE_PARAMETERS, MAX_PROFILE_STEPS};
 use crate::objective::{Objective, FAILURE_PENALTY};
 use crate::optim::problem::Silent;
 use crate::optim::space::UnitBox;
+use crate::residuals::jacobian::parameter_jacobian;
+use crate::residuals::uncertainty::{self, Interval};
+use crate::residuals::whiteness::{autocorrelation, effective_samples};
+use crate::store::engine::{EngineStats, StoredEngine};
 use crate::store::{encoding, CampaignStatus, Store};
 use serde::Serialize;
 use std::time::{Duration, Instant};

@@ -20,12 +20,12 @@
 use super::{Sensitivity, INFLUENTIAL_TOTAL};
 use crate::calibration::load_measurement;
 use crate::campaign::Campaign;
-use crate::diagnosis::sensitivity::series_weights;
 use crate::error::{Error, Result};
 use crate::evaluator::Simulator;
 use crate::objective::Objective;
 use crate::optim::space::UnitBox;
 use crate::outcome::CalibrationOutcome;
+use crate::residuals::jacobian::series_weights;
 use crate::store::Store;
 
 /// Central-difference step on the unit box of the scaled bounds.

@@ -145,6 +145,9 @@ pub fn saltelli_design(dim: usize, n: usize, seed: u64) -> Vec<Vec<f64>> {
 pub const SALTELLI_MAX_SAMPLES: usize = (1 << 16) - 1;
 pub const SALTELLI_MAX_DIMENSIONS: usize = sobol_burley::NUM_DIMENSIONS as usize;
 
+// The coordinator's bound on a sensitivity request's samples fits the design.
+const _: () = assert!(crate::limits::MAX_SENSITIVITY_SAMPLES <= SALTELLI_MAX_SAMPLES);
+
 /// Sobol indices of one quantity, with bootstrap confidence intervals (95 %).
 #[derive(Debug, Clone, PartialEq)]
 pub struct SobolIndices {

@@ -3,11 +3,10 @@
 //! an evaluation store, it finishes the campaigns a previous coordinator left unfinished,
 //! again whenever workers come back ([`resume`]).
 
-pub mod resume;
-
 use crate::api::CalibrationApi;
 use crate::campaigns::datasets::Datasets;
 use crate::campaigns::fmus::Fmus;
+use crate::campaigns::resume;
 use crate::campaigns::{self, Campaigns};
 use crate::dispatch::registry::RegistryService;
 use crate::dispatch::{self, DispatchConfig, GrpcEvaluator, WorkerPool};

@@ -20,6 +20,7 @@
 
 mod damage;
 pub mod encoding;
+pub mod engine;
 pub mod evaluator;
 pub mod export;
 mod key_filter;

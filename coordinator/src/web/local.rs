@@ -7,10 +7,10 @@
 use super::WebApp;
 use crate::campaigns::datasets::Datasets;
 use crate::campaigns::fmus::Fmus;
+use crate::campaigns::resume;
 use crate::campaigns::{self, Campaigns};
 use crate::error::{Error, Result};
 use crate::evaluator::LocalEvaluator;
-use crate::server::resume;
 use crate::store::SledStore;
 use calib_worker::service::cache::MeasurementCache;
 use calib_worker::service::fmu_cache::FmuCache;

@@ -26,8 +26,8 @@ pub mod local;
 pub mod plots;
 
 use crate::api::CalibrationApi;
-use crate::campaigns::datasets::MAX_DATASET_BYTES;
 use crate::campaigns::Campaigns;
+use crate::limits::MAX_DATASET_BYTES;
 use crate::limits::MAX_FMU_BYTES;
 use axum::body::Bytes;
 use axum::extract::{DefaultBodyLimit, Path, RawQuery, State};

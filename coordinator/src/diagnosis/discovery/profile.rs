@@ -10,14 +10,14 @@
 //! lightly damped joint is curved on that scale already.
 
 use crate::campaign::Campaign;
-use crate::diagnosis::residual::{effective_samples, ResidualStats};
-use crate::diagnosis::uncertainty::intervals;
 use crate::error::{Error, Result};
 use crate::evaluator::Evaluator;
 use crate::objective::Objective;
 use crate::optim::space::UnitBox;
 use crate::profile::walk::{Reoptimisation, DEFAULT_MAX_STEPS};
 use crate::profile::{profile_around_with, Around, ParameterProfile, Threshold};
+use crate::residuals::uncertainty::intervals;
+use crate::residuals::whiteness::{effective_samples, ResidualStats};
 use serde::Serialize;
 
 /// Step of the central differences, in each parameter's unit box.

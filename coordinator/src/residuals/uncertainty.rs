@@ -4,7 +4,7 @@
 //! the objective), `(JᵀJ)⁻¹ = V Σ⁻² Vᵀ` from the singular value decomposition of `J`; when
 //! `J` is rank deficient (see [`super::linear::RANK_TOLERANCE`]) every interval is
 //! unbounded. A correlated residual carries fewer independent samples than its count,
-//! so the covariance is widened by `N / N_eff` (see [`super::residual::effective_samples`]).
+//! so the covariance is widened by `N / N_eff` (see [`super::whiteness::effective_samples`]).
 //! 95% intervals are `value ± 1.96 √Cov_ii`. Where a parameter's interval is wide or two
 //! parameters correlate beyond ±0.95, the data cannot tell them apart; the report shows the
 //! correlation matrix so a user sees it.

@@ -1,11 +1,11 @@
-//! The outcome of a calibration from what it found.
+//! The typed outcome ([`crate::outcome`]) of a calibration from what it found.
 
-use super::{
+use super::Calibration;
+use crate::evidence;
+use crate::outcome::{
     Best, CalibrationOutcome, ExperimentFit, ExperimentInput, Minimum, Named, Range, Run, Spread,
     WindowSummary, VERSION,
 };
-use crate::calibration::Calibration;
-use crate::evidence;
 
 fn named(names: &[String], values: &[f64]) -> Named<f64> {
     names.iter().cloned().zip(values.iter().copied()).collect()

@@ -1,6 +1,8 @@
 //! A whole calibration: load the data, score the nominal point, run every method from every
 //! start, cluster the minima, pick the best.
 
+mod outcome;
+
 use crate::campaign::Campaign;
 use crate::error::{Error, Result};
 use crate::evaluator::{CacheStats, Evaluator, Fault, FaultKind};
