@@ -1,6 +1,7 @@
 use super::{Failure, Outcome};
 use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
 use calib_worker::limits;
+use calib_worker::model::{Model, ModelInfo, SolverOptions};
 use calib_worker::validate::{self, SolverOverrides};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -144,65 +145,10 @@ fn read_inputs(
 pub fn run(args: Args) -> Outcome {
     let model = super::fmu::model(&args.model, args.interface)?;
     let info = model.info();
-    let mut params = info.default_vector();
-    for assignment in &args.set {
-        let Some((name, value)) = assignment.split_once('=') else {
-            return Err(Failure::input(format!(
-                "--set {assignment}: expected NAME=VALUE"
-            )));
-        };
-        let (name, value) = (name.trim(), value.trim());
-        let refused = |e: validate::Invalid| Failure::input(format!("--set {assignment}: {e}"));
-        let index = validate::parameter(info, name).map_err(refused)?;
-        let v: f64 = value.parse().map_err(|_| {
-            Failure::input(format!("--set {assignment}: `{value}` is not a number"))
-        })?;
-        validate::parameter_value(info, index, v).map_err(refused)?;
-        params[index] = v;
-    }
-    if args.stop.is_nan() || args.stop <= args.start {
-        return Err(Failure::input(format!(
-            "--stop {}: must be a time after the start ({} s)",
-            args.stop, args.start
-        )));
-    }
-    validate::stop_time(args.stop)
-        .map_err(|e| Failure::input(format!("--stop {}: {e}", args.stop)))?;
-    let rows = (args.stop - args.start) / args.step + 2.0;
-    if !(args.step > 0.0 && rows <= limits::MAX_TIMES as f64) {
-        return Err(Failure::input(format!(
-            "--step {}: must be positive and give at most {} rows",
-            args.step,
-            limits::MAX_TIMES
-        )));
-    }
-    // The CLI's one tolerance sets both: atol a hundredth of rtol.
-    let overrides = SolverOverrides {
-        rtol: args.rtol,
-        atol: args.rtol.map(|rtol| rtol * 1e-2),
-        max_steps: None,
-        start_time: Some(args.start),
-        communication_step: args.cs_step,
-    };
-    let options = validate::solver_options(model, overrides).map_err(|(option, e)| {
-        let (flag, value) = match option {
-            "start_time" => ("--start", Some(args.start)),
-            "communication_step" => ("--cs-step", args.cs_step),
-            _ => ("--rtol", args.rtol),
-        };
-        Failure::input(format!("{flag} {}: {e}", value.unwrap_or(f64::NAN)))
-    })?;
-    let outputs: Vec<usize> = if args.outputs.is_empty() {
-        (0..info.outputs.len()).collect()
-    } else {
-        args.outputs
-            .iter()
-            .map(|name| {
-                validate::output(info, name)
-                    .map_err(|e| Failure::input(format!("--outputs {name}: {e}")))
-            })
-            .collect::<Result<_, _>>()?
-    };
+    let params = parameters(info, &args.set)?;
+    check_times(&args)?;
+    let options = solver_options(model, &args)?;
+    let outputs = chosen_outputs(info, &args.outputs)?;
     let grid = output_times(args.start, args.stop, args.step);
     validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
     // A profile is NAME=T:V,...; anything else names a file.
@@ -227,9 +173,146 @@ pub fn run(args: Args) -> Outcome {
     inputs
         .check(info, 0.0f64.min(args.start), args.stop)
         .map_err(|e| Failure::input(format!("--input: {e}")))?;
-    // Noise of the written outputs, then of the driven inputs' columns.
+    let noise = noise_levels(info, &outputs, &inputs, &args.noise)?;
+    // The file's signals drive the model beside the profiles; only the profiles are written
+    // (the file holds its own columns already).
+    let mut driving = inputs.clone();
+    if let Some(path) = files.first() {
+        let path = PathBuf::from(path.as_str());
+        let interpolation = match args.input_interpolation {
+            InterpolationArg::Linear => Interpolation::Linear,
+            InterpolationArg::Hold => Interpolation::Hold,
+        };
+        let read = read_inputs(&path, info, interpolation)?;
+        read.check(info, options.start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+        driving.signals.extend(read.signals);
+        driving
+            .check(info, options.start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+    }
+    let mut trajectory = model
+        .simulate_driven(&params, &grid, &outputs, &options, &driving)
+        .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
+    let mut columns: Vec<Vec<f64>> = inputs
+        .signals
+        .iter()
+        .map(|s| grid.iter().map(|&t| s.at(t)).collect())
+        .collect();
+    // The outputs' noise is drawn first, so a record without inputs keeps its draws.
+    add_noise(
+        trajectory.values.iter_mut().chain(columns.iter_mut()),
+        &noise,
+        args.seed,
+    )?;
+    let mut header = vec!["time".to_string()];
+    header.extend(
+        inputs
+            .signals
+            .iter()
+            .map(|s| info.inputs[s.input].name.clone()),
+    );
+    header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
+    let series: Vec<&Vec<f64>> = columns.iter().chain(&trajectory.values).collect();
+    write_csv(args.out.as_deref(), &header, &grid, &series)?;
+    if let Some(path) = &args.out {
+        eprintln!(
+            "wrote {} rows of {} outputs to {}",
+            grid.len(),
+            outputs.len(),
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// The model's default parameters with each `--set NAME=VALUE` applied, checked.
+fn parameters(info: &ModelInfo, sets: &[String]) -> Result<Vec<f64>, Failure> {
+    let mut params = info.default_vector();
+    for assignment in sets {
+        let Some((name, value)) = assignment.split_once('=') else {
+            return Err(Failure::input(format!(
+                "--set {assignment}: expected NAME=VALUE"
+            )));
+        };
+        let (name, value) = (name.trim(), value.trim());
+        let refused = |e: validate::Invalid| Failure::input(format!("--set {assignment}: {e}"));
+        let index = validate::parameter(info, name).map_err(refused)?;
+        let v: f64 = value.parse().map_err(|_| {
+            Failure::input(format!("--set {assignment}: `{value}` is not a number"))
+        })?;
+        validate::parameter_value(info, index, v).map_err(refused)?;
+        params[index] = v;
+    }
+    Ok(params)
+}
+
+/// `--start`, `--stop` and `--step` give a span the limits allow.
+fn check_times(args: &Args) -> Outcome {
+    if args.stop.is_nan() || args.stop <= args.start {
+        return Err(Failure::input(format!(
+            "--stop {}: must be a time after the start ({} s)",
+            args.stop, args.start
+        )));
+    }
+    validate::stop_time(args.stop)
+        .map_err(|e| Failure::input(format!("--stop {}: {e}", args.stop)))?;
+    let rows = (args.stop - args.start) / args.step + 2.0;
+    if !(args.step > 0.0 && rows <= limits::MAX_TIMES as f64) {
+        return Err(Failure::input(format!(
+            "--step {}: must be positive and give at most {} rows",
+            args.step,
+            limits::MAX_TIMES
+        )));
+    }
+    Ok(())
+}
+
+/// The solver options of the command line, checked against the model; an error names the
+/// flag.
+fn solver_options(model: &dyn Model, args: &Args) -> Result<SolverOptions, Failure> {
+    // The CLI's one tolerance sets both: atol a hundredth of rtol.
+    let overrides = SolverOverrides {
+        rtol: args.rtol,
+        atol: args.rtol.map(|rtol| rtol * 1e-2),
+        max_steps: None,
+        start_time: Some(args.start),
+        communication_step: args.cs_step,
+    };
+    validate::solver_options(model, overrides).map_err(|(option, e)| {
+        let (flag, value) = match option {
+            "start_time" => ("--start", Some(args.start)),
+            "communication_step" => ("--cs-step", args.cs_step),
+            _ => ("--rtol", args.rtol),
+        };
+        Failure::input(format!("{flag} {}: {e}", value.unwrap_or(f64::NAN)))
+    })
+}
+
+/// The outputs `--outputs` names (every output when it names none).
+fn chosen_outputs(info: &ModelInfo, names: &[String]) -> Result<Vec<usize>, Failure> {
+    if names.is_empty() {
+        return Ok((0..info.outputs.len()).collect());
+    }
+    names
+        .iter()
+        .map(|name| {
+            validate::output(info, name)
+                .map_err(|e| Failure::input(format!("--outputs {name}: {e}")))
+        })
+        .collect()
+}
+
+/// The noise of the written outputs, then of the driven inputs' columns, from each
+/// `--noise NAME=SIGMA`.
+fn noise_levels(
+    info: &ModelInfo,
+    outputs: &[usize],
+    inputs: &Inputs,
+    assignments: &[String],
+) -> Result<Vec<f64>, Failure> {
     let mut noise = vec![0.0; outputs.len() + inputs.signals.len()];
-    for assignment in &args.noise {
+    for assignment in assignments {
         let Some((name, sigma)) = assignment.split_once('=') else {
             return Err(Failure::input(format!(
                 "--noise {assignment}: expected NAME=SIGMA"
@@ -259,42 +342,20 @@ pub fn run(args: Args) -> Outcome {
             }
         }
     }
-    // The file's signals drive the model beside the profiles; only the profiles are written
-    // (the file holds its own columns already).
-    let mut driving = inputs.clone();
-    if let Some(path) = files.first() {
-        let path = PathBuf::from(path.as_str());
-        let interpolation = match args.input_interpolation {
-            InterpolationArg::Linear => Interpolation::Linear,
-            InterpolationArg::Hold => Interpolation::Hold,
-        };
-        let read = read_inputs(&path, info, interpolation)?;
-        read.check(info, options.start_time, args.stop)
-            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
-        driving.signals.extend(read.signals);
-        driving
-            .check(info, options.start_time, args.stop)
-            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
-    }
-    let mut trajectory = model
-        .simulate_driven(&params, &grid, &outputs, &options, &driving)
-        .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
-    let mut columns: Vec<Vec<f64>> = inputs
-        .signals
-        .iter()
-        .map(|s| grid.iter().map(|&t| s.at(t)).collect())
-        .collect();
+    Ok(noise)
+}
 
-    // The outputs' noise is drawn first, so a record without inputs keeps its draws.
-    let mut rng = ChaCha8Rng::seed_from_u64(args.seed);
-    for (series, &sigma) in trajectory
-        .values
-        .iter_mut()
-        .chain(columns.iter_mut())
-        .zip(&noise)
-    {
+/// Add Gaussian noise of standard deviation `noise[k]` to the k-th series, drawn in order
+/// from one generator seeded with `seed`.
+fn add_noise<'a>(
+    series: impl Iterator<Item = &'a mut Vec<f64>>,
+    noise: &[f64],
+    seed: u64,
+) -> Outcome {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    for (series, &sigma) in series.zip(noise) {
         if sigma > 0.0 {
-            // Checked above: every σ is finite and not negative.
+            // Checked where read: every σ is finite and not negative.
             let normal = Normal::new(0.0, sigma)
                 .map_err(|e| Failure::internal(format!("noise of σ = {sigma}: {e}")))?;
             for v in series.iter_mut() {
@@ -302,8 +363,18 @@ pub fn run(args: Args) -> Outcome {
             }
         }
     }
+    Ok(())
+}
 
-    let sink: Box<dyn Write> = match &args.out {
+/// Write `header` and a row per time of `grid` (the time, then each series) as CSV to
+/// `out`, or to standard output.
+fn write_csv(
+    out: Option<&std::path::Path>,
+    header: &[String],
+    grid: &[f64],
+    series: &[&Vec<f64>],
+) -> Outcome {
+    let sink: Box<dyn Write> = match out {
         Some(path) => Box::new(
             std::fs::File::create(path)
                 .map_err(|e| Failure::internal(format!("cannot write {}: {e}", path.display())))?,
@@ -312,36 +383,14 @@ pub fn run(args: Args) -> Outcome {
     };
     let mut csv = csv::Writer::from_writer(std::io::BufWriter::new(sink));
     let write_error = |e: csv::Error| Failure::internal(format!("cannot write CSV: {e}"));
-    let mut header = vec!["time".to_string()];
-    header.extend(
-        inputs
-            .signals
-            .iter()
-            .map(|s| info.inputs[s.input].name.clone()),
-    );
-    header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
-    csv.write_record(&header).map_err(write_error)?;
+    csv.write_record(header).map_err(write_error)?;
     for (i, t) in grid.iter().enumerate() {
         let mut row = vec![format!("{t}")];
-        row.extend(
-            columns
-                .iter()
-                .chain(&trajectory.values)
-                .map(|v| format!("{}", v[i])),
-        );
+        row.extend(series.iter().map(|v| format!("{}", v[i])));
         csv.write_record(&row).map_err(write_error)?;
     }
     csv.flush()
-        .map_err(|e| Failure::internal(format!("cannot write CSV: {e}")))?;
-    if let Some(path) = &args.out {
-        eprintln!(
-            "wrote {} rows of {} outputs to {}",
-            grid.len(),
-            outputs.len(),
-            path.display()
-        );
-    }
-    Ok(())
+        .map_err(|e| Failure::internal(format!("cannot write CSV: {e}")))
 }
 
 /// The signal of `--input NAME=T:V,T:V,...`: the points, read linearly, extended to cover
