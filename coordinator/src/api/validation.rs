@@ -95,6 +95,16 @@ pub(super) fn form_problems(c: &pb::Campaign) -> Vec<Problem> {
             problems.push(Problem::new("search.methods", "choose at least one method"));
         }
     }
+    problems.extend(output_problems(c));
+    problems.extend(parameter_problems(c));
+    problems.extend(form_window_problems(c));
+    problems
+}
+
+/// The outputs to compare: at least one (the campaign's, or each experiment's own), each
+/// with its measured column chosen.
+fn output_problems(c: &pb::Campaign) -> Vec<Problem> {
+    let mut problems = Vec::new();
     let no_outputs = "choose at least one output to compare with the measurement";
     if c.experiments.is_empty() {
         if c.outputs.is_empty() {
@@ -129,6 +139,13 @@ pub(super) fn form_problems(c: &pb::Campaign) -> Vec<Problem> {
             ));
         }
     }
+    problems
+}
+
+/// The parameters to calibrate: at least one (shared, an effect, or an experiment's own),
+/// each with its bounds ([`bound_problems`]).
+fn parameter_problems(c: &pb::Campaign) -> Vec<Problem> {
+    let mut problems = Vec::new();
     let shared_free = !c.parameters.is_empty() || !c.effects.is_empty();
     let own_free = c.experiments.iter().any(|e| !e.parameters.is_empty());
     if !shared_free && !own_free {
@@ -151,6 +168,13 @@ pub(super) fn form_problems(c: &pb::Campaign) -> Vec<Problem> {
             problems.extend(bound_problems(&format!("{list}[{i}]"), p));
         }
     }
+    problems
+}
+
+/// The windows of the data to fit: the campaign's one window or several (not both), or
+/// each experiment's; each on its own ([`window_problems`]).
+fn form_window_problems(c: &pb::Campaign) -> Vec<Problem> {
+    let mut problems = Vec::new();
     if c.experiments.is_empty() {
         let (start, stop) = (c.window_start, c.window_stop);
         if c.windows.is_empty() && start == 0.0 && stop == 0.0 {
