@@ -118,7 +118,30 @@ impl CalibrationApi {
     /// The campaign file of a campaign message, its records the uploaded datasets it names:
     /// `dataset_id`, or each experiment's.
     pub(super) async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
-        let (record, experiments) = if campaign.experiments.is_empty() {
+        let (record, experiments) = self.records(campaign).await?;
+        if campaign.fmu_id.is_empty() {
+            if fmu::interface_in_name(&campaign.model).is_some() {
+                return Err(Status::invalid_argument(format!(
+                    "campaign.fmu_id: missing; `{}` is an FMU's model: name the FMU by the \
+                     id UploadFmu answered",
+                    campaign.model
+                )));
+            }
+            return spec::campaign_file_with(campaign, record.as_ref(), &experiments, None)
+                .map_err(Status::invalid_argument);
+        }
+        let (campaign, archive) = self.on_fmu(campaign).await?;
+        spec::campaign_file_with(&campaign, record.as_ref(), &experiments, Some(&archive))
+            .map_err(Status::invalid_argument)
+    }
+
+    /// The records of a campaign message, each checked against its dataset: the one of
+    /// `dataset_id`, or each experiment's.
+    async fn records(
+        &self,
+        campaign: &pb::Campaign,
+    ) -> Result<(Option<spec::Record>, Vec<spec::Record>), Status> {
+        Ok(if campaign.experiments.is_empty() {
             let dataset = self
                 .dataset(&campaign.dataset_id, "campaign.dataset_id")
                 .await?;
@@ -150,18 +173,15 @@ impl CalibrationApi {
                 records.push(self.record(&dataset));
             }
             (None, records)
-        };
-        if campaign.fmu_id.is_empty() {
-            if fmu::interface_in_name(&campaign.model).is_some() {
-                return Err(Status::invalid_argument(format!(
-                    "campaign.fmu_id: missing; `{}` is an FMU's model: name the FMU by the \
-                     id UploadFmu answered",
-                    campaign.model
-                )));
-            }
-            return spec::campaign_file_with(campaign, record.as_ref(), &experiments, None)
-                .map_err(Status::invalid_argument);
-        }
+        })
+    }
+
+    /// A campaign message on the uploaded FMU it names, its model checked to be one of the
+    /// FMU's and its interface the one that model runs through; and the FMU's archive.
+    async fn on_fmu(
+        &self,
+        campaign: &pb::Campaign,
+    ) -> Result<(pb::Campaign, std::path::PathBuf), Status> {
         let info = self.fmu(&campaign.fmu_id, "campaign.fmu_id").await?;
         let mut campaign = campaign.clone();
         if !campaign.model.is_empty() {
@@ -193,7 +213,6 @@ impl CalibrationApi {
             .ok()
             .and_then(|f| f.file(&info.id))
             .ok_or_else(|| Status::internal("the FMU's archive has no path"))?;
-        spec::campaign_file_with(&campaign, record.as_ref(), &experiments, Some(&archive))
-            .map_err(Status::invalid_argument)
+        Ok((campaign, archive))
     }
 }
