@@ -5,9 +5,10 @@ use super::follow::{follow, follow_analysis, AnalysisStream, DiagnosisStream, St
 use super::messages::{diagnosis_state, fmu_message, state};
 use super::problem::Problem;
 use super::refusals::{not_found, status};
-use super::{defined_effects, CalibrationApi, MAX_CHUNK_BYTES, MAX_PAGE};
+use super::uploads::{dataset_chunks, fmu_chunks};
+use super::{defined_effects, CalibrationApi, MAX_PAGE};
 use crate::campaigns::Watched;
-use crate::limits::{MAX_DATASET_BYTES, MAX_FMU_BYTES, MAX_IDEMPOTENCY_KEY_BYTES};
+use crate::limits::MAX_IDEMPOTENCY_KEY_BYTES;
 use crate::sensitivity::{Methods, Settings, DEFAULT_SAMPLES};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_server::Calibration;
@@ -19,29 +20,7 @@ impl Calibration for CalibrationApi {
         &self,
         request: Request<Streaming<pb::DatasetChunk>>,
     ) -> Result<Response<pb::Dataset>, Status> {
-        let mut chunks = request.into_inner();
-        let mut bytes = Vec::new();
-        let (mut file_name, mut time_column) = (String::new(), String::new());
-        let mut first = true;
-        while let Some(chunk) = chunks.message().await? {
-            if first {
-                file_name = chunk.file_name;
-                time_column = chunk.time_column;
-                first = false;
-            }
-            if chunk.data.len() > MAX_CHUNK_BYTES {
-                return Err(Status::invalid_argument(format!(
-                    "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
-                    chunk.data.len()
-                )));
-            }
-            if bytes.len() + chunk.data.len() > MAX_DATASET_BYTES {
-                return Err(Status::invalid_argument(format!(
-                    "data: the file is more than the {MAX_DATASET_BYTES} bytes accepted"
-                )));
-            }
-            bytes.extend_from_slice(&chunk.data);
-        }
+        let (file_name, time_column, bytes) = dataset_chunks(request.into_inner()).await?;
         self.upload(file_name, time_column, bytes)
             .await
             .map(Response::new)
@@ -51,29 +30,7 @@ impl Calibration for CalibrationApi {
         &self,
         request: Request<Streaming<pb::FmuChunk>>,
     ) -> Result<Response<pb::Fmu>, Status> {
-        let mut chunks = request.into_inner();
-        let mut bytes = Vec::new();
-        let mut file_name = String::new();
-        let mut first = true;
-        while let Some(chunk) = chunks.message().await? {
-            if first {
-                file_name = chunk.file_name;
-                first = false;
-            }
-            if chunk.data.len() > MAX_CHUNK_BYTES {
-                return Err(Status::invalid_argument(format!(
-                    "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
-                    chunk.data.len()
-                )));
-            }
-            if bytes.len() + chunk.data.len() > MAX_FMU_BYTES {
-                return Err(Status::invalid_argument(format!(
-                    "fmu: the archive is more than the {MAX_FMU_BYTES} bytes accepted (what a \
-                     worker's UploadFmu carries)"
-                )));
-            }
-            bytes.extend_from_slice(&chunk.data);
-        }
+        let (file_name, bytes) = fmu_chunks(request.into_inner()).await?;
         self.upload_fmu_bytes(file_name, bytes)
             .await
             .map(Response::new)

@@ -1,12 +1,13 @@
-//! The datasets and FMUs a client uploads: the end of their uploads, once the chunks are
-//! joined, and the lookup of one by the id its upload answered.
+//! The datasets and FMUs a client uploads: their chunks joined, the file checked and kept,
+//! and the lookup of one by the id its upload answered.
 
 use super::messages::fmu_message;
 use super::CalibrationApi;
 use crate::campaigns::datasets::DatasetInfo;
 use crate::campaigns::fmus::FmuInfo;
+use crate::limits::{MAX_CHUNK_BYTES, MAX_DATASET_BYTES, MAX_FMU_BYTES};
 use calib_proto::v1 as pb;
-use tonic::Status;
+use tonic::{Status, Streaming};
 
 impl CalibrationApi {
     /// The end of `UploadDataset`, once the chunks are joined: check the file's name, parse
@@ -98,4 +99,65 @@ impl CalibrationApi {
             ))
         })
     }
+}
+
+/// The chunks of an `UploadDataset` joined: the file's name and time column (the first
+/// chunk's) and its bytes, refused past [`MAX_CHUNK_BYTES`] a chunk or
+/// [`MAX_DATASET_BYTES`] in all.
+pub(super) async fn dataset_chunks(
+    mut chunks: Streaming<pb::DatasetChunk>,
+) -> Result<(String, String, Vec<u8>), Status> {
+    let mut bytes = Vec::new();
+    let (mut file_name, mut time_column) = (String::new(), String::new());
+    let mut first = true;
+    while let Some(chunk) = chunks.message().await? {
+        if first {
+            file_name = chunk.file_name;
+            time_column = chunk.time_column;
+            first = false;
+        }
+        if chunk.data.len() > MAX_CHUNK_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
+                chunk.data.len()
+            )));
+        }
+        if bytes.len() + chunk.data.len() > MAX_DATASET_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "data: the file is more than the {MAX_DATASET_BYTES} bytes accepted"
+            )));
+        }
+        bytes.extend_from_slice(&chunk.data);
+    }
+    Ok((file_name, time_column, bytes))
+}
+
+/// The chunks of an `UploadFmu` joined: the archive's name (the first chunk's) and its
+/// bytes, refused past [`MAX_CHUNK_BYTES`] a chunk or [`MAX_FMU_BYTES`] in all.
+pub(super) async fn fmu_chunks(
+    mut chunks: Streaming<pb::FmuChunk>,
+) -> Result<(String, Vec<u8>), Status> {
+    let mut bytes = Vec::new();
+    let mut file_name = String::new();
+    let mut first = true;
+    while let Some(chunk) = chunks.message().await? {
+        if first {
+            file_name = chunk.file_name;
+            first = false;
+        }
+        if chunk.data.len() > MAX_CHUNK_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
+                chunk.data.len()
+            )));
+        }
+        if bytes.len() + chunk.data.len() > MAX_FMU_BYTES {
+            return Err(Status::invalid_argument(format!(
+                "fmu: the archive is more than the {MAX_FMU_BYTES} bytes accepted (what a \
+                 worker's UploadFmu carries)"
+            )));
+        }
+        bytes.extend_from_slice(&chunk.data);
+    }
+    Ok((file_name, bytes))
 }
