@@ -82,7 +82,7 @@ pub struct RunningCoordinator {
     address: SocketAddr,
     pool: Arc<WorkerPool>,
     shutdown: Option<oneshot::Sender<()>>,
-    server: JoinHandle<std::result::Result<(), tonic::transport::Error>>,
+    server: GrpcTask,
     resume: Option<JoinHandle<Result<usize>>>,
     control: Arc<resume::ResumeControl>,
     web: Option<RunningUi>,
@@ -181,17 +181,7 @@ pub fn serve_coordinator(
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
     let web_listener = match config.http {
-        Some(http) => {
-            let bound = std::net::TcpListener::bind(http)
-                .and_then(|l| l.set_nonblocking(true).map(|_| l))
-                .and_then(TcpListener::from_std)
-                .map_err(|source| Error::Listen {
-                    option: "--http",
-                    address: http,
-                    source,
-                })?;
-            Some(bound)
-        }
+        Some(http) => Some(bind_http(http)?),
         None => None,
     };
     // Open the store first: one held by another process stops the coordinator at once.
@@ -200,15 +190,68 @@ pub fn serve_coordinator(
         None => None,
     };
     let pool = dispatch::start_pool(config.dispatch.clone())?;
+    let campaigns = open_campaigns(&config, store.as_ref(), &pool)?;
+    let web = match web_listener {
+        Some(listener) => Some(start_web(listener, &config, &campaigns)?),
+        None => None,
+    };
+    let (shutdown, server) = spawn_grpc(listener, &config, &campaigns, &pool)?;
+    tracing::info!(
+        %address,
+        tls = config.security.tls.is_some(),
+        token = config.security.token.is_some(),
+        "coordinator serving"
+    );
+    // Campaigns submitted to the API and left running go on as live campaigns, so their
+    // clients follow them; the store's resume below skips them.
+    if store.is_some() {
+        match campaigns.resume_submitted() {
+            Ok(0) => {}
+            Ok(count) => tracing::info!(campaigns = count, "submitted campaigns resumed"),
+            Err(e) => tracing::error!(error = %e, "cannot resume submitted campaigns"),
+        }
+    }
+    let control = Arc::new(resume::ResumeControl::default());
+    let resume = store.map(|store| spawn_resume(store, &config, &pool, &control, &campaigns));
+    Ok(RunningCoordinator {
+        address,
+        pool,
+        shutdown: Some(shutdown),
+        server,
+        resume,
+        control,
+        web,
+    })
+}
+
+/// The web app's listener on `http` (`--http`).
+fn bind_http(http: SocketAddr) -> Result<TcpListener> {
+    std::net::TcpListener::bind(http)
+        .and_then(|l| l.set_nonblocking(true).map(|_| l))
+        .and_then(TcpListener::from_std)
+        .map_err(|source| Error::Listen {
+            option: "--http",
+            address: http,
+            source,
+        })
+}
+
+/// The API's campaigns: on the coordinator's store (in memory without one), evaluated on
+/// the pool's workers, their datasets, results and FMUs in the API folder.
+fn open_campaigns(
+    config: &CoordinatorConfig,
+    store: Option<&Arc<SledStore>>,
+    pool: &Arc<WorkerPool>,
+) -> Result<Arc<Campaigns>> {
     let api_folder = config
         .api
         .clone()
         .unwrap_or_else(|| campaigns::default_folder(config.store.as_deref()));
-    let api_store: Arc<dyn Store> = match &store {
+    let api_store: Arc<dyn Store> = match store {
         Some(s) => s.clone(),
         None => Arc::new(MemoryStore::new()),
     };
-    let campaigns = Arc::new(
+    Ok(Arc::new(
         Campaigns::new(
             api_store,
             Arc::new(GrpcEvaluator::new(
@@ -219,29 +262,61 @@ pub fn serve_coordinator(
             api_folder.join("results"),
         )
         .with_fmus(Fmus::open(&api_folder.join("fmus"))?),
-    );
+    ))
+}
+
+/// Serve the web app on `listener` over the API's campaigns.
+fn start_web(
+    listener: TcpListener,
+    config: &CoordinatorConfig,
+    campaigns: &Arc<Campaigns>,
+) -> Result<RunningUi> {
     // The Model tab runs an uploaded FMU's code on this machine only behind the token:
     // without one, anyone reaching the port could. Campaigns on FMUs run on the workers.
     let web_fmus = config.security.token.is_some();
-    let web = match web_listener {
-        Some(listener) => {
-            let simulator = if web_fmus {
-                web::local::simulator_with_fmus(campaigns.fmus()?)?
-            } else {
-                web::local::simulator()
-            };
-            Some(serve_app(
-                listener,
-                WebApp::new(campaigns.clone(), simulator)
-                    .with_door(DoorConfig {
-                        allow_hosts: config.http_allow_hosts.clone(),
-                        token: config.security.token.clone(),
-                    })
-                    .with_fmu_simulation(web_fmus),
-            )?)
-        }
-        None => None,
+    let simulator = if web_fmus {
+        web::local::simulator_with_fmus(campaigns.fmus()?)?
+    } else {
+        web::local::simulator()
     };
+    serve_app(
+        listener,
+        WebApp::new(campaigns.clone(), simulator)
+            .with_door(DoorConfig {
+                allow_hosts: config.http_allow_hosts.clone(),
+                token: config.security.token.clone(),
+            })
+            .with_fmu_simulation(web_fmus),
+    )
+}
+
+/// Reflection that lists exactly what this server answers (not the workers' Simulator).
+fn reflection() -> tonic_reflection::server::Builder<'static> {
+    let mut builder = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        // Both versions of the reflection protocol describe both reflection services (each
+        // build adds only its own file): a client of either version can look up every
+        // service it is listed.
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET);
+    for name in SERVED {
+        builder = builder.with_service_name(*name);
+    }
+    builder
+}
+
+/// The gRPC server's task: it ends when the server stops.
+type GrpcTask = JoinHandle<std::result::Result<(), tonic::transport::Error>>;
+
+/// Serve health, reflection, the worker registry and the Calibration API on `listener`;
+/// the sender stops the server.
+fn spawn_grpc(
+    listener: TcpListener,
+    config: &CoordinatorConfig,
+    campaigns: &Arc<Campaigns>,
+    pool: &Arc<WorkerPool>,
+) -> Result<(oneshot::Sender<()>, GrpcTask)> {
     let calibration = CalibrationServer::new(CalibrationApi::new(campaigns.clone()))
         .max_decoding_message_size(64 << 20)
         .max_encoding_message_size(64 << 20);
@@ -250,23 +325,6 @@ pub fn serve_coordinator(
         config.dispatch.heartbeat,
     ));
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    // Reflection lists exactly what this server answers (not the workers' Simulator).
-    let reflection = || {
-        let mut builder = tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-            // Both versions of the reflection protocol describe both reflection services
-            // (each build adds only its own file): a client of either version can look up
-            // every service it is listed.
-            .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(
-                tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET,
-            );
-        for name in SERVED {
-            builder = builder.with_service_name(*name);
-        }
-        builder
-    };
     let reflection_v1 = reflection()
         .build_v1()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
@@ -297,51 +355,36 @@ pub fn serve_coordinator(
             })
             .await
     });
-    tracing::info!(
-        %address,
-        tls = config.security.tls.is_some(),
-        token = config.security.token.is_some(),
-        "coordinator serving"
-    );
-    // Campaigns submitted to the API and left running go on as live campaigns, so their
-    // clients follow them; the store's resume below skips them.
-    if store.is_some() {
-        match campaigns.resume_submitted() {
-            Ok(0) => {}
-            Ok(count) => tracing::info!(campaigns = count, "submitted campaigns resumed"),
-            Err(e) => tracing::error!(error = %e, "cannot resume submitted campaigns"),
+    Ok((shutdown_tx, server))
+}
+
+/// Finish, on a thread of their own, the campaigns a previous coordinator left running on
+/// `store` (those the API follows live excepted).
+fn spawn_resume(
+    store: Arc<SledStore>,
+    config: &CoordinatorConfig,
+    pool: &Arc<WorkerPool>,
+    control: &Arc<resume::ResumeControl>,
+    campaigns: &Arc<Campaigns>,
+) -> JoinHandle<Result<usize>> {
+    let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
+    let results = config.results.clone();
+    let (pool, control) = (pool.clone(), control.clone());
+    let live = campaigns.clone();
+    // Campaigns block for as long as they run: on a thread of their own.
+    tokio::task::spawn_blocking(move || {
+        let resumed = resume::resume_until_finished(
+            &*store,
+            &evaluator,
+            results.as_deref(),
+            &pool,
+            &control,
+            &|id| live.is_live(id),
+        );
+        match &resumed {
+            Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
+            Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
         }
-    }
-    let control = Arc::new(resume::ResumeControl::default());
-    let resume = store.map(|store| {
-        let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
-        let results = config.results.clone();
-        let (pool, control) = (pool.clone(), control.clone());
-        let live = campaigns.clone();
-        // Campaigns block for as long as they run: on a thread of their own.
-        tokio::task::spawn_blocking(move || {
-            let resumed = resume::resume_until_finished(
-                &*store,
-                &evaluator,
-                results.as_deref(),
-                &pool,
-                &control,
-                &|id| live.is_live(id),
-            );
-            match &resumed {
-                Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
-                Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
-            }
-            resumed
-        })
-    });
-    Ok(RunningCoordinator {
-        address,
-        pool,
-        shutdown: Some(shutdown_tx),
-        server,
-        resume,
-        control,
-        web,
+        resumed
     })
 }
