@@ -394,8 +394,14 @@ fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
         .filter_map(|l| l.strip_prefix("data: "))
         .next_back()
         .unwrap();
-    let state: pb::CampaignState = serde_json::from_str(last).unwrap();
-    assert_eq!(state.phase, pb::CampaignPhase::Finished as i32, "{state:?}");
+    // Read as a JSON client reads it: a run's best before its first point is `null` (+inf),
+    // which the proto types cannot hold.
+    let state: serde_json::Value = serde_json::from_str(last).unwrap();
+    assert_eq!(
+        state["phase"],
+        pb::CampaignPhase::Finished as i32,
+        "{state}"
+    );
     id
 }
 
@@ -484,8 +490,8 @@ fn two_campaigns_fits_are_drawn_over_the_measured_data_once() {
 
     // The waterfall the campaign left names each run by method and start.
     let (_, body) = post(web, "GetCampaign", serde_json::json!({"id": long}));
-    let state: pb::CampaignState = serde_json::from_str(&body).unwrap();
-    let waterfall = anatomy(&state.plots["waterfall.svg"]);
+    let state: serde_json::Value = serde_json::from_str(&body).unwrap();
+    let waterfall = anatomy(state["plots"]["waterfall.svg"].as_str().unwrap());
     let mut runs = waterfall.x_ticks.clone();
     runs.sort();
     assert_eq!(runs, ["nelder-mead #0", "nelder-mead #1"]);
