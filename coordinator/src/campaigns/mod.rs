@@ -41,7 +41,8 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::sync::watch;
 
-/// Longest pause before a campaign without workers tries again.
+/// Longest pause before a campaign without workers tries again, whether it runs live or is
+/// resumed from the store ([`resume`]).
 pub const MAX_PAUSE: Duration = Duration::from_secs(30);
 
 /// Where a campaign stands.

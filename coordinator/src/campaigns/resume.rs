@@ -16,8 +16,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-/// Longest pause between two resumes of campaigns that workers keep failing.
-const MAX_PAUSE: Duration = Duration::from_secs(60);
+// The pauses between two resumes of campaigns that workers keep failing grow to the same
+// bound as a live campaign's wait for workers.
+use super::MAX_PAUSE;
 
 /// Where the results of a resumed campaign go: `<results>/<name>/` when `results` is given,
 /// else `results/<name>/` beside the campaign file, as `calib calibrate` does by default.
