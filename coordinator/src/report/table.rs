@@ -2,6 +2,7 @@
 
 use super::evidence::{self, BEST_TOLERANCE};
 use crate::calibration::Calibration;
+use crate::campaign::FreeParameter;
 use crate::optim::multistart::Stop;
 use crate::outcome::{CalibrationOutcome, Named};
 use std::fmt::Write;
@@ -17,25 +18,38 @@ pub fn summary(c: &Calibration) -> String {
 /// The summary of a calibration from its outcome: what `calib calibrate` prints, and `calib
 /// submit` for a campaign a coordinator ran.
 pub fn summary_of(result: &CalibrationOutcome) -> String {
-    let free = &result.free_parameters;
-    let point = |named: &Named<f64>| -> Vec<f64> {
-        free.iter()
-            .map(|p| named.get(&p.name).copied().unwrap_or(f64::NAN))
-            .collect()
-    };
-    let runs = &result.runs;
-    let best = &result.best;
-    let best_index = result.best_index();
-
     let mut s = String::new();
-    let names: Vec<&str> = free.iter().map(|p| p.name.as_str()).collect();
-    let width = names.iter().map(|n| n.len()).max().unwrap_or(8).max(12);
+    let width = result
+        .free_parameters
+        .iter()
+        .map(|p| p.name.len())
+        .max()
+        .unwrap_or(8)
+        .max(12);
+    write_runs(&mut s, result, width);
+    write_best(&mut s, result, width);
+    write_search(&mut s, result);
+    s
+}
+
+/// The free parameters' values in `named`, NaN where one is missing.
+fn point(free: &[FreeParameter], named: &Named<f64>) -> Vec<f64> {
+    free.iter()
+        .map(|p| named.get(&p.name).copied().unwrap_or(f64::NAN))
+        .collect()
+}
+
+/// The table of runs, best first.
+fn write_runs(s: &mut String, result: &CalibrationOutcome, width: usize) {
+    let free = &result.free_parameters;
+    let runs = &result.runs;
+    let best_index = result.best_index();
     let mut order: Vec<usize> = (0..runs.len()).collect();
     order.sort_by(|&a, &b| runs[a].objective.total_cmp(&runs[b].objective));
 
     let _ = write!(s, "{:<24} {:>5} ", "method", "start");
-    for n in &names {
-        let _ = write!(s, "{n:>width$}  ");
+    for p in free {
+        let _ = write!(s, "{:>width$}  ", p.name.as_str());
     }
     let _ = writeln!(
         s,
@@ -45,7 +59,7 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
     for i in order {
         let r = &runs[i];
         let _ = write!(s, "{:<24} {:>5} ", r.method, r.start);
-        for (p, v) in free.iter().zip(&point(&r.parameters)) {
+        for (p, v) in free.iter().zip(&point(free, &r.parameters)) {
             let mark = if evidence::at_bound(*v, p.nominal, p.min, p.max).is_some() {
                 AT_BOUND
             } else {
@@ -70,7 +84,14 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
         "(* best run; {AT_BOUND} on a bound: within {:.0}% of its range from it)",
         100.0 * evidence::BOUND_TOLERANCE
     );
-    let best_point = point(&best.parameters);
+}
+
+/// The best point, its bounds, the objective and each compared series' error before and
+/// after.
+fn write_best(s: &mut String, result: &CalibrationOutcome, width: usize) {
+    let free = &result.free_parameters;
+    let best = &result.best;
+    let best_point = point(free, &best.parameters);
     let best_objective = best.objective;
     let _ = writeln!(s);
     let _ = writeln!(s, "best ({} from start {}):", best.method, best.start);
@@ -115,6 +136,12 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
     for (name, before, after) in series {
         let _ = writeln!(s, "  rms {name:<22} {before:.4e} -> {after:.4e}");
     }
+}
+
+/// How many runs reached the best, the distinct minima and what the search cost.
+fn write_search(s: &mut String, result: &CalibrationOutcome) {
+    let free = &result.free_parameters;
+    let runs = &result.runs;
     let objectives: Vec<f64> = runs.iter().map(|r| r.objective).collect();
     let at_best = evidence::runs_at_best(&objectives);
     let _ = writeln!(
@@ -192,7 +219,6 @@ pub fn summary_of(result: &CalibrationOutcome) -> String {
             }
         );
     }
-    s
 }
 
 /// Minima listed under the summary, best first.
