@@ -182,6 +182,18 @@ fn fit_table(s: &mut String, fit: &Fit) {
 /// The Markdown report (`diagnosis.md`).
 pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
     let mut s = String::new();
+    write_heading(&mut s, d);
+    write_errors(&mut s, d);
+    write_candidates(&mut s, d);
+    write_refits(&mut s, d);
+    write_parameters(&mut s, d);
+    write_profiles(&mut s, d);
+    write_plot_links(&mut s, plots);
+    s
+}
+
+/// The title, the verdict, the windows and the noise.
+fn write_heading(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(
         s,
         "# Diagnosis of `{}` (model `{}`)\n",
@@ -205,6 +217,10 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
             .collect::<Vec<_>>()
             .join(", ")
     );
+}
+
+/// The objectives and each output's error, before and after.
+fn write_errors(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "## Error before and after\n");
     let _ = writeln!(
         s,
@@ -244,6 +260,10 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
             d.final_fit.held_out_rms[i]
         );
     }
+}
+
+/// The candidates as ranked, with their refitted objectives.
+fn write_candidates(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "\n## Candidates, ranked without refitting\n");
     let _ = writeln!(s, "Score: the share of the residual's sum of squares the effect could remove, linearised at the baseline optimum.\n");
     let _ = writeln!(
@@ -263,6 +283,10 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
             refit
         );
     }
+}
+
+/// Every refit the diagnosis made.
+fn write_refits(s: &mut String, d: &Diagnosis) {
     if !d.refits.is_empty() {
         let _ = writeln!(s, "\n## Refits\n");
         let _ = writeln!(
@@ -285,6 +309,10 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
             );
         }
     }
+}
+
+/// The baseline's fitted parameters, and the final ones when effects were selected.
+fn write_parameters(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(
         s,
         "\n## Baseline parameters\n\n{} of {} runs of the baseline calibration reached its best objective within {:.0}%.\n",
@@ -292,11 +320,15 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
         d.baseline.runs_at_best.of,
         100.0 * d.baseline.runs_at_best.tolerance
     );
-    fit_table(&mut s, &d.baseline);
+    fit_table(s, &d.baseline);
     if !d.selected.is_empty() {
         let _ = writeln!(s, "## Final parameters (with {})\n", d.selected.join(" + "));
-        fit_table(&mut s, &d.final_fit);
+        fit_table(s, &d.final_fit);
     }
+}
+
+/// The profile-likelihood intervals of the selected effects.
+fn write_profiles(s: &mut String, d: &Diagnosis) {
     if !d.profiles.is_empty() {
         let _ = writeln!(
             s,
@@ -328,13 +360,16 @@ pub fn markdown(d: &Diagnosis, plots: &[PathBuf]) -> String {
         }
         let _ = writeln!(s);
     }
+}
+
+/// A link to each plot.
+fn write_plot_links(s: &mut String, plots: &[PathBuf]) {
     let _ = writeln!(s, "## Plots\n");
     for p in plots {
         if let Some(name) = p.file_name() {
             let _ = writeln!(s, "![{0}]({0})\n", name.to_string_lossy());
         }
     }
-    s
 }
 
 /// Write `diagnosis.json`, `diagnosis.md` and the plots into `dir`; the paths written.
