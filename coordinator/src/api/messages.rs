@@ -109,11 +109,7 @@ pub(super) fn diagnosis_state(s: &DiagnosisSnapshot) -> pb::DiagnosisState {
         phase: phase(s.phase).into(),
         evaluations: s.evaluations,
         failure: s.failure.clone().unwrap_or_default(),
-        report_json: s
-            .report
-            .as_ref()
-            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
-            .unwrap_or_default(),
+        report_json: pretty_json(s.report.as_ref()),
         files: s.files.iter().cloned().collect(),
         found_outside_the_library: s.found.as_deref().map(discovery::found_message),
     }
@@ -126,12 +122,15 @@ pub(super) fn analysis_state(s: &AnalysisSnapshot) -> pb::AnalysisState {
         evaluations: s.evaluations,
         planned: s.planned,
         failure: s.failure.clone().unwrap_or_default(),
-        report_json: s
-            .report
-            .as_ref()
-            .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
-            .unwrap_or_default(),
+        report_json: pretty_json(s.report.as_ref()),
         conclusion: s.conclusion.clone(),
         files: s.files.iter().cloned().collect(),
     }
+}
+
+/// A report as the indented JSON of the `report_json` fields; empty before there is one.
+fn pretty_json<T: serde::Serialize>(report: Option<&T>) -> String {
+    report
+        .map(|r| serde_json::to_string_pretty(r).expect("plain data"))
+        .unwrap_or_default()
 }

@@ -116,18 +116,9 @@ pub(super) async fn dataset_chunks(
             time_column = chunk.time_column;
             first = false;
         }
-        if chunk.data.len() > MAX_CHUNK_BYTES {
-            return Err(Status::invalid_argument(format!(
-                "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
-                chunk.data.len()
-            )));
-        }
-        if bytes.len() + chunk.data.len() > MAX_DATASET_BYTES {
-            return Err(Status::invalid_argument(format!(
-                "data: the file is more than the {MAX_DATASET_BYTES} bytes accepted"
-            )));
-        }
-        bytes.extend_from_slice(&chunk.data);
+        append_chunk(&mut bytes, &chunk.data, MAX_DATASET_BYTES, || {
+            format!("data: the file is more than the {MAX_DATASET_BYTES} bytes accepted")
+        })?;
     }
     Ok((file_name, time_column, bytes))
 }
@@ -145,19 +136,33 @@ pub(super) async fn fmu_chunks(
             file_name = chunk.file_name;
             first = false;
         }
-        if chunk.data.len() > MAX_CHUNK_BYTES {
-            return Err(Status::invalid_argument(format!(
-                "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
-                chunk.data.len()
-            )));
-        }
-        if bytes.len() + chunk.data.len() > MAX_FMU_BYTES {
-            return Err(Status::invalid_argument(format!(
+        append_chunk(&mut bytes, &chunk.data, MAX_FMU_BYTES, || {
+            format!(
                 "fmu: the archive is more than the {MAX_FMU_BYTES} bytes accepted (what a \
                  worker's UploadFmu carries)"
-            )));
-        }
-        bytes.extend_from_slice(&chunk.data);
+            )
+        })?;
     }
     Ok((file_name, bytes))
+}
+
+/// Append one chunk's `data` to `bytes`: refused past [`MAX_CHUNK_BYTES`] a chunk, or past
+/// `limit` in all (`too_large` says so in the upload's words).
+fn append_chunk(
+    bytes: &mut Vec<u8>,
+    data: &[u8],
+    limit: usize,
+    too_large: impl FnOnce() -> String,
+) -> Result<(), Status> {
+    if data.len() > MAX_CHUNK_BYTES {
+        return Err(Status::invalid_argument(format!(
+            "data: a chunk of {} bytes is more than the {MAX_CHUNK_BYTES} accepted",
+            data.len()
+        )));
+    }
+    if bytes.len() + data.len() > limit {
+        return Err(Status::invalid_argument(too_large()));
+    }
+    bytes.extend_from_slice(data);
+    Ok(())
 }
