@@ -19,7 +19,7 @@ examples/furuta.toml` for a first campaign.",
     propagate_version = true
 )]
 struct Cli {
-    /// Log filter (e.g. `info`, `calib_coordinator=debug`); also read from RUST_LOG.
+    /// Log filter (e.g. `info`, `calib_engine=debug`); also read from RUST_LOG.
     #[arg(long, global = true, value_name = "FILTER")]
     log: Option<String>,
     #[command(subcommand)]

@@ -2,7 +2,7 @@
 
 use crate::napping::{serve_napping, NappingSimulator};
 use crate::worker::SandboxWorker;
-use calib_coordinator::dispatch::{DispatchConfig, RemoteWorkers, WorkerAddress};
+use calib_service::dispatch::{DispatchConfig, RemoteWorkers, WorkerAddress};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 

@@ -5,10 +5,10 @@
 //! Nelder–Mead over `solve_ivp`) measured on the same kind of machine.
 
 use super::{Failure, Outcome};
-use calib_coordinator::calibration;
-use calib_coordinator::campaign::{Campaign, Method};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration;
+use calib_engine::campaign::{Campaign, Method};
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use calib_worker::{models, SolverOptions};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};

@@ -15,13 +15,13 @@
 
 use super::bench::Report;
 use super::{Failure, Outcome};
-use calib_coordinator::calibration;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::dispatch::RemoteWorkers;
-use calib_coordinator::evaluator::{Evaluator, LocalEvaluator};
-use calib_coordinator::objective::Objective;
-use calib_coordinator::store::{SledStore, StoredEvaluator};
+use calib_engine::calibration;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::{Evaluator, LocalEvaluator};
+use calib_engine::objective::Objective;
+use calib_engine::store::{SledStore, StoredEvaluator};
 use calib_sandbox::{NappingCluster, SandboxCluster};
+use calib_service::dispatch::RemoteWorkers;
 use calib_worker::{models, SolverOptions};
 use std::path::Path;
 use std::time::{Duration, Instant};
@@ -220,17 +220,31 @@ impl Drop for ChildWorker {
 /// Figures of the cluster benchmark, as `calib bench --cluster --json` reports them.
 pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) -> Outcome {
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-
-    // Overhead: one worker with a slot per core against this process on every core.
     let furuta = objective_of(campaign)?;
-    let batch = points(&furuta, 256);
+    let in_process_us = grpc_overhead(&furuta, cores, repeat, report)?;
+    coordinator_cpu(&furuta, cores, repeat, in_process_us, report)?;
+    hx_scaling(repeat, report)?;
+    dispatch_capacity(&furuta, thousand, report)?;
+    report.figure("dispatch_efficiency_target", 0.9);
+    Ok(())
+}
+
+/// The gRPC overhead: one worker with a slot per core against this process on every core.
+/// Returns the in-process time per evaluation (µs).
+fn grpc_overhead(
+    furuta: &Objective,
+    cores: usize,
+    repeat: usize,
+    report: &mut Report,
+) -> Result<f64, Failure> {
+    let batch = points(furuta, 256);
     let workers = SandboxCluster::start(1, cores);
     let remote = connect(&workers.urls())?;
     let evaluator = remote.evaluator();
     // Warm both (the worker caches the measurement, the pools start their threads).
-    time_batch(&LocalEvaluator, &furuta, &batch, 1);
-    time_batch(&evaluator, &furuta, &batch, 1);
-    let (local, cluster) = time_pair(&LocalEvaluator, &evaluator, &furuta, &batch, repeat);
+    time_batch(&LocalEvaluator, furuta, &batch, 1);
+    time_batch(&evaluator, furuta, &batch, 1);
+    let (local, cluster) = time_pair(&LocalEvaluator, &evaluator, furuta, &batch, repeat);
     let per = |d: Duration| d.as_secs_f64() * 1e6 / batch.len() as f64;
     let overhead_ratio = (per(cluster) - per(local)) / per(local);
     report.say(format!(
@@ -252,9 +266,19 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
     report.figure("grpc_overhead_ratio_target", 0.25);
     drop((evaluator, remote, workers));
 
-    // The coordinator's CPU per evaluation: a worker process of a slot per core, batches of
-    // 256 distinct points through the evaluation store (each point simulated and stored
-    // once), the CPU of this process over the points it had simulated.
+    Ok(per(local))
+}
+
+/// The coordinator's CPU per evaluation: a worker process of a slot per core, batches of
+/// 256 distinct points through the evaluation store (each point simulated and stored once),
+/// the CPU of this process over the points it had simulated.
+fn coordinator_cpu(
+    furuta: &Objective,
+    cores: usize,
+    repeat: usize,
+    in_process_us: f64,
+    report: &mut Report,
+) -> Outcome {
     let worker = ChildWorker::start(cores)?;
     let remote = connect(std::slice::from_ref(&worker.url))?;
     let db = tempfile_dir("store")?;
@@ -263,16 +287,16 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
         let stored = StoredEvaluator::new(remote.evaluator(), &store);
         // The worker gets the measurement first.
         stored
-            .evaluate(&furuta, &points_from(&furuta, 1 << 20, 1))
+            .evaluate(furuta, &points_from(furuta, 1 << 20, 1))
             .map_err(|e| Failure::internal(e.to_string()))?;
         let rounds = repeat.max(1);
         let before_cpu = super::cpu::process_cpu();
         let before = stored.stats().simulated;
         let start = Instant::now();
         for round in 0..rounds {
-            let batch = points_from(&furuta, round * 256, 256);
+            let batch = points_from(furuta, round * 256, 256);
             stored
-                .evaluate(&furuta, &batch)
+                .evaluate(furuta, &batch)
                 .map_err(|e| Failure::internal(e.to_string()))?;
         }
         let wall = start.elapsed();
@@ -286,17 +310,22 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
             "  {us:.1} us per evaluation ({:.3} s CPU for {simulated} simulated in {:.2} s; {:.3} of the in-process evaluation; target 10 us)  -> one core feeds {:.0} evaluations/s",
             cpu.as_secs_f64(),
             wall.as_secs_f64(),
-            us / per(local),
+            us / in_process_us,
             1e6 / us
         ));
         report.figure("coordinator_cpu_us_per_eval", us);
         report.figure("coordinator_cpu_target_us", 10.0);
-        report.figure("coordinator_cpu_ratio_to_evaluation", us / per(local));
+        report.figure("coordinator_cpu_ratio_to_evaluation", us / in_process_us);
     }
     drop((store, remote, worker));
     let _ = std::fs::remove_dir_all(&db);
 
-    // Scaling: single-slot workers, a model of ≥ 5 ms per simulation.
+    Ok(())
+}
+
+/// Scaling: single-slot workers, a model of ≥ 5 ms per simulation, beside the machine's own
+/// scaling in this process.
+fn hx_scaling(repeat: usize, report: &mut Report) -> Outcome {
     let hx = hx_objective()?;
     let batch = points(&hx, 64);
     let hx_repeat = repeat.div_ceil(7);
@@ -336,8 +365,12 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
     report.figure("hx_scaling_efficiency_2", rates[1] / (2.0 * rates[0]));
     report.figure("machine_scaling_efficiency_2", own[1] / (2.0 * own[0]));
 
-    // Dispatcher capacity: workers that only sleep. The rate of one such worker (its nap
-    // plus the timer's granularity plus one round trip) is the unit of the efficiency.
+    Ok(())
+}
+
+/// Dispatcher capacity: workers that only sleep. The rate of one such worker (its nap plus
+/// the timer's granularity plus one round trip) is the unit of the efficiency.
+fn dispatch_capacity(furuta: &Objective, thousand: bool, report: &mut Report) -> Outcome {
     let nap = Duration::from_millis(5);
     let mut single = 0.0;
     let mut counts = vec![1usize, 10, 100];
@@ -348,8 +381,8 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
         let workers = NappingCluster::start(count, nap, 1)
             .map_err(|e| Failure::internal(format!("cannot start napping workers: {e}")))?;
         let remote = connect(workers.urls())?;
-        let batch = points(&furuta, 40 * count);
-        let took = time_batch(&remote.evaluator(), &furuta, &batch, 3);
+        let batch = points(furuta, 40 * count);
+        let took = time_batch(&remote.evaluator(), furuta, &batch, 3);
         let rate = batch.len() as f64 / took.as_secs_f64();
         if count == 1 {
             single = rate;
@@ -367,7 +400,6 @@ pub fn run(repeat: usize, campaign: &Path, thousand: bool, report: &mut Report) 
             report.figure(&format!("dispatch_efficiency_{count}"), efficiency);
         }
     }
-    report.figure("dispatch_efficiency_target", 0.9);
     Ok(())
 }
 

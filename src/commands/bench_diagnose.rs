@@ -1,10 +1,10 @@
 //! `calib bench diagnose`: wall time of a whole diagnosis, single-node.
 
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::diagnose;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::diagnose;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 

@@ -12,11 +12,11 @@
 //! objective in the seed's tool chain).
 
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::matrix::*;
-use calib_coordinator::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::matrix::*;
+use calib_analysis::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::Instant;

@@ -10,11 +10,11 @@
 //! clock counts every evaluation, including those the evaluation cache answered.
 
 use super::{Failure, Outcome};
-use calib_coordinator::calibration::{self, Calibration};
-use calib_coordinator::campaign::{Campaign, Method};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::multistart::MAX_CONCURRENT_RUNS;
-use calib_coordinator::optim::problem::Progress;
+use calib_engine::calibration::{self, Calibration};
+use calib_engine::campaign::{Campaign, Method};
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::multistart::MAX_CONCURRENT_RUNS;
+use calib_engine::optim::problem::Progress;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 use std::path::PathBuf;

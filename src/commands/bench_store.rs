@@ -2,12 +2,12 @@
 //! resumes from it.
 
 use super::{Failure, Outcome};
-use calib_coordinator::calibration::{self, Calibration};
-use calib_coordinator::campaign::{Campaign, Method};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::objective::Evaluation;
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::store::{evaluation_key_from, MemoryStore, SledStore, Store};
+use calib_engine::calibration::{self, Calibration};
+use calib_engine::campaign::{Campaign, Method};
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::objective::Evaluation;
+use calib_engine::optim::problem::Silent;
+use calib_engine::store::{evaluation_key_from, MemoryStore, SledStore, Store};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 

@@ -1,10 +1,10 @@
 use super::{Failure, Outcome};
-use calib_coordinator::calibration;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Progress;
-use calib_coordinator::report;
-use calib_coordinator::store::SledStore;
+use calib_analysis::report;
+use calib_engine::calibration;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Progress;
+use calib_engine::store::SledStore;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};

@@ -1,6 +1,6 @@
 use super::{Failure, Outcome};
-use calib_coordinator::dispatch::{self, DispatchConfig};
-use calib_coordinator::server::{self, CoordinatorConfig};
+use calib_service::dispatch::{self, DispatchConfig};
+use calib_service::server::{self, CoordinatorConfig};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 
@@ -39,7 +39,7 @@ pub struct Args {
     http: Option<SocketAddr>,
     /// A host name (or NAME:PORT) the web app also answers as, besides its address and
     /// localhost: the name users or a reverse proxy reach it by. Repeatable.
-    #[arg(long, value_name = "NAME", requires = "http", value_parser = calib_coordinator::web::door::parse_allowed_host)]
+    #[arg(long, value_name = "NAME", requires = "http", value_parser = calib_service::web::door::parse_allowed_host)]
     allow_host: Vec<String>,
 }
 

@@ -1,10 +1,11 @@
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::outside::{found_outside_the_library, Found};
-use calib_coordinator::diagnosis::{self, report};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Progress;
-use calib_coordinator::store::SledStore;
+use calib_analysis::diagnosis::outside::{found_outside_the_library, Found};
+use calib_analysis::diagnosis::{self, report};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Progress;
+use calib_engine::store::SledStore;
+use calib_service::dispatch::RemoteWorkers;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
 
@@ -63,47 +64,7 @@ pub fn run(args: Args) -> Outcome {
         Some(list) => Some(args.workers.connect(list)?),
         None => None,
     };
-    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed_precise} {pos} evaluations {msg}")
-            .expect("valid template"),
-    );
-    bar.set_message("calibrating, ranking candidate effects, refitting");
-    bar.enable_steady_tick(std::time::Duration::from_millis(200));
-    let spinner = Spinner(bar);
-    let result = match &workers {
-        Some(workers) => {
-            diagnosis::diagnose_with_store(&campaign, &workers.evaluator(), &store, &spinner)
-        }
-        None => diagnosis::diagnose_with_store(&campaign, &LocalEvaluator, &store, &spinner),
-    };
-    let result = result.and_then(|mut d| {
-        if args.profile {
-            spinner
-                .0
-                .set_message("profiling the likelihood of the selected effects");
-            match &workers {
-                Some(workers) => diagnosis::profile_selected(&mut d, &workers.evaluator(), &store)?,
-                None => diagnosis::profile_selected(&mut d, &LocalEvaluator, &store)?,
-            }
-        }
-        Ok(d)
-    });
-    spinner.0.finish_and_clear();
-    let d = result?;
-    let found = if args.discover {
-        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
-        bar.set_message("discovering outside the library, refitting the proposal");
-        let spinner = Spinner(bar);
-        let found = match &workers {
-            Some(workers) => found_outside_the_library(&d, &workers.evaluator(), &spinner),
-            None => found_outside_the_library(&d, &LocalEvaluator, &spinner),
-        };
-        spinner.0.finish_and_clear();
-        Some(found?)
-    } else {
-        None
-    };
+    let (d, found) = diagnose(&args, &campaign, &store, workers.as_ref())?;
     // `--out` is a results root, as for `calib calibrate`: one `<name>/` per campaign.
     let out = super::calibrate::results_root(&args.campaign, args.out.as_deref())
         .join(&campaign.name)
@@ -121,6 +82,77 @@ pub fn run(args: Args) -> Outcome {
         );
         return Ok(());
     }
+    print_fit(&d);
+    print_profiles_and_verdict(&d, args.profile, found.as_ref());
+    println!(
+        "{} evaluations, {} simulated, {} from the store ({}); {} trajectories simulated; {:.2} s",
+        d.stats.evaluations.requested,
+        d.stats.evaluations.simulated,
+        d.stats.evaluations.cached,
+        db.display(),
+        d.stats.trajectories,
+        d.elapsed.as_secs_f64()
+    );
+    for path in written {
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// The diagnosis (with the profiles of the selected effects and discovery when asked for),
+/// a spinner on the terminal while it runs.
+fn diagnose(
+    args: &Args,
+    campaign: &Campaign,
+    store: &SledStore,
+    workers: Option<&RemoteWorkers>,
+) -> Result<(diagnosis::Diagnosis, Option<Found>), Failure> {
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{spinner} {elapsed_precise} {pos} evaluations {msg}")
+            .expect("valid template"),
+    );
+    bar.set_message("calibrating, ranking candidate effects, refitting");
+    bar.enable_steady_tick(std::time::Duration::from_millis(200));
+    let spinner = Spinner(bar);
+    let result = match workers {
+        Some(workers) => {
+            diagnosis::diagnose_with_store(campaign, &workers.evaluator(), store, &spinner)
+        }
+        None => diagnosis::diagnose_with_store(campaign, &LocalEvaluator, store, &spinner),
+    };
+    let result = result.and_then(|mut d| {
+        if args.profile {
+            spinner
+                .0
+                .set_message("profiling the likelihood of the selected effects");
+            match workers {
+                Some(workers) => diagnosis::profile_selected(&mut d, &workers.evaluator(), store)?,
+                None => diagnosis::profile_selected(&mut d, &LocalEvaluator, store)?,
+            }
+        }
+        Ok(d)
+    });
+    spinner.0.finish_and_clear();
+    let d = result?;
+    let found = if args.discover {
+        let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+        bar.set_message("discovering outside the library, refitting the proposal");
+        let spinner = Spinner(bar);
+        let found = match workers {
+            Some(workers) => found_outside_the_library(&d, &workers.evaluator(), &spinner),
+            None => found_outside_the_library(&d, &LocalEvaluator, &spinner),
+        };
+        spinner.0.finish_and_clear();
+        Some(found?)
+    } else {
+        None
+    };
+    Ok((d, found))
+}
+
+/// The baseline, its residuals, the candidates, what was added and the parameters.
+fn print_fit(d: &diagnosis::Diagnosis) {
     println!(
         "baseline: objective {:.4e} (held out {:.4e}), noise floor {:.4e}; {} of {} runs reached it",
         d.baseline.objective,
@@ -159,7 +191,12 @@ pub fn run(args: Args) -> Outcome {
     for note in report::bound_notes(&d.final_fit) {
         println!("  note: {note}");
     }
-    if args.profile && d.profiles.is_empty() {
+}
+
+/// The profiles' intervals, the objective before and after, the verdict and what discovery
+/// found.
+fn print_profiles_and_verdict(d: &diagnosis::Diagnosis, profile: bool, found: Option<&Found>) {
+    if profile && d.profiles.is_empty() {
         println!("  (no effect selected: nothing to profile)");
     }
     for p in &d.profiles {
@@ -184,22 +221,9 @@ pub fn run(args: Args) -> Outcome {
         d.final_fit.held_out_objective
     );
     println!("\n{}", report::verdict_text(&d));
-    if let Some(found) = &found {
+    if let Some(found) = found {
         println!("\n{}", found.text());
     }
-    println!(
-        "{} evaluations, {} simulated, {} from the store ({}); {} trajectories simulated; {:.2} s",
-        d.stats.evaluations.requested,
-        d.stats.evaluations.simulated,
-        d.stats.evaluations.cached,
-        db.display(),
-        d.stats.trajectories,
-        d.elapsed.as_secs_f64()
-    );
-    for path in written {
-        println!("wrote {}", path.display());
-    }
-    Ok(())
 }
 
 /// diagnosis.json with discovery's entry, and diagnosis.md with its section.

@@ -51,8 +51,8 @@ impl Failure {
     }
 }
 
-impl From<calib_coordinator::Error> for Failure {
-    fn from(e: calib_coordinator::Error) -> Self {
+impl From<calib_engine::Error> for Failure {
+    fn from(e: calib_engine::Error) -> Self {
         if e.is_bad_input() {
             Failure::input(e.to_string())
         } else {

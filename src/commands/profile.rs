@@ -1,8 +1,8 @@
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::profile::{self, report, walk::DEFAULT_MAX_STEPS, Settings};
-use calib_coordinator::store::SledStore;
+use calib_analysis::profile::{self, report, walk::DEFAULT_MAX_STEPS, Settings};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::store::SledStore;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]

@@ -1,9 +1,9 @@
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::outcome::CalibrationOutcome;
-use calib_coordinator::sensitivity::{self, local, report, Methods, Settings, DEFAULT_SAMPLES};
-use calib_coordinator::store::SledStore;
+use calib_analysis::sensitivity::{self, local, report, Methods, Settings, DEFAULT_SAMPLES};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::outcome::CalibrationOutcome;
+use calib_engine::store::SledStore;
 use std::path::PathBuf;
 
 /// Which analysis to run.

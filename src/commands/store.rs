@@ -1,7 +1,7 @@
 //! `calib store`: look into, save and restore an evaluation store.
 
 use super::{Failure, Outcome};
-use calib_coordinator::store::{export, SledStore, Store, StoreError};
+use calib_engine::store::{export, SledStore, Store, StoreError};
 use std::io::Write;
 use std::path::PathBuf;
 

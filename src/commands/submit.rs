@@ -2,7 +2,7 @@
 //! coordinator, through its Calibration API.
 
 use super::{Failure, Outcome};
-use calib_coordinator::campaign::Campaign;
+use calib_engine::campaign::Campaign;
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
 use std::path::{Path, PathBuf};
@@ -127,9 +127,9 @@ pub fn submit(args: SubmitArgs) -> Outcome {
         }
         let several = !campaign.experiment.is_empty();
         let mut message = if several {
-            calib_coordinator::api::spec::campaign_message_on(&text, "", &ids)
+            calib_service::api::spec::campaign_message_on(&text, "", &ids)
         } else {
-            calib_coordinator::api::spec::campaign_message(&text, &ids[0])
+            calib_service::api::spec::campaign_message(&text, &ids[0])
         }
         .map_err(|e| Failure::input(format!("{}: {e}", args.campaign.display())))?;
         if let Some((hash, archive)) = &fmu {
@@ -385,7 +385,7 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
     std::fs::create_dir_all(&folder)
         .map_err(|e| Failure::internal(format!("{}: {e}", folder.display())))?;
     let outcome = match &state.result {
-        Some(result) => calib_coordinator::api::result::outcome_of(result),
+        Some(result) => calib_service::api::result::outcome_of(result),
         None => {
             return Err(Failure::internal(format!(
                 "coordinator: campaign {} finished without a result (a coordinator older than \
@@ -418,7 +418,7 @@ fn finish(args: &SubmitArgs, campaign: &Campaign, state: &pb::CampaignState) -> 
     if args.json {
         println!("{text}");
     } else {
-        print!("{}", calib_coordinator::report::table::summary_of(&outcome));
+        print!("{}", calib_analysis::report::table::summary_of(&outcome));
         for path in written {
             println!("wrote {}", path.display());
         }

@@ -1,5 +1,5 @@
 use super::{Failure, Outcome};
-use calib_coordinator::web::local::{self, UiConfig};
+use calib_service::web::local::{self, UiConfig};
 use std::io::Write;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -20,7 +20,7 @@ pub struct Args {
     /// A host name (or NAME:PORT) the app also answers as, besides its address and
     /// localhost: requests naming any other Host, or sent by another web page, are refused.
     /// Repeatable.
-    #[arg(long, value_name = "NAME", value_parser = calib_coordinator::web::door::parse_allowed_host)]
+    #[arg(long, value_name = "NAME", value_parser = calib_service::web::door::parse_allowed_host)]
     allow_host: Vec<String>,
 }
 

@@ -2,7 +2,7 @@
 //! the user what is awaited while no worker is up.
 
 use super::Failure;
-use calib_coordinator::dispatch::{self, DispatchConfig, Health, RemoteWorkers, WorkerPool};
+use calib_service::dispatch::{self, DispatchConfig, Health, RemoteWorkers, WorkerPool};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 

@@ -39,7 +39,7 @@ fn upload(c: &Coordinator, file: &Path) -> pb::Dataset {
 
 fn message(search: &str, dataset: &str) -> pb::Campaign {
     let text = clean_campaign(search);
-    calib_coordinator::api::spec::campaign_message(&text, dataset).unwrap()
+    calib_service::api::spec::campaign_message(&text, dataset).unwrap()
 }
 
 /// Follow a campaign to its end; every state seen.
@@ -201,14 +201,14 @@ fn calib_submit_of_experiments_with_an_input_equals_the_local_calibration() {
         "pair.toml",
         &experiments_campaign(&swing, &driven),
     );
-    let local = calib_coordinator::calibration::calibrate(
-        &calib_coordinator::campaign::Campaign::load(&campaign).unwrap(),
-        calib_coordinator::evaluator::LocalEvaluator,
-        &calib_coordinator::optim::problem::Silent,
+    let local = calib_engine::calibration::calibrate(
+        &calib_engine::campaign::Campaign::load(&campaign).unwrap(),
+        calib_engine::evaluator::LocalEvaluator,
+        &calib_engine::optim::problem::Silent,
     )
     .unwrap();
-    let summary = calib_coordinator::report::table::summary(&local);
-    let local = calib_coordinator::report::result_json(&local);
+    let summary = calib_analysis::report::table::summary(&local);
+    let local = calib_analysis::report::result_json(&local);
 
     let cluster = TestCluster::start(2, 1);
     let coordinator = Coordinator::start(dir.path(), &cluster.urls());
@@ -456,7 +456,7 @@ fn malformed_requests_name_the_field_and_the_coordinator_keeps_serving() {
     let experiments = |swing: &str, driven: &str| {
         let text = experiments_campaign(Path::new("swing.csv"), Path::new("driven.csv"));
         let ids = [swing.to_string(), driven.to_string()];
-        calib_coordinator::api::spec::campaign_message_on(&text, "", &ids).unwrap()
+        calib_service::api::spec::campaign_message_on(&text, "", &ids).unwrap()
     };
     let cases: Vec<(Option<pb::Campaign>, tonic::Code, &str)> = vec![
         (None, tonic::Code::InvalidArgument, "campaign"),
@@ -781,7 +781,7 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
         .unwrap()
         .into_inner();
     let text = std::fs::read_to_string(repo().join("examples/furuta_viscous_arm.toml")).unwrap();
-    let campaign = calib_coordinator::api::spec::campaign_message(&text, &dataset.id).unwrap();
+    let campaign = calib_service::api::spec::campaign_message(&text, &dataset.id).unwrap();
     assert!(
         campaign.diagnosis.is_some(),
         "the [diagnosis] section travels"

@@ -1,6 +1,7 @@
-//! The coordinator's top-level modules form layers: no module reaches, through `crate::`
-//! paths in its non-test code, a module that reaches back to it (docs/architecture.md draws
-//! the graph this test reads).
+//! The coordinator's crates and their top-level modules form layers: no module reaches,
+//! through the paths in its non-test code, a module that reaches back to it; no module names
+//! one of a crate above its own; only the service crate depends on an async runtime or a
+//! network stack (docs/architecture.md draws the graph this test reads).
 
 use crate::common::*;
 use std::collections::{BTreeMap, BTreeSet};
@@ -63,51 +64,94 @@ fn code(file: &Path) -> String {
         .join("\n")
 }
 
-/// Which top-level modules each top-level module of the coordinator names.
-fn module_graph() -> BTreeMap<String, BTreeSet<String>> {
-    let src = repo().join("coordinator/src");
+/// The coordinator's crates, bottom up: each may name only those before it.
+const CRATES: [(&str, &str); 3] = [
+    ("calib_engine", "coordinator/engine"),
+    ("calib_analysis", "coordinator/analysis"),
+    ("calib_service", "coordinator/service"),
+];
+
+/// The top-level modules of a crate's `src/`.
+fn modules_of(src: &Path) -> BTreeSet<String> {
     let mut modules = BTreeSet::new();
-    for entry in std::fs::read_dir(&src).unwrap() {
+    for entry in std::fs::read_dir(src).unwrap() {
         let path = entry.unwrap().path();
         let name = path.file_stem().unwrap().to_str().unwrap().to_string();
         if name != "lib" {
             modules.insert(name);
         }
     }
-    let mut files = Vec::new();
-    sources(&src, &mut files);
-    let tests = test_modules(&files);
-    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for file in &files {
-        let relative = file.strip_prefix(&src).unwrap();
-        let first = relative.components().next().unwrap().as_os_str();
-        let module = Path::new(first).file_stem().unwrap().to_str().unwrap();
-        if module == "lib" || tests.contains(file) || file.ends_with("tests.rs") {
-            continue;
-        }
-        let code = code(file);
-        let named = graph.entry(module.to_string()).or_default();
-        // `crate::name` anywhere, and the names inside `use crate::{a, b::c}`.
-        for part in code.split("crate::").skip(1) {
-            let braced = part.strip_prefix('{').map(|b| b.split('}').next().unwrap());
-            let names: Vec<&str> = match braced {
-                Some(list) => list
-                    .split(',')
-                    .map(|n| n.trim().split("::").next().unwrap().trim())
-                    .collect(),
-                None => vec![part
-                    .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+    modules
+}
+
+/// The modules `code` names through `prefix::name` anywhere, and the names inside
+/// `use prefix::{a, b::c}`.
+fn named_after(code: &str, prefix: &str) -> Vec<String> {
+    let mut names = Vec::new();
+    for part in code.split(prefix).skip(1) {
+        match part.strip_prefix('{').map(|b| b.split('}').next().unwrap()) {
+            Some(list) => names.extend(
+                list.split(',')
+                    .map(|n| n.trim().split("::").next().unwrap().trim().to_string()),
+            ),
+            None => names.push(
+                part.split(|c: char| !(c.is_alphanumeric() || c == '_'))
                     .next()
-                    .unwrap()],
-            };
-            for n in names {
-                if n != module && modules.contains(n) {
-                    named.insert(n.to_string());
+                    .unwrap()
+                    .to_string(),
+            ),
+        }
+    }
+    names
+}
+
+/// Which top-level modules each top-level module of the coordinator's crates names, and the
+/// crate of each module.
+fn module_graph() -> (
+    BTreeMap<String, BTreeSet<String>>,
+    BTreeMap<String, &'static str>,
+) {
+    let mut crate_of: BTreeMap<String, &'static str> = BTreeMap::new();
+    for (name, folder) in CRATES {
+        for module in modules_of(&repo().join(folder).join("src")) {
+            assert!(
+                crate_of.insert(module.clone(), name).is_none(),
+                "module {module} in two crates"
+            );
+        }
+    }
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for (name, folder) in CRATES {
+        let src = repo().join(folder).join("src");
+        let mut files = Vec::new();
+        sources(&src, &mut files);
+        let tests = test_modules(&files);
+        for file in &files {
+            let relative = file.strip_prefix(&src).unwrap();
+            let first = relative.components().next().unwrap().as_os_str();
+            let module = Path::new(first).file_stem().unwrap().to_str().unwrap();
+            if module == "lib" || tests.contains(file) || file.ends_with("tests.rs") {
+                continue;
+            }
+            let code = code(file);
+            let named = graph.entry(module.to_string()).or_default();
+            let prefixes = ["crate::".to_string()]
+                .into_iter()
+                .chain(CRATES.iter().map(|(c, _)| format!("{c}::")));
+            for prefix in prefixes {
+                for n in named_after(&code, &prefix) {
+                    let known = match prefix.as_str() {
+                        "crate::" => crate_of.get(&n) == Some(&name),
+                        other => crate_of.get(&n).is_some_and(|c| format!("{c}::") == other),
+                    };
+                    if n != module && known {
+                        named.insert(n);
+                    }
                 }
             }
         }
     }
-    graph
+    (graph, crate_of)
 }
 
 /// A cycle of the graph, if it has one (depth-first search).
@@ -144,19 +188,64 @@ fn cycle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
 
 #[test]
 fn the_coordinators_modules_import_no_circle() {
-    let graph = module_graph();
+    let (graph, crate_of) = module_graph();
     for (module, named) in &graph {
         println!(
-            "{module} -> {}",
+            "{} {module} -> {}",
+            crate_of[module],
             Vec::from_iter(named.iter().cloned()).join(", ")
         );
     }
-    // The reading finds the edges it should: a test that cannot see edges proves nothing.
+    // The reading finds the edges it should, within a crate and across crates: a test that
+    // cannot see edges proves nothing.
     assert!(graph["diagnosis"].contains("residuals"), "{graph:?}");
     assert!(graph["profile"].contains("residuals"), "{graph:?}");
     assert!(graph["server"].contains("web"), "{graph:?}");
     assert!(graph["calibration"].contains("outcome"), "{graph:?}");
+    assert!(graph["diagnosis"].contains("calibration"), "{graph:?}");
+    assert!(graph["api"].contains("report"), "{graph:?}");
     assert_eq!(cycle(&graph), None);
+    // No module names one of a crate above its own.
+    let rank = |c: &str| CRATES.iter().position(|(name, _)| *name == c).unwrap();
+    for (module, named) in &graph {
+        for n in named {
+            assert!(
+                rank(crate_of[n]) <= rank(crate_of[module]),
+                "{module} ({}) names {n} ({}), a crate above it",
+                crate_of[module],
+                crate_of[n]
+            );
+        }
+    }
+}
+
+/// The names of a crate's `[dependencies]` (not its dev-dependencies).
+fn dependencies(folder: &str) -> BTreeSet<String> {
+    let text = std::fs::read_to_string(repo().join(folder).join("Cargo.toml")).unwrap();
+    let manifest: toml::Value = toml::from_str(&text).unwrap();
+    manifest
+        .get("dependencies")
+        .and_then(|d| d.as_table())
+        .map(|d| d.keys().cloned().collect())
+        .unwrap_or_default()
+}
+
+#[test]
+fn only_the_service_crate_runs_async_code_or_serves() {
+    let engine = dependencies("coordinator/engine");
+    let analysis = dependencies("coordinator/analysis");
+    let service = dependencies("coordinator/service");
+    for (crate_, deps) in [("engine", &engine), ("analysis", &analysis)] {
+        for async_or_network in ["tokio", "tonic", "axum", "calib-proto", "calib-service"] {
+            assert!(
+                !deps.contains(async_or_network),
+                "the {crate_} crate depends on {async_or_network}"
+            );
+        }
+    }
+    assert!(!engine.contains("calib-analysis"));
+    assert!(analysis.contains("calib-engine"));
+    assert!(service.contains("tokio") && service.contains("calib-analysis"));
 }
 
 #[test]

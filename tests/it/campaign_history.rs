@@ -60,7 +60,7 @@ impl Coordinator {
 }
 
 fn message(search: &str, dataset: &str) -> pb::Campaign {
-    calib_coordinator::api::spec::campaign_message(&clean_campaign(search), dataset).unwrap()
+    calib_service::api::spec::campaign_message(&clean_campaign(search), dataset).unwrap()
 }
 
 /// The history's points in order, each no further on than the state, the last its end.

@@ -7,9 +7,9 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
+use calib_service::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use std::io::{Read, Write};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -174,7 +174,7 @@ fn http_post(address: SocketAddr, path: &str, body: &[u8]) -> (u16, String) {
 const SEARCH: &str = "methods = [\"nelder-mead\"]\nmax_evaluations = 40";
 
 fn message(search: &str, dataset: &str) -> pb::Campaign {
-    calib_coordinator::api::spec::campaign_message(&clean_campaign(search), dataset).unwrap()
+    calib_service::api::spec::campaign_message(&clean_campaign(search), dataset).unwrap()
 }
 
 /// The clean campaign file with `search`, after one replacement.
@@ -454,7 +454,7 @@ fn a_cancelled_campaign_can_be_submitted_again() {
 
 #[test]
 fn a_stored_campaign_beyond_the_limits_is_closed_as_failed_when_the_coordinator_restarts() {
-    use calib_coordinator::store::{CampaignRecord, CampaignStatus, SledStore, Store};
+    use calib_engine::store::{CampaignRecord, CampaignStatus, SledStore, Store};
     let dir = tempfile::tempdir().unwrap();
     // As an earlier coordinator, with no limit on starts, left it: running.
     let text = clean_campaign("methods = [\"nelder-mead\"]\nstarts = 1000000000");
@@ -479,7 +479,7 @@ fn a_stored_campaign_beyond_the_limits_is_closed_as_failed_when_the_coordinator_
     }
     let cluster = TestCluster::start(1, 1);
     let c = Coordinator::start(dir.path(), &cluster.urls());
-    let hex = calib_coordinator::store::hex(&id);
+    let hex = calib_engine::store::hex(&id);
     await_condition("the campaign closed", Duration::from_secs(60), || {
         c.state(&hex).phase() == pb::CampaignPhase::Failed
     });

@@ -625,7 +625,7 @@ fn benchmarks_default_to_a_campaign_that_ships() {
             .find(|value| value.ends_with(".toml"))
             .unwrap_or_else(|| panic!("no default campaign in `calib {args:?}`:\n{help}"));
         let campaign = repo().join(default);
-        let loaded = calib_coordinator::campaign::Campaign::load(&campaign);
+        let loaded = calib_engine::campaign::Campaign::load(&campaign);
         assert!(
             loaded.is_ok(),
             "`calib {args:?}` defaults to {default}: {:?}",

@@ -3,11 +3,11 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, Calibration};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerAddress};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration::{calibrate, Calibration};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
+use calib_service::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerAddress};
 use std::time::Duration;
 
 fn campaign(dir: &std::path::Path, max_evaluations: usize) -> Campaign {
@@ -113,12 +113,9 @@ fn a_registered_worker_serves_the_coordinator() {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let mut dispatch = DispatchConfig::new(Vec::new());
         dispatch.probe_interval = Duration::from_millis(100);
-        let coordinator = calib_coordinator::server::serve_coordinator(
+        let coordinator = calib_service::server::serve_coordinator(
             listener,
-            calib_coordinator::server::CoordinatorConfig::new(
-                "127.0.0.1:0".parse().unwrap(),
-                dispatch,
-            ),
+            calib_service::server::CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch),
         )
         .unwrap();
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -140,7 +137,7 @@ fn a_registered_worker_serves_the_coordinator() {
                 .any(|w| w.url == url && w.health == Health::Up)
         },
     );
-    let evaluator = calib_coordinator::dispatch::GrpcEvaluator::new(
+    let evaluator = calib_service::dispatch::GrpcEvaluator::new(
         coordinator.pool().clone(),
         runtime.handle().clone(),
     );
@@ -178,12 +175,11 @@ fn a_dns_name_resolves_to_workers() {
 
 #[test]
 fn an_invalid_request_is_a_fault_and_is_not_retried() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let mut objective =
-        calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let mut objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let g = objective.model.info().parameter_index("g").unwrap();
     objective.base[g] = f64::NAN;
     let cluster = TestCluster::start(2, 1);
@@ -207,11 +203,11 @@ fn an_invalid_request_is_a_fault_and_is_not_retried() {
 
 #[test]
 fn a_hanging_worker_costs_a_deadline_and_its_points_go_elsewhere() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let good = TestWorker::start(1, 64);
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
@@ -297,7 +293,7 @@ fn small_diagnosis(dir: &std::path::Path) -> Campaign {
 
 #[test]
 fn a_diagnosis_on_the_cluster_equals_the_local_one() {
-    use calib_coordinator::diagnosis::diagnose;
+    use calib_analysis::diagnosis::diagnose;
     let dir = tempfile::tempdir().unwrap();
     let campaign = small_diagnosis(dir.path());
     let local = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();
@@ -310,7 +306,7 @@ fn a_diagnosis_on_the_cluster_equals_the_local_one() {
     let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
     assert_eq!(local.selected, remote_result.selected);
     assert_eq!(local.verdict, remote_result.verdict);
-    let ranking = |d: &calib_coordinator::diagnosis::Diagnosis| {
+    let ranking = |d: &calib_analysis::diagnosis::Diagnosis| {
         d.candidates
             .iter()
             .map(|c| {
@@ -360,8 +356,8 @@ impl SetResolver {
     }
 }
 
-impl calib_coordinator::dispatch::Resolve for SetResolver {
-    fn resolve(&self, _name: &str) -> calib_coordinator::dispatch::discovery::Resolution {
+impl calib_service::dispatch::Resolve for SetResolver {
+    fn resolve(&self, _name: &str) -> calib_service::dispatch::discovery::Resolution {
         self.calls.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
         let answer = self.answer.lock().unwrap().clone();
         Box::pin(
@@ -385,7 +381,7 @@ fn up_urls(remote: &RemoteWorkers) -> Vec<String> {
 
 #[test]
 fn a_dns_name_resolved_again_adds_and_drops_workers() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let cluster = TestCluster::start(2, 1);
     let (a, b) = (cluster.workers[0].address(), cluster.workers[1].address());
     let resolver = std::sync::Arc::new(SetResolver::default());
@@ -396,7 +392,7 @@ fn a_dns_name_resolved_again_adds_and_drops_workers() {
     }]);
     config.probe_interval = Duration::from_millis(100);
     config.resolve_interval = Duration::from_millis(100);
-    config.resolver = calib_coordinator::dispatch::Resolver(resolver.clone());
+    config.resolver = calib_service::dispatch::Resolver(resolver.clone());
     let remote = RemoteWorkers::connect(config).unwrap();
     let wait_for = |what: &str, urls: Vec<String>| {
         await_condition(what, Duration::from_secs(10), || {
@@ -424,8 +420,8 @@ fn a_dns_name_resolved_again_adds_and_drops_workers() {
     // Work goes to the worker the name resolves to now, and only there.
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let points: Vec<Vec<f64>> = (0..4)
         .map(|i| vec![0.01 + 1e-4 * f64::from(i), 0.002])
         .collect();
@@ -440,11 +436,11 @@ fn a_dns_name_resolved_again_adds_and_drops_workers() {
 
 #[test]
 fn a_failed_worker_is_probed_back_in() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let mut first = TestWorker::start(1, 64);
     let address = first.address();
     // Held across the kill: the port refuses connections and stays free for the second.
@@ -499,12 +495,9 @@ fn a_registration_lapses_after_missed_renewals() {
         dispatch.probe_interval = Duration::from_millis(100);
         // Renewals every second; three missed and the worker is dropped.
         dispatch.heartbeat = Duration::from_secs(1);
-        calib_coordinator::server::serve_coordinator(
+        calib_service::server::serve_coordinator(
             listener,
-            calib_coordinator::server::CoordinatorConfig::new(
-                "127.0.0.1:0".parse().unwrap(),
-                dispatch,
-            ),
+            calib_service::server::CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch),
         )
         .unwrap()
     });
@@ -550,11 +543,11 @@ fn napping_pool(
 ) -> (
     tokio::runtime::Runtime,
     std::sync::Arc<calib_sandbox::NappingSimulator>,
-    calib_coordinator::dispatch::RemoteWorkers,
-    calib_coordinator::objective::Objective,
+    calib_service::dispatch::RemoteWorkers,
+    calib_engine::objective::Objective,
     tempfile::TempDir,
 ) {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let pool = unmeasured_napping_pool(nap);
     // The worker gets the measurement first.
     pool.2
@@ -571,14 +564,14 @@ fn unmeasured_napping_pool(
 ) -> (
     tokio::runtime::Runtime,
     std::sync::Arc<calib_sandbox::NappingSimulator>,
-    calib_coordinator::dispatch::RemoteWorkers,
-    calib_coordinator::objective::Objective,
+    calib_service::dispatch::RemoteWorkers,
+    calib_engine::objective::Objective,
     tempfile::TempDir,
 ) {
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(1)
         .enable_all()
@@ -605,7 +598,7 @@ fn distinct_points(n: u32) -> Vec<Vec<f64>> {
 
 #[test]
 fn a_slow_workers_chunks_hold_a_point_per_slot_two_in_flight() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     // Half a second per point: far beyond the 50 ms of work a chunk holds per slot.
     let (_runtime, napper, remote, objective, _dir) = napping_pool(Duration::from_millis(500));
     let before = napper.requests();
@@ -625,8 +618,8 @@ fn a_slow_workers_chunks_hold_a_point_per_slot_two_in_flight() {
 
 #[test]
 fn a_fast_workers_chunks_grow_past_eight_points_per_slot() {
-    use calib_coordinator::dispatch::pool::{CHUNK_SECONDS, MAX_POINTS_PER_SLOT};
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
+    use calib_service::dispatch::pool::{CHUNK_SECONDS, MAX_POINTS_PER_SLOT};
     // A worker of two slots that takes a millisecond per point. Its speed is recorded in
     // the pool as its first answer records it (one point in 1 ms), not timed here: what a
     // loaded machine would measure is no part of the claim, how chunks follow it is.
@@ -658,14 +651,14 @@ fn napping_cluster(
     slots: u32,
 ) -> (
     tempfile::TempDir,
-    calib_coordinator::objective::Objective,
+    calib_engine::objective::Objective,
     calib_sandbox::NappingCluster,
     RemoteWorkers,
 ) {
     let dir = tempfile::tempdir().unwrap();
     let campaign = campaign(dir.path(), 10);
-    let measurement = calib_coordinator::calibration::load_measurement(&campaign).unwrap();
-    let objective = calib_coordinator::objective::Objective::new(&campaign, &measurement).unwrap();
+    let measurement = calib_engine::calibration::load_measurement(&campaign).unwrap();
+    let objective = calib_engine::objective::Objective::new(&campaign, &measurement).unwrap();
     let nappers = calib_sandbox::NappingCluster::start(workers, nap, slots).unwrap();
     let remote = nappers.try_connect().unwrap();
     (dir, objective, nappers, remote)
@@ -673,7 +666,7 @@ fn napping_cluster(
 
 #[test]
 fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let (_dir, objective, nappers, remote) = napping_cluster(2, Duration::from_millis(20), 2);
     assert!(remote.wait_until_up(2, Duration::from_secs(10)));
     let batch = |k: u32| -> Vec<Vec<f64>> {
@@ -702,7 +695,7 @@ fn a_batch_that_fits_the_idle_slots_goes_evenly_in_one_request_per_worker() {
 
 #[test]
 fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let (_dir, objective, _nappers, remote) = napping_cluster(1, Duration::from_millis(300), 2);
     assert!(remote.wait_until_up(1, Duration::from_secs(10)));
     let evaluator = remote.evaluator();
@@ -748,7 +741,7 @@ fn a_pool_whose_slots_are_all_busy_has_no_room_for_a_second_round() {
 
 #[test]
 fn the_measurement_travels_to_each_worker_once() {
-    use calib_coordinator::evaluator::Evaluator;
+    use calib_engine::evaluator::Evaluator;
     let (_dir, objective, nappers, remote) = napping_cluster(2, Duration::from_millis(20), 1);
     // Both up before the first batch, or one of them could take it all.
     assert!(remote.wait_until_up(2, Duration::from_secs(10)));

@@ -4,9 +4,9 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::evaluator::{Evaluator, Fault, LocalEvaluator};
-use calib_coordinator::objective::{Evaluation, Objective};
-use calib_coordinator::store::{CampaignStatus, SledStore, Store};
+use calib_engine::evaluator::{Evaluator, Fault, LocalEvaluator};
+use calib_engine::objective::{Evaluation, Objective};
+use calib_engine::store::{CampaignStatus, SledStore, Store};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -318,12 +318,12 @@ impl Evaluator for WorkersLostAfter {
 
 #[test]
 fn a_coordinator_resumes_a_faulted_campaign_again_once_a_worker_registers() {
-    use calib_coordinator::calibration::calibrate_with_store;
-    use calib_coordinator::campaign::Campaign;
-    use calib_coordinator::dispatch::DispatchConfig;
-    use calib_coordinator::optim::problem::Silent;
-    use calib_coordinator::server::{serve_coordinator, CoordinatorConfig};
-    use calib_coordinator::store::MemoryStore;
+    use calib_engine::calibration::calibrate_with_store;
+    use calib_engine::campaign::Campaign;
+    use calib_engine::optim::problem::Silent;
+    use calib_engine::store::MemoryStore;
+    use calib_service::dispatch::DispatchConfig;
+    use calib_service::server::{serve_coordinator, CoordinatorConfig};
 
     let dir = tempfile::tempdir().unwrap();
     let search = "methods = [\"nelder-mead\", \"powell\"]\nstarts = 2\nmax_evaluations = 100";
@@ -340,7 +340,7 @@ fn a_coordinator_resumes_a_faulted_campaign_again_once_a_worker_registers() {
         };
         let error = calibrate_with_store(&campaign, &lost, &store, &Silent).err();
         assert!(
-            matches!(error, Some(calib_coordinator::Error::Fault(_))),
+            matches!(error, Some(calib_engine::Error::Fault(_))),
             "{:?}",
             error.map(|e| e.to_string())
         );

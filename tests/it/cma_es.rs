@@ -2,11 +2,11 @@
 //! evolution, a rerun served from the store, and the clean record's true frictions.
 
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, calibrate_with_store, Calibration};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::store::MemoryStore;
+use calib_engine::calibration::{calibrate, calibrate_with_store, Calibration};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
+use calib_engine::store::MemoryStore;
 
 /// Differential evolution's population on two parameters, `max(15, 10 n)`: CMA-ES is given
 /// as many points per round, so the two are compared at the same batch size.

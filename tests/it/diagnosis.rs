@@ -2,10 +2,10 @@
 //! is nothing to find, and admits it when the missing piece is outside its library.
 
 use crate::common::*;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::{diagnose, Diagnosis, Verdict};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::{diagnose, Diagnosis, Verdict};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use calib_worker::{models, SolverOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

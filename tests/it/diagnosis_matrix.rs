@@ -4,13 +4,13 @@
 //! (every effect under every setting) is `calib bench diagnose --matrix`.
 
 use crate::common::*;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::matrix::{
+use calib_analysis::diagnosis::matrix::{
     naive_real_campaign, parameter_toml, search_toml, synthetic_campaign, SEED_REAL_OBJECTIVE,
 };
-use calib_coordinator::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::{diagnose, Diagnosis, NOISE_FACTOR};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 
 /// Settings of the matrix, by its keys.
 const NM: &str = "nm";

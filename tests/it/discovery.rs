@@ -7,7 +7,7 @@
 //! continuous integration (`CI` set), where that fails the test.
 
 use crate::common::*;
-use calib_coordinator::diagnosis::discovery::{
+use calib_analysis::diagnosis::discovery::{
     discover, Discovery, DiscoveryOptions, FurutaJoints, Record,
 };
 use std::path::Path;
@@ -186,10 +186,10 @@ fn a_clean_record_gets_no_proposal() {
 /// instead of the truth.
 #[test]
 fn cogging_is_found_after_calibrating_the_frictions() {
-    use calib_coordinator::calibration::calibrate;
-    use calib_coordinator::campaign::Campaign;
-    use calib_coordinator::evaluator::LocalEvaluator;
-    use calib_coordinator::optim::problem::Silent;
+    use calib_engine::calibration::calibrate;
+    use calib_engine::campaign::Campaign;
+    use calib_engine::evaluator::LocalEvaluator;
+    use calib_engine::optim::problem::Silent;
     let dir = tempfile::tempdir().unwrap();
     let Some((record, truth)) = record(
         dir.path(),

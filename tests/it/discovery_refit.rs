@@ -6,15 +6,15 @@
 //! continuous integration (`CI` set), where that fails the test.
 
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, load_measurement};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::discovery::{
+use calib_analysis::diagnosis::discovery::{
     discover, joint_model, record_of, refit_discovered, Discovery, DiscoveryOptions, ProposalRefit,
 };
-use calib_coordinator::diagnosis::noise_floor;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::objective::Objective;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::noise_floor;
+use calib_engine::calibration::{calibrate, load_measurement};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::objective::Objective;
+use calib_engine::optim::problem::Silent;
 use std::path::Path;
 
 /// The two bearing frictions free, from nominal values off the truth, on `csv`.

@@ -362,7 +362,7 @@ fn a_campaign_on_an_uploaded_fmu_is_watched_cancelled_profiled_and_diagnosed() {
         .unwrap()
         .into_inner();
     let text = std::fs::read_to_string(&campaign).unwrap();
-    let mut message = calib_coordinator::api::spec::campaign_message(&text, &dataset.id).unwrap();
+    let mut message = calib_service::api::spec::campaign_message(&text, &dataset.id).unwrap();
     message.fmu_id = fmu.id.clone();
 
     // Cancelled at once, a long campaign stops.

@@ -1,11 +1,11 @@
 //! Calibrating the Furuta pendulum's frictions: synthetic record (truth known) and the real rig.
 
 use crate::common::*;
-use calib_coordinator::calibration::calibrate;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::multistart::Stop;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration::calibrate;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::multistart::Stop;
+use calib_engine::optim::problem::Silent;
 
 /// Calibrate both frictions on the clean record with one method from the nominal point and
 /// one screened start, each within 0.02% of the truth (README's claim), over the seed's bounds [0, 0.9] (much wider than the frictions: the
@@ -205,11 +205,11 @@ fn rounds_count_the_batches_each_run_waited_for() {
     assert!(c.screened > 0);
     let longest = c.runs.iter().map(|r| r.rounds).max().unwrap();
     assert_eq!(c.rounds(), 2 + longest);
-    let result = calib_coordinator::report::result_json(&c);
+    let result = calib_analysis::report::result_json(&c);
     assert_eq!(result["rounds"].as_u64(), Some(c.rounds() as u64));
     for (json, r) in result["runs"].as_array().unwrap().iter().zip(&c.runs) {
         assert_eq!(json["rounds"].as_u64(), Some(r.rounds as u64));
     }
-    let table = calib_coordinator::report::table::summary_of(&c.outcome);
+    let table = calib_analysis::report::table::summary_of(&c.outcome);
     assert!(table.contains(&format!("{} rounds", c.rounds())), "{table}");
 }

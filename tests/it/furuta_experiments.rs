@@ -12,12 +12,12 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, calibrate_with_store, Calibration};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::profile::{profile, report, BestFrom, Profiles, Settings};
-use calib_coordinator::store::MemoryStore;
+use calib_analysis::profile::{profile, report, BestFrom, Profiles, Settings};
+use calib_engine::calibration::{calibrate, calibrate_with_store, Calibration};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
+use calib_engine::store::MemoryStore;
 use std::path::{Path, PathBuf};
 
 /// Length of both records [s].
@@ -417,7 +417,7 @@ fn disjoint_windows_fit_only_their_samples() {
     within_1_percent("armFriction", best.point[0], r.arm);
     within_1_percent("pendulumFriction", best.point[1], r.pendulum);
     assert!(best.objective <= 1.5 * floor(&c));
-    let json = calib_coordinator::report::result_json(&c);
+    let json = calib_analysis::report::result_json(&c);
     assert_eq!(
         json["window"]["windows"],
         serde_json::json!([[0.0, 5.0], [10.0, 20.0]])
@@ -520,7 +520,7 @@ fn calibrate_writes_each_experiments_plots_and_share_of_the_fit() {
     assert_eq!(json["best"]["objective"].as_f64(), Some(best.objective));
     assert_eq!(
         json["experiments"],
-        calib_coordinator::report::result_json(&c)["experiments"]
+        calib_analysis::report::result_json(&c)["experiments"]
     );
 
     let experiments = json["experiments"].as_array().unwrap();

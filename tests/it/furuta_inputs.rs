@@ -8,10 +8,10 @@
 //! test.
 
 use crate::common::*;
-use calib_coordinator::calibration::calibrate;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration::calibrate;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use std::path::{Path, PathBuf};
 
 /// Length of the driven record [s].

@@ -4,10 +4,10 @@
 //! every column), with the five columns mapped to the model's inputs by `[[inputs]]`.
 
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, Calibration};
-use calib_coordinator::campaign::{Campaign, Method};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration::{calibrate, Calibration};
+use calib_engine::campaign::{Campaign, Method};
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use std::path::Path;
 
 /// The bench's factors, as the example's header sets them.

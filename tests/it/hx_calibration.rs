@@ -1,11 +1,11 @@
 //! Calibrating the low-fidelity evaporator on the high-fidelity record (the seed's case).
 
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, Calibration};
-use calib_coordinator::campaign::{Campaign, Method};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::report::evidence::{at_bound, Bound};
+use calib_analysis::report::evidence::{at_bound, Bound};
+use calib_engine::calibration::{calibrate, Calibration};
+use calib_engine::campaign::{Campaign, Method};
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 
 /// One Nelder–Mead run from the nominal point of `file` on a budget of `evaluations`.
 fn nelder_mead(file: &str, evaluations: usize) -> Calibration {
@@ -15,7 +15,7 @@ fn nelder_mead(file: &str, evaluations: usize) -> Calibration {
     campaign.search.max_evaluations = evaluations;
     let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
     let best = c.best_run();
-    let rms = |e: &calib_coordinator::objective::Evaluation| -> Vec<f64> {
+    let rms = |e: &calib_engine::objective::Evaluation| -> Vec<f64> {
         let n = c.objective.grid.len() as f64;
         e.sse.iter().map(|s| (s / n).sqrt()).collect()
     };

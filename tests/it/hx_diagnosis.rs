@@ -2,10 +2,10 @@
 //! found in records the project's own low-fidelity model makes, within 1,500 simulations.
 
 use crate::common::*;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::{diagnose, Verdict};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_analysis::diagnosis::{diagnose, Verdict};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use calib_worker::{models, SolverOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;

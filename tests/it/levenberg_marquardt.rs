@@ -3,12 +3,12 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, calibrate_with_store, Calibration};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::multistart::{RunOutcome, Stop};
-use calib_coordinator::optim::problem::{Progress, Silent};
-use calib_coordinator::store::{MemoryStore, Store};
+use calib_engine::calibration::{calibrate, calibrate_with_store, Calibration};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::multistart::{RunOutcome, Stop};
+use calib_engine::optim::problem::{Progress, Silent};
+use calib_engine::store::{MemoryStore, Store};
 use std::path::Path;
 use std::sync::Mutex;
 
@@ -289,9 +289,9 @@ fn a_cluster_run_equals_the_local_run() {
 /// bits from workers as in one process.
 #[test]
 fn residuals_of_several_experiments_are_concatenated_alike_everywhere() {
-    use calib_coordinator::calibration::load_measurement;
-    use calib_coordinator::evaluator::Evaluator;
-    use calib_coordinator::objective::Objective;
+    use calib_engine::calibration::load_measurement;
+    use calib_engine::evaluator::Evaluator;
+    use calib_engine::objective::Objective;
     let dir = tempfile::tempdir().unwrap();
     let campaign = example(
         dir.path(),

@@ -16,6 +16,8 @@ mod reference_fmus;
 mod api;
 mod architecture;
 mod campaign_history;
+mod campaign_loader;
+mod campaign_message;
 mod campaign_requests;
 mod cli;
 mod cluster;

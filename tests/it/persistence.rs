@@ -2,12 +2,12 @@
 //! with SIGKILL and restarted, model version changes, export and import, resume.
 
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate_with_store, resume_unfinished};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::{Evaluator, Fault, LocalEvaluator};
-use calib_coordinator::objective::{Evaluation, Objective};
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::store::{CampaignStatus, MemoryStore, SledStore, Store};
+use calib_engine::calibration::{calibrate_with_store, resume_unfinished};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::{Evaluator, Fault, LocalEvaluator};
+use calib_engine::objective::{Evaluation, Objective};
+use calib_engine::optim::problem::Silent;
+use calib_engine::store::{CampaignStatus, MemoryStore, SledStore, Store};
 use calib_worker::{Model, ModelInfo, SimulationError, SolverOptions, Trajectory};
 use serde_json::Value;
 use std::path::Path;

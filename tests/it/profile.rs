@@ -4,10 +4,10 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::profile::{profile, report, BestFrom, ParameterProfile, Profiles, Settings};
-use calib_coordinator::store::{MemoryStore, SledStore};
+use calib_analysis::profile::{profile, report, BestFrom, ParameterProfile, Profiles, Settings};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::store::{MemoryStore, SledStore};
 
 fn example(name: &str) -> Campaign {
     Campaign::load(&repo().join("examples").join(name)).unwrap()

@@ -48,7 +48,7 @@ fn python_stubs() -> tempfile::TempDir {
 
 #[test]
 fn a_python_client_runs_a_campaign_on_a_coordinator() {
-    use calib_coordinator::server::{serve_coordinator, CoordinatorConfig};
+    use calib_service::server::{serve_coordinator, CoordinatorConfig};
     if let Some(reason) = python_missing() {
         common::skip(&reason);
         return;

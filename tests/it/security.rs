@@ -7,13 +7,13 @@
 use crate::common::cluster::TestWorker;
 use crate::common::pki::Pki;
 use crate::common::*;
-use calib_coordinator::calibration::calibrate;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerAddress};
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
+use calib_engine::calibration::calibrate;
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
 use calib_proto::v1 as proto;
 use calib_security::{ClientSecurity, ServerTls};
+use calib_service::dispatch::{DispatchConfig, Health, RemoteWorkers, WorkerAddress};
 use std::path::Path;
 use std::time::Duration;
 
@@ -293,7 +293,7 @@ fn the_token_is_not_in_the_debug_output_of_any_configuration() {
     worker.register_security = pki.client(Some(TOKEN));
     let dispatch = dispatch_config(&[], pki.client(Some(TOKEN)));
     let mut coordinator =
-        calib_coordinator::server::CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch);
+        calib_service::server::CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch);
     coordinator.security = pki.server(Some(TOKEN));
     let key = std::fs::read_to_string(&pki.key).unwrap();
     let key_body = key.lines().nth(1).unwrap();
@@ -317,12 +317,10 @@ fn a_worker_registering_with_a_tls_coordinator_serves_it() {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let mut dispatch = dispatch_config(&[], pki.client(Some(TOKEN)));
         dispatch.probe_interval = Duration::from_millis(100);
-        let mut config = calib_coordinator::server::CoordinatorConfig::new(
-            "127.0.0.1:0".parse().unwrap(),
-            dispatch,
-        );
+        let mut config =
+            calib_service::server::CoordinatorConfig::new("127.0.0.1:0".parse().unwrap(), dispatch);
         config.security = pki.server(Some(TOKEN));
-        calib_coordinator::server::serve_coordinator(listener, config).unwrap()
+        calib_service::server::serve_coordinator(listener, config).unwrap()
     });
     let registry = format!("https://{}", coordinator.address());
     let (server, client) = (pki.server(Some(TOKEN)), pki.client(Some(TOKEN)));
@@ -345,7 +343,7 @@ fn a_worker_registering_with_a_tls_coordinator_serves_it() {
                 .any(|w| w.url == url && w.health == Health::Up)
         },
     );
-    let evaluator = calib_coordinator::dispatch::GrpcEvaluator::new(
+    let evaluator = calib_service::dispatch::GrpcEvaluator::new(
         coordinator.pool().clone(),
         runtime.handle().clone(),
     );
@@ -361,12 +359,12 @@ fn a_worker_without_the_token_cannot_register() {
     let runtime = tokio::runtime::Runtime::new().unwrap();
     let coordinator = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let mut config = calib_coordinator::server::CoordinatorConfig::new(
+        let mut config = calib_service::server::CoordinatorConfig::new(
             "127.0.0.1:0".parse().unwrap(),
             dispatch_config(&[], pki.client(Some(TOKEN))),
         );
         config.security = pki.server(Some(TOKEN));
-        calib_coordinator::server::serve_coordinator(listener, config).unwrap()
+        calib_service::server::serve_coordinator(listener, config).unwrap()
     });
     let registry = format!("https://{}", coordinator.address());
     // Were the registration let in, the pool would find nothing at this address.

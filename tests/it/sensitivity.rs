@@ -3,10 +3,10 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::sensitivity::{analyse, Methods, Sensitivity, Settings, DEFAULT_SAMPLES};
-use calib_coordinator::store::{MemoryStore, SledStore};
+use calib_analysis::sensitivity::{analyse, Methods, Sensitivity, Settings, DEFAULT_SAMPLES};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::store::{MemoryStore, SledStore};
 
 fn example(name: &str) -> Campaign {
     Campaign::load(&repo().join("examples").join(name)).unwrap()
@@ -31,7 +31,7 @@ fn hx_all_the_air_side_pressure_drop_factor_can_be_held_fixed() {
     let s = analyse(&campaign, LocalEvaluator, &MemoryStore::new(), settings).unwrap();
     assert_eq!(s.quantities[1].name, "dp_ref");
     let airdp = total(&s, 0, "CF_Airdp");
-    println!("{}", calib_coordinator::sensitivity::report::table(&s));
+    println!("{}", calib_analysis::sensitivity::report::table(&s));
     assert!(airdp < 0.01, "CF_Airdp total {airdp}");
     assert!(!s.influential(index_of(&s, "CF_Airdp")));
     assert!(s.fixable().contains(&"CF_Airdp"), "{:?}", s.fixable());
@@ -100,7 +100,7 @@ fn furuta_on_linear_bounds_only_the_pendulum_friction_drives_the_objective() {
         seed: 1,
     };
     let s = analyse(&campaign, LocalEvaluator, &MemoryStore::new(), settings).unwrap();
-    println!("{}", calib_coordinator::sensitivity::report::table(&s));
+    println!("{}", calib_analysis::sensitivity::report::table(&s));
     let pendulum = index_of(&s, "pendulumFriction");
     assert!(s.influential(pendulum));
     assert!(total(&s, 0, "pendulumFriction") > 0.9);
@@ -144,7 +144,7 @@ fn furuta_both_frictions_are_influential_on_the_examples_log10_bounds() {
             seed: 1,
         };
         let s = analyse(&campaign, LocalEvaluator, &MemoryStore::new(), settings).unwrap();
-        println!("{}", calib_coordinator::sensitivity::report::table(&s));
+        println!("{}", calib_analysis::sensitivity::report::table(&s));
         for friction in ["armFriction", "pendulumFriction"] {
             assert!(
                 s.influential(index_of(&s, friction)),

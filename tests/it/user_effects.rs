@@ -5,12 +5,12 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::calibration::{calibrate, calibrate_with_store, Calibration};
-use calib_coordinator::campaign::Campaign;
-use calib_coordinator::diagnosis::candidate_effects;
-use calib_coordinator::evaluator::LocalEvaluator;
-use calib_coordinator::optim::problem::Silent;
-use calib_coordinator::store::MemoryStore;
+use calib_analysis::diagnosis::candidate_effects;
+use calib_engine::calibration::{calibrate, calibrate_with_store, Calibration};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
+use calib_engine::store::MemoryStore;
 use std::path::Path;
 
 /// The viscous-arm record (true viscous friction 0.002 N.m.s/rad) fitted with the two

@@ -5,9 +5,9 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_proto::v1 as pb;
 use calib_proto::v1::calibration_client::CalibrationClient;
+use calib_service::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use std::io::{Read, Write};
 use std::net::SocketAddr;
 use std::path::Path;
@@ -139,7 +139,7 @@ fn the_coordinators_json_routes_answer_what_its_grpc_methods_answer() {
     // Submit over HTTP, follow over gRPC: one campaign, run on the workers.
     let search = "methods = [\"nelder-mead\"]\nstarts = 2\nmax_evaluations = 80\nseed = 3";
     let text = clean_campaign(search);
-    let campaign = calib_coordinator::api::spec::campaign_message(&text, &dataset.id).unwrap();
+    let campaign = calib_service::api::spec::campaign_message(&text, &dataset.id).unwrap();
     let (code, body) = post(
         web,
         "SubmitCampaign",
@@ -325,8 +325,8 @@ fn json_routes_fail_with_the_rpcs_status_and_message() {
 
 #[test]
 fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
-    use calib_coordinator::store::{CampaignStatus, SledStore, Store};
-    use calib_coordinator::web::local::{start_ui, UiConfig};
+    use calib_engine::store::{CampaignStatus, SledStore, Store};
+    use calib_service::web::local::{start_ui, UiConfig};
     let dir = tempfile::tempdir().unwrap();
     let search = "methods = [\"nelder-mead\"]\nstarts = 2\nmax_evaluations = 60\nseed = 4";
     let campaign = write(dir.path(), "clean.toml", &clean_campaign(search));
@@ -339,7 +339,7 @@ fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
         record.status = CampaignStatus::Running;
         record.result = None;
         store.put_campaign(&id, &record).unwrap();
-        calib_coordinator::store::hex(&id)
+        calib_engine::store::hex(&id)
     };
 
     let runtime = runtime();
@@ -373,7 +373,7 @@ fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
 
 /// Submit `text` on dataset `dataset` over HTTP and wait until the campaign ends: its id.
 fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
-    let campaign = calib_coordinator::api::spec::campaign_message(text, dataset).unwrap();
+    let campaign = calib_service::api::spec::campaign_message(text, dataset).unwrap();
     let (code, body) = post(
         c.http(),
         "SubmitCampaign",
@@ -407,7 +407,7 @@ fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
 
 #[test]
 fn two_campaigns_fits_are_drawn_over_the_measured_data_once() {
-    use calib_coordinator::report::chart::anatomy;
+    use calib_analysis::report::chart::anatomy;
     let dir = tempfile::tempdir().unwrap();
     let cluster = TestCluster::start(1, 2);
     let c = Coordinator::start(dir.path(), &cluster.urls());

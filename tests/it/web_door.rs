@@ -7,8 +7,8 @@
 
 use crate::reference_fmus;
 
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
-use calib_coordinator::web::local::{start_ui, RunningUi, UiConfig};
+use calib_service::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
+use calib_service::web::local::{start_ui, RunningUi, UiConfig};
 use std::io::{Read, Write};
 use std::net::SocketAddr;
 use std::path::Path;

@@ -916,11 +916,11 @@ fn reflection_describes_every_listed_service_in_both_versions() {
     });
     let coordinator = runtime.block_on(async {
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-        let config = calib_coordinator::server::CoordinatorConfig::new(
+        let config = calib_service::server::CoordinatorConfig::new(
             "127.0.0.1:0".parse().unwrap(),
             calib_sandbox::cluster::dispatch_config(&[worker.url()]),
         );
-        calib_coordinator::server::serve_coordinator(listener, config).unwrap()
+        calib_service::server::serve_coordinator(listener, config).unwrap()
     });
     runtime.block_on(async {
         let channel = Channel::from_shared(format!("http://{}", coordinator.address()))

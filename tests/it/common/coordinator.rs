@@ -1,8 +1,8 @@
 //! A coordinator in the test's own process: on the store (`db`) and API files (`api`) of a
 //! folder, dispatching to given workers, on a runtime of its own; shut down when dropped.
 
-use calib_coordinator::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use calib_proto::v1::calibration_client::CalibrationClient;
+use calib_service::server::{serve_coordinator, CoordinatorConfig, RunningCoordinator};
 use std::path::Path;
 use tonic::transport::Channel;
 

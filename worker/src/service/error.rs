@@ -2,7 +2,7 @@
 
 /// Why a request to the worker was not answered. Its gRPC status code is all a client sees;
 /// whether a request is worth retrying elsewhere is decided on the coordinator's side
-/// (`calib_coordinator::dispatch::WorkerError::is_retryable`).
+/// (`calib_service::dispatch::WorkerError::is_retryable`).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum Error {
     /// The request is malformed; `field` names the offending field of the request.
