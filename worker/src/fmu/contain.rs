@@ -220,68 +220,12 @@ pub fn supervise(channel: libc::c_int) -> ! {
                 libc::_exit(1);
             }
         };
-        let me = libc::getpid();
-        let mut command = Command::new("/proc/self/exe");
-        command
-            .args(std::env::args_os().skip(1))
-            .env(INNER, "1")
-            .env("TMPDIR", &workdir)
-            .current_dir(&workdir);
-        command.pre_exec(move || {
-            let mut none: libc::sigset_t = std::mem::zeroed();
-            libc::sigemptyset(&mut none);
-            libc::pthread_sigmask(libc::SIG_SETMASK, &none, std::ptr::null_mut());
-            if libc::prctl(
-                libc::PR_SET_PDEATHSIG,
-                libc::SIGKILL as libc::c_ulong,
-                0,
-                0,
-                0,
-            ) < 0
-                || libc::getppid() != me
-            {
-                return Err(io::Error::other("the FMU host ended"));
-            }
-            Ok(())
-        });
-        let inner = match command.spawn() {
-            Ok(child) => child.id() as libc::pid_t,
-            Err(e) => {
-                eprintln!("cannot start the FMU's process: {e}");
-                let _ = std::fs::remove_dir_all(&workdir);
-                libc::_exit(1);
-            }
-        };
+        let inner = start_inner(&workdir);
         // Only the FMU's process answers on the channel: let go of it, so that the worker
         // sees its end when that process ends. (Its stdout and stderr stay open here: they
         // end when this process does, after the last of the FMU's processes.)
         libc::close(channel);
-        let mut ended: Option<libc::c_int> = None;
-        'wait: loop {
-            let signal = libc::sigwaitinfo(&set, std::ptr::null_mut());
-            if signal == libc::SIGCHLD {
-                loop {
-                    let mut status = 0;
-                    let pid = libc::waitpid(-1, &mut status, libc::WNOHANG);
-                    if pid <= 0 {
-                        break;
-                    }
-                    if pid == inner {
-                        ended = Some(status);
-                        break 'wait;
-                    }
-                }
-            } else if signal > 0 {
-                // Told to stop; the FMU's process may have ended already (its SIGCHLD still
-                // pending behind the lower-numbered stop signal): report that end, not the
-                // request.
-                let mut status = 0;
-                if libc::waitpid(inner, &mut status, libc::WNOHANG) == inner {
-                    ended = Some(status);
-                }
-                break;
-            }
-        }
+        let ended = wait_for(inner, &set);
         if ended.is_none() {
             libc::kill(inner, libc::SIGKILL);
             let mut status = 0;
@@ -289,26 +233,110 @@ pub fn supervise(channel: libc::c_int) -> ! {
         }
         kill_descendants();
         let _ = std::fs::remove_dir_all(&workdir);
-        match ended {
-            Some(status) if libc::WIFEXITED(status) => libc::_exit(libc::WEXITSTATUS(status)),
-            Some(status) if libc::WIFSIGNALED(status) => {
-                // End as the FMU's process did, for the worker to report (no core dump).
-                let signal = libc::WTERMSIG(status);
-                let none = libc::rlimit {
-                    rlim_cur: 0,
-                    rlim_max: 0,
-                };
-                libc::setrlimit(libc::RLIMIT_CORE, &none);
-                libc::signal(signal, libc::SIG_DFL);
-                let mut only: libc::sigset_t = std::mem::zeroed();
-                libc::sigemptyset(&mut only);
-                libc::sigaddset(&mut only, signal);
-                libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
-                libc::raise(signal);
-                libc::_exit(128 + signal)
-            }
-            _ => libc::_exit(143),
+        exit_as(ended)
+    }
+}
+
+/// Start this program again as the FMU's process, in `workdir`, killed when the supervisor
+/// ends; its pid. A start that fails ends the supervisor.
+///
+/// # Safety
+/// Plain system calls, in a process that runs a single thread.
+unsafe fn start_inner(workdir: &Path) -> libc::pid_t {
+    let me = libc::getpid();
+    let mut command = Command::new("/proc/self/exe");
+    command
+        .args(std::env::args_os().skip(1))
+        .env(INNER, "1")
+        .env("TMPDIR", workdir)
+        .current_dir(workdir);
+    command.pre_exec(move || {
+        let mut none: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut none);
+        libc::pthread_sigmask(libc::SIG_SETMASK, &none, std::ptr::null_mut());
+        if libc::prctl(
+            libc::PR_SET_PDEATHSIG,
+            libc::SIGKILL as libc::c_ulong,
+            0,
+            0,
+            0,
+        ) < 0
+            || libc::getppid() != me
+        {
+            return Err(io::Error::other("the FMU host ended"));
         }
+        Ok(())
+    });
+    match command.spawn() {
+        Ok(child) => child.id() as libc::pid_t,
+        Err(e) => {
+            eprintln!("cannot start the FMU's process: {e}");
+            let _ = std::fs::remove_dir_all(workdir);
+            libc::_exit(1);
+        }
+    }
+}
+
+/// Wait until the FMU's process `inner` ends (its wait status) or a stop signal of `set`
+/// arrives (`None`, unless the process had ended already).
+///
+/// # Safety
+/// Plain system calls, in a process that runs a single thread, with `set` blocked.
+unsafe fn wait_for(inner: libc::pid_t, set: &libc::sigset_t) -> Option<libc::c_int> {
+    let mut ended: Option<libc::c_int> = None;
+    'wait: loop {
+        let signal = libc::sigwaitinfo(set, std::ptr::null_mut());
+        if signal == libc::SIGCHLD {
+            loop {
+                let mut status = 0;
+                let pid = libc::waitpid(-1, &mut status, libc::WNOHANG);
+                if pid <= 0 {
+                    break;
+                }
+                if pid == inner {
+                    ended = Some(status);
+                    break 'wait;
+                }
+            }
+        } else if signal > 0 {
+            // Told to stop; the FMU's process may have ended already (its SIGCHLD still
+            // pending behind the lower-numbered stop signal): report that end, not the
+            // request.
+            let mut status = 0;
+            if libc::waitpid(inner, &mut status, libc::WNOHANG) == inner {
+                ended = Some(status);
+            }
+            break;
+        }
+    }
+    ended
+}
+
+/// End as the FMU's process did (its exit code, or its signal without a core dump), or as
+/// stopped (143) when it did not end by itself.
+///
+/// # Safety
+/// Plain system calls, in a process that runs a single thread.
+unsafe fn exit_as(ended: Option<libc::c_int>) -> ! {
+    match ended {
+        Some(status) if libc::WIFEXITED(status) => libc::_exit(libc::WEXITSTATUS(status)),
+        Some(status) if libc::WIFSIGNALED(status) => {
+            // End as the FMU's process did, for the worker to report (no core dump).
+            let signal = libc::WTERMSIG(status);
+            let none = libc::rlimit {
+                rlim_cur: 0,
+                rlim_max: 0,
+            };
+            libc::setrlimit(libc::RLIMIT_CORE, &none);
+            libc::signal(signal, libc::SIG_DFL);
+            let mut only: libc::sigset_t = std::mem::zeroed();
+            libc::sigemptyset(&mut only);
+            libc::sigaddset(&mut only, signal);
+            libc::pthread_sigmask(libc::SIG_UNBLOCK, &only, std::ptr::null_mut());
+            libc::raise(signal);
+            libc::_exit(128 + signal)
+        }
+        _ => libc::_exit(143),
     }
 }
 

@@ -59,6 +59,9 @@ pub struct Variable {
     pub description: String,
 }
 
+/// A declared type's unit, min and max.
+type DeclaredType = (String, Option<f64>, Option<f64>);
+
 /// What calib reads of a model description.
 #[derive(Debug, Clone)]
 pub struct Description {
@@ -109,135 +112,14 @@ impl Description {
                 .and_then(|n| n.attribute("modelIdentifier"))
                 .map(str::to_string)
         };
-        let number = |n: roxmltree::Node, attr: &str| -> Result<Option<f64>, FmuError> {
-            n.attribute(attr)
-                .map(|v| {
-                    v.trim().parse::<f64>().map_err(|_| {
-                        FmuError::Description(format!(
-                            "`{attr}` of <{}> is not a number: `{v}`",
-                            n.tag_name().name()
-                        ))
-                    })
-                })
-                .transpose()
+
+        let types = declared_types(version, child("TypeDefinitions"))?;
+        let variables = match child("ModelVariables") {
+            Some(vars) => variables(version, vars, &types)?,
+            None => Vec::new(),
         };
 
-        // Declared types: unit, min and max a variable inherits.
-        let mut types: HashMap<String, (String, Option<f64>, Option<f64>)> = HashMap::new();
-        if let Some(defs) = child("TypeDefinitions") {
-            for t in defs.children().filter(|n| n.is_element()) {
-                let Some(name) = t.attribute("name") else {
-                    continue;
-                };
-                // FMI 2.0: <SimpleType name><Real unit min max/></SimpleType>;
-                // FMI 3.0: <Float64Type name unit min max/>.
-                let holder = match version {
-                    FmiVersion::V2 => t.children().find(|n| n.has_tag_name("Real")),
-                    FmiVersion::V3 => t.has_tag_name("Float64Type").then_some(t),
-                };
-                if let Some(h) = holder {
-                    types.insert(
-                        name.to_string(),
-                        (
-                            h.attribute("unit").unwrap_or("").to_string(),
-                            number(h, "min")?,
-                            number(h, "max")?,
-                        ),
-                    );
-                }
-            }
-        }
-
-        let mut variables = Vec::new();
-        if let Some(vars) = child("ModelVariables") {
-            for v in vars.children().filter(|n| n.is_element()) {
-                // FMI 2.0: <ScalarVariable ...><Real start unit .../></ScalarVariable>;
-                // FMI 3.0: <Float64 name ... start unit .../>.
-                let holder = match version {
-                    FmiVersion::V2 => v.children().find(|n| n.is_element()).and_then(|h| {
-                        match h.tag_name().name() {
-                            "Real" => Some((h, Kind::Real)),
-                            "Integer" => Some((h, Kind::Integer)),
-                            "Boolean" => Some((h, Kind::Boolean)),
-                            _ => None,
-                        }
-                    }),
-                    FmiVersion::V3 => match v.tag_name().name() {
-                        "Float64" => Some((v, Kind::Real)),
-                        "Int32" => Some((v, Kind::Integer)),
-                        "Boolean" => Some((v, Kind::Boolean)),
-                        _ => None,
-                    },
-                };
-                let Some((h, kind)) = holder else {
-                    continue;
-                };
-                let name = v.attribute("name").unwrap_or("").to_string();
-                let vr = v
-                    .attribute("valueReference")
-                    .and_then(|s| s.trim().parse::<u32>().ok())
-                    .ok_or_else(|| {
-                        FmuError::Description(format!(
-                            "variable `{name}` has no valid valueReference"
-                        ))
-                    })?;
-                let inherited = h
-                    .attribute("declaredType")
-                    .and_then(|t| types.get(t))
-                    .cloned()
-                    .unwrap_or_default();
-                // FMI 3.0 arrays (<Dimension>) are not scalars: leave them out.
-                if v.children().any(|n| n.has_tag_name("Dimension")) {
-                    continue;
-                }
-                let start = match h.attribute("start").map(str::trim) {
-                    Some("true") => Some(1.0),
-                    Some("false") => Some(0.0),
-                    Some(s) => s.parse::<f64>().ok(),
-                    None => None,
-                };
-                variables.push(Variable {
-                    name,
-                    kind,
-                    value_reference: vr,
-                    causality: v.attribute("causality").unwrap_or("local").to_string(),
-                    variability: v
-                        .attribute("variability")
-                        .unwrap_or("continuous")
-                        .to_string(),
-                    start,
-                    unit: h
-                        .attribute("unit")
-                        .map(str::to_string)
-                        .unwrap_or(inherited.0),
-                    min: number(h, "min")?.or(inherited.1),
-                    max: number(h, "max")?.or(inherited.2),
-                    description: v.attribute("description").unwrap_or("").to_string(),
-                });
-            }
-        }
-
-        let structure = child("ModelStructure");
-        let (continuous_states, event_indicators) = match version {
-            FmiVersion::V2 => {
-                let states = structure
-                    .and_then(|s| s.children().find(|n| n.has_tag_name("Derivatives")))
-                    .map_or(0, |d| {
-                        d.children().filter(|n| n.has_tag_name("Unknown")).count()
-                    });
-                let indicators = root
-                    .attribute("numberOfEventIndicators")
-                    .and_then(|s| s.trim().parse().ok())
-                    .unwrap_or(0);
-                (states, indicators)
-            }
-            FmiVersion::V3 => {
-                let count = |tag: &str| {
-                    structure.map_or(0, |s| s.children().filter(|n| n.has_tag_name(tag)).count())
-                };
-                (count("ContinuousStateDerivative"), count("EventIndicator"))
-            }
-        };
+        let (continuous_states, event_indicators) = counts(version, root, child("ModelStructure"));
         let experiment = child("DefaultExperiment");
         Ok(Description {
             version,
@@ -311,6 +193,156 @@ impl Description {
                 .filter(|v| v.causality != "output"),
         );
         list
+    }
+}
+
+/// The number in attribute `attr` of `n`, if it has one.
+fn number(n: roxmltree::Node, attr: &str) -> Result<Option<f64>, FmuError> {
+    n.attribute(attr)
+        .map(|v| {
+            v.trim().parse::<f64>().map_err(|_| {
+                FmuError::Description(format!(
+                    "`{attr}` of <{}> is not a number: `{v}`",
+                    n.tag_name().name()
+                ))
+            })
+        })
+        .transpose()
+}
+
+/// Declared types: the unit, min and max a variable of each inherits.
+fn declared_types(
+    version: FmiVersion,
+    definitions: Option<roxmltree::Node>,
+) -> Result<HashMap<String, DeclaredType>, FmuError> {
+    let mut types: HashMap<String, DeclaredType> = HashMap::new();
+    if let Some(defs) = definitions {
+        for t in defs.children().filter(|n| n.is_element()) {
+            let Some(name) = t.attribute("name") else {
+                continue;
+            };
+            // FMI 2.0: <SimpleType name><Real unit min max/></SimpleType>;
+            // FMI 3.0: <Float64Type name unit min max/>.
+            let holder = match version {
+                FmiVersion::V2 => t.children().find(|n| n.has_tag_name("Real")),
+                FmiVersion::V3 => t.has_tag_name("Float64Type").then_some(t),
+            };
+            if let Some(h) = holder {
+                types.insert(
+                    name.to_string(),
+                    (
+                        h.attribute("unit").unwrap_or("").to_string(),
+                        number(h, "min")?,
+                        number(h, "max")?,
+                    ),
+                );
+            }
+        }
+    }
+    Ok(types)
+}
+
+/// The scalar variables of `<ModelVariables>` of the types calib reads (Real / Float64,
+/// Integer / Int32, Boolean).
+fn variables(
+    version: FmiVersion,
+    vars: roxmltree::Node,
+    types: &HashMap<String, DeclaredType>,
+) -> Result<Vec<Variable>, FmuError> {
+    let mut variables = Vec::new();
+    for v in vars.children().filter(|n| n.is_element()) {
+        // FMI 2.0: <ScalarVariable ...><Real start unit .../></ScalarVariable>;
+        // FMI 3.0: <Float64 name ... start unit .../>.
+        let holder = match version {
+            FmiVersion::V2 => {
+                v.children()
+                    .find(|n| n.is_element())
+                    .and_then(|h| match h.tag_name().name() {
+                        "Real" => Some((h, Kind::Real)),
+                        "Integer" => Some((h, Kind::Integer)),
+                        "Boolean" => Some((h, Kind::Boolean)),
+                        _ => None,
+                    })
+            }
+            FmiVersion::V3 => match v.tag_name().name() {
+                "Float64" => Some((v, Kind::Real)),
+                "Int32" => Some((v, Kind::Integer)),
+                "Boolean" => Some((v, Kind::Boolean)),
+                _ => None,
+            },
+        };
+        let Some((h, kind)) = holder else {
+            continue;
+        };
+        let name = v.attribute("name").unwrap_or("").to_string();
+        let vr = v
+            .attribute("valueReference")
+            .and_then(|s| s.trim().parse::<u32>().ok())
+            .ok_or_else(|| {
+                FmuError::Description(format!("variable `{name}` has no valid valueReference"))
+            })?;
+        let inherited = h
+            .attribute("declaredType")
+            .and_then(|t| types.get(t))
+            .cloned()
+            .unwrap_or_default();
+        // FMI 3.0 arrays (<Dimension>) are not scalars: leave them out.
+        if v.children().any(|n| n.has_tag_name("Dimension")) {
+            continue;
+        }
+        let start = match h.attribute("start").map(str::trim) {
+            Some("true") => Some(1.0),
+            Some("false") => Some(0.0),
+            Some(s) => s.parse::<f64>().ok(),
+            None => None,
+        };
+        variables.push(Variable {
+            name,
+            kind,
+            value_reference: vr,
+            causality: v.attribute("causality").unwrap_or("local").to_string(),
+            variability: v
+                .attribute("variability")
+                .unwrap_or("continuous")
+                .to_string(),
+            start,
+            unit: h
+                .attribute("unit")
+                .map(str::to_string)
+                .unwrap_or(inherited.0),
+            min: number(h, "min")?.or(inherited.1),
+            max: number(h, "max")?.or(inherited.2),
+            description: v.attribute("description").unwrap_or("").to_string(),
+        });
+    }
+    Ok(variables)
+}
+
+/// The number of continuous states and of event indicators.
+fn counts(
+    version: FmiVersion,
+    root: roxmltree::Node,
+    structure: Option<roxmltree::Node>,
+) -> (usize, usize) {
+    match version {
+        FmiVersion::V2 => {
+            let states = structure
+                .and_then(|s| s.children().find(|n| n.has_tag_name("Derivatives")))
+                .map_or(0, |d| {
+                    d.children().filter(|n| n.has_tag_name("Unknown")).count()
+                });
+            let indicators = root
+                .attribute("numberOfEventIndicators")
+                .and_then(|s| s.trim().parse().ok())
+                .unwrap_or(0);
+            (states, indicators)
+        }
+        FmiVersion::V3 => {
+            let count = |tag: &str| {
+                structure.map_or(0, |s| s.children().filter(|n| n.has_tag_name(tag)).count())
+            };
+            (count("ContinuousStateDerivative"), count("EventIndicator"))
+        }
     }
 }
 

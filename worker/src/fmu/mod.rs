@@ -112,6 +112,76 @@ enum Runner {
     Isolated(host::Hosts),
 }
 
+/// The real parameters a campaign may set, with their bounds (unbounded in the model
+/// description: unbounded here; a campaign's bounds are always finite) and start values.
+fn parameter_specs(description: &Description) -> Vec<ParameterSpec> {
+    description
+        .parameters()
+        .map(|v| {
+            // Unbounded in the model description: unbounded here (a campaign's bounds
+            // are always finite).
+            let min = v.min.unwrap_or(f64::NEG_INFINITY);
+            let max = v.max.unwrap_or(f64::INFINITY);
+            ParameterSpec {
+                name: v.name.clone(),
+                unit: v.unit.clone(),
+                default: v.start.unwrap_or(0.0).clamp(min, max),
+                min,
+                max,
+                description: v.description.clone(),
+            }
+        })
+        .collect()
+}
+
+/// The observable variables as outputs (a non-output's causality in its description).
+fn output_specs(observables: &[&description::Variable]) -> Vec<OutputSpec> {
+    observables
+        .iter()
+        .map(|v| OutputSpec {
+            name: v.name.clone(),
+            unit: v.unit.clone(),
+            description: if v.causality == "output" {
+                v.description.clone()
+            } else {
+                format!("({}) {}", v.causality, v.description)
+                    .trim_end()
+                    .to_string()
+            },
+        })
+        .collect()
+}
+
+/// The input variables, each described with how it is held between samples and what it is
+/// when undriven.
+fn input_specs(description: &Description) -> Vec<InputSpec> {
+    description
+        .inputs()
+        .map(|v| {
+            let undriven = match (v.kind, v.start) {
+                (Kind::Boolean, Some(s)) => format!("{}", s != 0.0),
+                (_, Some(s)) => format!("{s}"),
+                (_, None) => "its start value".to_string(),
+            };
+            let held = match v.kind {
+                Kind::Real if v.variability != "discrete" => String::new(),
+                Kind::Real => "discrete, held between samples; ".to_string(),
+                Kind::Integer => "integer, held between samples and rounded; ".to_string(),
+                Kind::Boolean => "boolean, held between samples, true when non-zero; ".to_string(),
+            };
+            InputSpec {
+                name: v.name.clone(),
+                unit: v.unit.clone(),
+                description: if v.description.is_empty() {
+                    format!("{held}undriven: {undriven}")
+                } else {
+                    format!("{} ({held}undriven: {undriven})", v.description)
+                },
+            }
+        })
+        .collect()
+}
+
 struct Local {
     library: OnceLock<Result<Arc<ffi::Library>, FmuError>>,
     idle: Mutex<Vec<ffi::Instance>>,
@@ -140,73 +210,18 @@ impl FmuModel {
         .ok_or_else(|| {
             FmuError::Description(format!("the FMU does not support {}", interface.name()))
         })?;
-        let parameters: Vec<ParameterSpec> = description
-            .parameters()
-            .map(|v| {
-                // Unbounded in the model description: unbounded here (a campaign's bounds
-                // are always finite).
-                let min = v.min.unwrap_or(f64::NEG_INFINITY);
-                let max = v.max.unwrap_or(f64::INFINITY);
-                ParameterSpec {
-                    name: v.name.clone(),
-                    unit: v.unit.clone(),
-                    default: v.start.unwrap_or(0.0).clamp(min, max),
-                    min,
-                    max,
-                    description: v.description.clone(),
-                }
-            })
-            .collect();
+        let parameters = parameter_specs(&description);
         let parameter_vrs = description
             .parameters()
             .map(|v| v.value_reference)
             .collect();
         let observables = description.observables();
-        let outputs = observables
-            .iter()
-            .map(|v| OutputSpec {
-                name: v.name.clone(),
-                unit: v.unit.clone(),
-                description: if v.causality == "output" {
-                    v.description.clone()
-                } else {
-                    format!("({}) {}", v.causality, v.description)
-                        .trim_end()
-                        .to_string()
-                },
-            })
-            .collect();
+        let outputs = output_specs(&observables);
         let output_refs = observables
             .iter()
             .map(|v| (v.kind, v.value_reference))
             .collect();
-        let inputs = description
-            .inputs()
-            .map(|v| {
-                let undriven = match (v.kind, v.start) {
-                    (Kind::Boolean, Some(s)) => format!("{}", s != 0.0),
-                    (_, Some(s)) => format!("{s}"),
-                    (_, None) => "its start value".to_string(),
-                };
-                let held = match v.kind {
-                    Kind::Real if v.variability != "discrete" => String::new(),
-                    Kind::Real => "discrete, held between samples; ".to_string(),
-                    Kind::Integer => "integer, held between samples and rounded; ".to_string(),
-                    Kind::Boolean => {
-                        "boolean, held between samples, true when non-zero; ".to_string()
-                    }
-                };
-                InputSpec {
-                    name: v.name.clone(),
-                    unit: v.unit.clone(),
-                    description: if v.description.is_empty() {
-                        format!("{held}undriven: {undriven}")
-                    } else {
-                        format!("{} ({held}undriven: {undriven})", v.description)
-                    },
-                }
-            })
-            .collect();
+        let inputs = input_specs(&description);
         let input_refs = description
             .inputs()
             .map(|v| run::InputRef {

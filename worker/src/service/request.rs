@@ -303,6 +303,60 @@ impl Evaluation {
     }
 }
 
+/// The indices of the free parameters, each named once.
+fn free_indices(info: &ModelInfo, names: &[String]) -> Result<Vec<usize>> {
+    let mut free = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        let field = format!("free_parameters[{i}]");
+        let index = validate::parameter(info, name).map_err(|e| at(&field, e))?;
+        if free.contains(&index) {
+            return Err(Error::invalid(field, format!("`{name}` is listed twice")));
+        }
+        free.push(index);
+    }
+    Ok(free)
+}
+
+/// The points to evaluate: at least one, at most the limit, each a value in range for every
+/// free parameter.
+fn checked_points(
+    info: &ModelInfo,
+    free: &[usize],
+    points: Vec<proto::Point>,
+) -> Result<Vec<Vec<f64>>> {
+    if points.is_empty() {
+        return Err(Error::invalid("points", "no point to evaluate"));
+    }
+    if points.len() > limits::MAX_POINTS {
+        return Err(Error::invalid(
+            "points",
+            format!(
+                "{} points exceed the limit of {}",
+                points.len(),
+                limits::MAX_POINTS
+            ),
+        ));
+    }
+    let mut checked = Vec::with_capacity(points.len());
+    for (i, p) in points.into_iter().enumerate() {
+        if p.values.len() != free.len() {
+            return Err(Error::invalid(
+                format!("points[{i}].values"),
+                format!(
+                    "{} values for {} free parameters",
+                    p.values.len(),
+                    free.len()
+                ),
+            ));
+        }
+        for (j, (&index, &v)) in free.iter().zip(&p.values).enumerate() {
+            check_value(info, index, v, &format!("points[{i}].values[{j}]"))?;
+        }
+        checked.push(p.values);
+    }
+    Ok(checked)
+}
+
 impl TryFrom<proto::EvaluateRequest> for Evaluation {
     type Error = Error;
 
@@ -311,15 +365,7 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
         let model = model_with_effects(&r.model, &r.effects)?;
         let info = model.info();
         let base = parameter_vector(info, &r.parameters)?;
-        let mut free = Vec::with_capacity(r.free_parameters.len());
-        for (i, name) in r.free_parameters.iter().enumerate() {
-            let field = format!("free_parameters[{i}]");
-            let index = validate::parameter(info, name).map_err(|e| at(&field, e))?;
-            if free.contains(&index) {
-                return Err(Error::invalid(field, format!("`{name}` is listed twice")));
-            }
-            free.push(index);
-        }
+        let free = free_indices(info, &r.free_parameters)?;
         if r.outputs.is_empty() {
             return Err(Error::invalid("outputs", "no output to compare"));
         }
@@ -366,36 +412,7 @@ impl TryFrom<proto::EvaluateRequest> for Evaluation {
                 ));
             }
         }
-        if r.points.is_empty() {
-            return Err(Error::invalid("points", "no point to evaluate"));
-        }
-        if r.points.len() > limits::MAX_POINTS {
-            return Err(Error::invalid(
-                "points",
-                format!(
-                    "{} points exceed the limit of {}",
-                    r.points.len(),
-                    limits::MAX_POINTS
-                ),
-            ));
-        }
-        let mut points = Vec::with_capacity(r.points.len());
-        for (i, p) in r.points.into_iter().enumerate() {
-            if p.values.len() != free.len() {
-                return Err(Error::invalid(
-                    format!("points[{i}].values"),
-                    format!(
-                        "{} values for {} free parameters",
-                        p.values.len(),
-                        free.len()
-                    ),
-                ));
-            }
-            for (j, (&index, &v)) in free.iter().zip(&p.values).enumerate() {
-                check_value(info, index, v, &format!("points[{i}].values[{j}]"))?;
-            }
-            points.push(p.values);
-        }
+        let points = checked_points(info, &free, r.points)?;
         Ok(Self {
             model,
             base,
