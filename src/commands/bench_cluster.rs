@@ -283,8 +283,7 @@ fn coordinator_cpu(
     let remote = connect(std::slice::from_ref(&worker.url))?;
     let db = tempfile_dir("store")?;
     let store = SledStore::open(&db).map_err(|e| Failure::internal(e.to_string()))?;
-    {
-        let stored = StoredEvaluator::new(remote.evaluator(), &store);
+    StoredEvaluator::with(remote.evaluator(), &store, |stored| -> Outcome {
         // The worker gets the measurement first.
         stored
             .evaluate(furuta, &points_from(furuta, 1 << 20, 1))
@@ -316,7 +315,8 @@ fn coordinator_cpu(
         report.figure("coordinator_cpu_us_per_eval", us);
         report.figure("coordinator_cpu_target_us", 10.0);
         report.figure("coordinator_cpu_ratio_to_evaluation", us / in_process_us);
-    }
+        Ok(())
+    })?;
     drop((store, remote, worker));
     let _ = std::fs::remove_dir_all(&db);
 

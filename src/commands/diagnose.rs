@@ -220,7 +220,7 @@ fn print_profiles_and_verdict(d: &diagnosis::Diagnosis, profile: bool, found: Op
         d.baseline.held_out_objective,
         d.final_fit.held_out_objective
     );
-    println!("\n{}", report::verdict_text(&d));
+    println!("\n{}", report::verdict_text(d));
     if let Some(found) = found {
         println!("\n{}", found.text());
     }

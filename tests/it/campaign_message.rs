@@ -3,10 +3,10 @@
 //! replaced anywhere in it), decoding it, writing its campaign file and loading that file
 //! never panic; what loads is within the coordinator's limits.
 
-use calib_service::api::spec;
 use calib_engine::campaign::Campaign;
 use calib_engine::limits;
 use calib_proto::v1 as pb;
+use calib_service::api::spec;
 use proptest::prelude::*;
 use proptest::sample::select;
 use serde_json::Value;

@@ -6,7 +6,6 @@
 
 pub mod calibration;
 pub mod campaign;
-pub mod coalesce;
 pub mod error;
 pub mod evaluator;
 pub mod evidence;

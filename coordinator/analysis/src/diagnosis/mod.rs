@@ -189,13 +189,15 @@ where
             1 + campaign.more.len()
         )));
     }
-    let stored = StoredEngine::new(engine, store);
-    let outcome = diagnose_on(campaign, &stored, progress);
-    if let Some(e) = stored.error() {
+    let (outcome, error, stats) = StoredEngine::with(engine, store, |stored| {
+        let outcome = diagnose_on(campaign, stored, progress);
+        (outcome, stored.error(), stored.stats())
+    });
+    if let Some(e) = error {
         return Err(e.into());
     }
     let mut diagnosis = outcome?;
-    diagnosis.stats = stored.stats();
+    diagnosis.stats = stats;
     Ok(diagnosis)
 }
 
@@ -291,7 +293,7 @@ where
     })
 }
 
-/// 1. The baseline: the campaign calibrated on the fitted window. Above the noise floor and
+/// Step 1, the baseline: the campaign calibrated on the fitted window. Above the noise floor and
 /// not corroborated by the campaign's own runs, the baseline too gets the diagnosis's own
 /// search, so that no effect is credited with what a better fit of the campaign's own
 /// parameters removes. Returns the calibration, the baseline and, where the fair refit
@@ -303,7 +305,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
     holdout_objective: &Objective,
     noise_floor: f64,
 ) -> Result<(Calibration, Fit, Option<Fit>)> {
-    let calibration = calibrate(&fit_campaign, engine, progress)?;
+    let calibration = calibrate(fit_campaign, engine, progress)?;
     let mut baseline = fit_of(&calibration, &[], engine, holdout_objective)?;
     // The campaign's own baseline where the fair refit replaced it.
     let mut replaced: Option<Fit> = None;
@@ -315,7 +317,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
         && !fair::corroborated(&calibration)
     {
         let fair = fair::fair_refit(
-            &fit_campaign,
+            fit_campaign,
             &baseline,
             &[],
             &[],
@@ -349,7 +351,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
     Ok((calibration, baseline, replaced))
 }
 
-/// 2–3. The candidate effects ranked, best first (each scored at the baseline and, where the
+/// Steps 2 and 3: the candidate effects ranked, best first (each scored at the baseline and, where the
 /// fair refit moved it, at the campaign's own baseline too), and their specifications.
 fn ranked<E: Evaluator + Simulator>(
     fit_campaign: &Campaign,
@@ -421,7 +423,6 @@ where
         fit.free.len(),
         fit.effective_samples,
     );
-    let stored = StoredEngine::new(engine, store);
     let around = Around {
         objective: &objective,
         free: &fit.free,
@@ -431,13 +432,15 @@ where
         linearised: &fit.parameters,
         correlation: &fit.correlation,
     };
-    let outcome = profile_around(&around, &which, &stored, DEFAULT_MAX_STEPS);
-    if let Some(e) = stored.error() {
+    let (outcome, error, added) = StoredEngine::with(engine, store, |stored| {
+        let outcome = profile_around(&around, &which, stored, DEFAULT_MAX_STEPS);
+        (outcome, stored.error(), stored.stats())
+    });
+    if let Some(e) = error {
         return Err(e.into());
     }
     d.profiles = outcome?;
     d.profile_threshold = Some(threshold);
-    let added = stored.stats();
     let e = &mut d.stats.evaluations;
     e.requested += added.evaluations.requested;
     e.simulated += added.evaluations.simulated;

@@ -571,23 +571,25 @@ pub fn profile<E: Evaluator + Simulator>(
                 )
             }
         };
-    let stored = StoredEngine::new(engine, store);
-    let outcome = (|| {
-        let (linearised, correlation, threshold) =
-            local_statistics(&stored, &objective, &campaign.free, &point, best_objective)?;
-        let around = Around {
-            objective: &objective,
-            free: &campaign.free,
-            point: &point,
-            best_objective,
-            threshold: threshold.delta,
-            linearised: &linearised,
-            correlation: &correlation,
-        };
-        let profiles = profile_around(&around, &which, &stored, settings.max_steps)?;
-        Ok::<_, Error>((threshold, profiles))
-    })();
-    if let Some(e) = stored.error() {
+    let (outcome, error, stored_stats) = StoredEngine::with(engine, store, |stored| {
+        let outcome = (|| {
+            let (linearised, correlation, threshold) =
+                local_statistics(stored, &objective, &campaign.free, &point, best_objective)?;
+            let around = Around {
+                objective: &objective,
+                free: &campaign.free,
+                point: &point,
+                best_objective,
+                threshold: threshold.delta,
+                linearised: &linearised,
+                correlation: &correlation,
+            };
+            let profiles = profile_around(&around, &which, stored, settings.max_steps)?;
+            Ok::<_, Error>((threshold, profiles))
+        })();
+        (outcome, stored.error(), stored.stats())
+    });
+    if let Some(e) = error {
         return Err(e.into());
     }
     let (threshold, profiles) = outcome?;
@@ -618,7 +620,7 @@ pub fn profile<E: Evaluator + Simulator>(
         threshold,
         profiles,
         lowest,
-        stats: stored.stats(),
+        stats: stored_stats,
         calibration,
         elapsed: started.elapsed(),
     })

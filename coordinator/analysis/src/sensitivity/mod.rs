@@ -394,57 +394,58 @@ pub fn analyse_reporting<E: Evaluator>(
         store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
     }
     let space = UnitBox::new(&campaign.free);
-    let evaluator = StoredEvaluator::new(evaluator, store);
-    let outputs = objective.series_count();
-    let total = planned(dim, settings);
-    let done = std::cell::Cell::new(0);
-    progress(0, total);
-    let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
-        let mut values = Vec::with_capacity(unit.len());
-        for slice in unit.chunks(SLICE_POINTS) {
-            let physical: Vec<Vec<f64>> = slice.iter().map(|u| space.to_physical(u)).collect();
-            let evaluations = evaluator.evaluate(&objective, &physical)?;
-            if let Some(e) = evaluator.error() {
-                return Err(e.into());
+    StoredEvaluator::with(evaluator, store, |evaluator| {
+        let outputs = objective.series_count();
+        let total = planned(dim, settings);
+        let done = std::cell::Cell::new(0);
+        progress(0, total);
+        let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
+            let mut values = Vec::with_capacity(unit.len());
+            for slice in unit.chunks(SLICE_POINTS) {
+                let physical: Vec<Vec<f64>> = slice.iter().map(|u| space.to_physical(u)).collect();
+                let evaluations = evaluator.evaluate(&objective, &physical)?;
+                if let Some(e) = evaluator.error() {
+                    return Err(e.into());
+                }
+                values.extend(evaluations.iter().map(|e| quantities(&objective, e)));
+                done.set(done.get() + slice.len());
+                progress(done.get(), total);
             }
-            values.extend(evaluations.iter().map(|e| quantities(&objective, e)));
-            done.set(done.get() + slice.len());
-            progress(done.get(), total);
+            Ok(values)
+        };
+        let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
+            values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
+        };
+        let mut result = empty_result(campaign, &objective, settings);
+        if settings.methods.morris() {
+            let design = sampling::morris_design(dim, settings.samples, settings.seed);
+            let values = evaluate(&design)?;
+            result.morris_points = design.len();
+            result.morris_failed = values.iter().filter(|v| v.is_none()).count();
+            for q in 0..=outputs {
+                result.quantities[q].morris =
+                    Some(sampling::morris_effects(&design, &column(&values, q), dim));
+            }
         }
-        Ok(values)
-    };
-    let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
-        values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
-    };
-    let mut result = empty_result(campaign, &objective, settings);
-    if settings.methods.morris() {
-        let design = sampling::morris_design(dim, settings.samples, settings.seed);
-        let values = evaluate(&design)?;
-        result.morris_points = design.len();
-        result.morris_failed = values.iter().filter(|v| v.is_none()).count();
-        for q in 0..=outputs {
-            result.quantities[q].morris =
-                Some(sampling::morris_effects(&design, &column(&values, q), dim));
+        if settings.methods.sobol() {
+            let n = settings.samples;
+            let design = sampling::saltelli_design(dim, n, settings.seed);
+            let values = evaluate(&design)?;
+            result.sobol_points = design.len();
+            result.sobol_failed = values.iter().filter(|v| v.is_none()).count();
+            result.sobol_excluded = (0..n)
+                .filter(|&j| (0..dim + 2).any(|block| values[block * n + j].is_none()))
+                .count();
+            for q in 0..=outputs {
+                result.quantities[q].sobol = Some(sampling::sobol_indices(
+                    &column(&values, q),
+                    dim,
+                    n,
+                    settings.seed,
+                ));
+            }
         }
-    }
-    if settings.methods.sobol() {
-        let n = settings.samples;
-        let design = sampling::saltelli_design(dim, n, settings.seed);
-        let values = evaluate(&design)?;
-        result.sobol_points = design.len();
-        result.sobol_failed = values.iter().filter(|v| v.is_none()).count();
-        result.sobol_excluded = (0..n)
-            .filter(|&j| (0..dim + 2).any(|block| values[block * n + j].is_none()))
-            .count();
-        for q in 0..=outputs {
-            result.quantities[q].sobol = Some(sampling::sobol_indices(
-                &column(&values, q),
-                dim,
-                n,
-                settings.seed,
-            ));
-        }
-    }
-    result.stats = evaluator.stats();
-    Ok(result)
+        result.stats = evaluator.stats();
+        Ok(result)
+    })
 }

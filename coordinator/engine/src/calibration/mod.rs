@@ -248,9 +248,11 @@ fn calibrate_measured<E: Evaluator>(
     };
     store.put_campaign(&id, &record)?;
     tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
-    let evaluator = StoredEvaluator::new(evaluator, store);
-    let outcome = search(campaign, &objective, &evaluator, progress);
-    if let Some(e) = evaluator.error() {
+    let (outcome, stats, error) = StoredEvaluator::with(evaluator, store, |evaluator| {
+        let outcome = search(campaign, &objective, evaluator, progress);
+        (outcome, evaluator.stats(), evaluator.error())
+    });
+    if let Some(e) = error {
         return Err(e.into());
     }
     let (nominal, screened, runs, clusters, best, best_evaluation) = match outcome {
@@ -276,7 +278,7 @@ fn calibrate_measured<E: Evaluator>(
         clusters,
         best,
         best_evaluation,
-        stats: evaluator.stats(),
+        stats,
         elapsed: started.elapsed(),
         outcome: CalibrationOutcome::default(),
     };

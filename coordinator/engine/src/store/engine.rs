@@ -21,19 +21,23 @@ pub struct EngineStats {
 }
 
 /// Evaluations through a store, trajectories straight from the inner engine.
-pub struct StoredEngine<'s, E> {
-    evaluator: StoredEvaluator<'s, &'s E>,
-    inner: &'s E,
+pub struct StoredEngine<'a, E> {
+    evaluator: &'a StoredEvaluator<'a, &'a E>,
+    inner: &'a E,
     trajectories: AtomicU64,
 }
 
-impl<'s, E: Evaluator + Simulator> StoredEngine<'s, E> {
-    pub fn new(inner: &'s E, store: &'s dyn Store) -> Self {
-        Self {
-            evaluator: StoredEvaluator::new(inner, store),
-            inner,
-            trajectories: AtomicU64::new(0),
-        }
+impl<E: Evaluator + Simulator> StoredEngine<'_, E> {
+    /// Run `f` with an engine that evaluates through `store` (the store's dispatcher lives
+    /// until `f` returns) and simulates trajectories with `inner`.
+    pub fn with<R>(inner: &E, store: &dyn Store, f: impl FnOnce(&StoredEngine<'_, E>) -> R) -> R {
+        StoredEvaluator::with(inner, store, |evaluator| {
+            f(&StoredEngine {
+                evaluator,
+                inner,
+                trajectories: AtomicU64::new(0),
+            })
+        })
     }
 
     pub fn stats(&self) -> EngineStats {
@@ -115,24 +119,26 @@ mod tests {
         let store = MemoryStore::new();
         let points = vec![vec![0.011, 0.0012], vec![0.012, 0.002]];
         let inner = Counting::default();
-        let first = StoredEngine::new(&inner, &store);
-        let a = first.evaluate(&objective, &points).unwrap();
-        first.simulate(&objective, &points[..1]).unwrap();
-        assert_eq!(first.stats().evaluations.simulated, 2);
-        assert_eq!(first.stats().trajectories, 1);
-
-        let again = StoredEngine::new(&inner, &store);
-        let b = again.evaluate(&objective, &points).unwrap();
-        assert_eq!(inner.evaluated.load(Ordering::Relaxed), 2);
-        assert_eq!(again.stats().evaluations.simulated, 0);
-        assert_eq!(again.stats().evaluations.cached, 2);
-        assert_eq!(
-            a.iter().map(|e| e.objective).collect::<Vec<_>>(),
-            b.iter().map(|e| e.objective).collect::<Vec<_>>()
-        );
-        // Trajectories go to the inner engine every time.
-        again.simulate(&objective, &points[..1]).unwrap();
-        assert_eq!(inner.simulated.load(Ordering::Relaxed), 2);
-        assert!(again.error().is_none());
+        let a = StoredEngine::with(&inner, &store, |first| {
+            let a = first.evaluate(&objective, &points).unwrap();
+            first.simulate(&objective, &points[..1]).unwrap();
+            assert_eq!(first.stats().evaluations.simulated, 2);
+            assert_eq!(first.stats().trajectories, 1);
+            a
+        });
+        StoredEngine::with(&inner, &store, |again| {
+            let b = again.evaluate(&objective, &points).unwrap();
+            assert_eq!(inner.evaluated.load(Ordering::Relaxed), 2);
+            assert_eq!(again.stats().evaluations.simulated, 0);
+            assert_eq!(again.stats().evaluations.cached, 2);
+            assert_eq!(
+                a.iter().map(|e| e.objective).collect::<Vec<_>>(),
+                b.iter().map(|e| e.objective).collect::<Vec<_>>()
+            );
+            // Trajectories go to the inner engine every time.
+            again.simulate(&objective, &points[..1]).unwrap();
+            assert_eq!(inner.simulated.load(Ordering::Relaxed), 2);
+            assert!(again.error().is_none());
+        });
     }
 }

@@ -19,6 +19,7 @@
 //! [`encoding`]; [`export`] writes and reads a versioned, line-oriented copy of a store.
 
 mod damage;
+mod dispatcher;
 pub mod encoding;
 pub mod engine;
 pub mod evaluator;

@@ -349,32 +349,33 @@ stop = 1.0
 fn concurrent_requests_for_one_point_simulate_it_once() {
     let store = MemoryStore::new();
     let inner = Counting::default();
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let points: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 * 0.1]).collect();
-    std::thread::scope(|scope| {
-        for t in 0..4 {
-            let (evaluator, objective, points) = (&evaluator, &objective, &points);
-            scope.spawn(move || {
-                // Each thread asks for an overlapping window, one point twice.
-                let mut batch = points[t..t + 3].to_vec();
-                batch.push(points[t].clone());
-                let answers = evaluator.evaluate(objective, &batch).unwrap();
-                for (p, a) in batch.iter().zip(answers) {
-                    assert_eq!(a.objective, p[0]);
-                }
-            });
-        }
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let points: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 * 0.1]).collect();
+        std::thread::scope(|scope| {
+            for t in 0..4 {
+                let (evaluator, objective, points) = (&evaluator, &objective, &points);
+                scope.spawn(move || {
+                    // Each thread asks for an overlapping window, one point twice.
+                    let mut batch = points[t..t + 3].to_vec();
+                    batch.push(points[t].clone());
+                    let answers = evaluator.evaluate(objective, &batch).unwrap();
+                    for (p, a) in batch.iter().zip(answers) {
+                        assert_eq!(a.objective, p[0]);
+                    }
+                });
+            }
+        });
+        assert_eq!(inner.simulated.load(Ordering::SeqCst), 6);
+        let stats = evaluator.stats();
+        assert_eq!(
+            (stats.requested, stats.simulated, stats.cached),
+            (16, 6, 10)
+        );
+        let store_stats = store.stats().unwrap();
+        assert_eq!((store_stats.hits, store_stats.misses), (10, 6));
+        assert_eq!(store_stats.evaluations, 6);
     });
-    assert_eq!(inner.simulated.load(Ordering::SeqCst), 6);
-    let stats = evaluator.stats();
-    assert_eq!(
-        (stats.requested, stats.simulated, stats.cached),
-        (16, 6, 10)
-    );
-    let store_stats = store.stats().unwrap();
-    assert_eq!((store_stats.hits, store_stats.misses), (10, 6));
-    assert_eq!(store_stats.evaluations, 6);
 }
 
 #[test]
@@ -383,20 +384,21 @@ fn a_second_evaluator_on_the_same_store_simulates_nothing() {
     let objective = objective(false);
     let points: Vec<Vec<f64>> = (0..5).map(|i| vec![i as f64 * 0.2]).collect();
     let first = Counting::default();
-    StoredEvaluator::new(&first, &store)
-        .evaluate(&objective, &points)
-        .unwrap();
+    StoredEvaluator::with(&first, &store, |evaluator| {
+        evaluator.evaluate(&objective, &points).unwrap();
+    });
     let second = Counting::default();
-    let again = StoredEvaluator::new(&second, &store);
-    let answers = again.evaluate(&objective, &points).unwrap();
-    assert_eq!(second.simulated.load(Ordering::SeqCst), 0);
-    assert_eq!(again.stats().cached, 5);
-    assert_eq!(answers[4].objective, 0.8);
+    StoredEvaluator::with(&second, &store, |again| {
+        let answers = again.evaluate(&objective, &points).unwrap();
+        assert_eq!(second.simulated.load(Ordering::SeqCst), 0);
+        assert_eq!(again.stats().cached, 5);
+        assert_eq!(answers[4].objective, 0.8);
 
-    // Other data, other objective: nothing is reused.
-    let other = objective_with_other_data();
-    again.evaluate(&other, &points).unwrap();
-    assert_eq!(second.simulated.load(Ordering::SeqCst), 5);
+        // Other data, other objective: nothing is reused.
+        let other = objective_with_other_data();
+        again.evaluate(&other, &points).unwrap();
+        assert_eq!(second.simulated.load(Ordering::SeqCst), 5);
+    });
 }
 
 fn objective_with_other_data() -> Objective {
@@ -445,27 +447,28 @@ fn a_crashed_simulation_does_not_leave_waiters_hanging() {
         let_go: false.into(),
         inner: Counting::default(),
     };
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let point = vec![vec![0.5]];
-    let crashed = std::thread::scope(|scope| {
-        let first = scope.spawn(|| evaluator.evaluate(&objective, &point));
-        // The second caller asks while the first simulates the point, and waits on it...
-        await_flag(&inner.started);
-        let second = scope.spawn(|| evaluator.evaluate(&objective, &point));
-        let deadline = std::time::Instant::now() + Duration::from_secs(10);
-        while evaluator.waiting_on_others() == 0 {
-            assert!(!second.is_finished(), "the second caller did not wait");
-            assert!(std::time::Instant::now() < deadline, "no caller waits");
-            std::thread::yield_now();
-        }
-        // ...when the simulation crashes.
-        inner.let_go.store(true, Ordering::SeqCst);
-        let answer = second.join().unwrap().unwrap();
-        assert_eq!(answer[0].objective, 0.5);
-        first.join().is_err()
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let point = vec![vec![0.5]];
+        let crashed = std::thread::scope(|scope| {
+            let first = scope.spawn(|| evaluator.evaluate(&objective, &point));
+            // The second caller asks while the first simulates the point, and waits on it...
+            await_flag(&inner.started);
+            let second = scope.spawn(|| evaluator.evaluate(&objective, &point));
+            let deadline = std::time::Instant::now() + Duration::from_secs(10);
+            while evaluator.waiting_on_others() == 0 {
+                assert!(!second.is_finished(), "the second caller did not wait");
+                assert!(std::time::Instant::now() < deadline, "no caller waits");
+                std::thread::yield_now();
+            }
+            // ...when the simulation crashes.
+            inner.let_go.store(true, Ordering::SeqCst);
+            let answer = second.join().unwrap().unwrap();
+            assert_eq!(answer[0].objective, 0.5);
+            first.join().is_err()
+        });
+        assert!(crashed);
     });
-    assert!(crashed);
 }
 
 /// Has no worker for its first batch, then behaves.
@@ -494,16 +497,17 @@ fn a_fault_stores_nothing_and_the_points_are_simulated_once_workers_are_back() {
         armed: true.into(),
         inner: Counting::default(),
     };
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let points: Vec<Vec<f64>> = (0..3).map(|i| vec![i as f64 * 0.1]).collect();
-    let fault = evaluator.evaluate(&objective, &points).unwrap_err();
-    assert!(fault.is_retryable(), "{fault:?}");
-    assert_eq!(store.stats().unwrap().evaluations, 0);
-    let answers = evaluator.evaluate(&objective, &points).unwrap();
-    assert_eq!(answers[2].objective, 0.2);
-    assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 3);
-    assert_eq!(store.stats().unwrap().evaluations, 3);
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let points: Vec<Vec<f64>> = (0..3).map(|i| vec![i as f64 * 0.1]).collect();
+        let fault = evaluator.evaluate(&objective, &points).unwrap_err();
+        assert!(fault.is_retryable(), "{fault:?}");
+        assert_eq!(store.stats().unwrap().evaluations, 0);
+        let answers = evaluator.evaluate(&objective, &points).unwrap();
+        assert_eq!(answers[2].objective, 0.2);
+        assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 3);
+        assert_eq!(store.stats().unwrap().evaluations, 3);
+    });
 }
 
 /// Eight runs on threads of their own, each asking five times for `per_ask` new points
@@ -535,19 +539,20 @@ fn concurrent_runs_share_one_durable_write_per_round() {
     let dir = tempfile::tempdir().unwrap();
     let store = SledStore::open(dir.path()).unwrap();
     let inner = Counting::default();
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let flushes_before = store.flushes();
-    let asks = ask_from_runs(&evaluator, &objective, 2);
-    assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
-    let batches = inner.batches.load(Ordering::SeqCst);
-    let flushes = store.flushes() - flushes_before;
-    assert!(batches < asks / 2, "{batches} batches for {asks} asks");
-    assert!(
-        flushes <= batches as u64,
-        "{flushes} flushes for {batches} rounds"
-    );
-    assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let flushes_before = store.flushes();
+        let asks = ask_from_runs(&evaluator, &objective, 2);
+        assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
+        let batches = inner.batches.load(Ordering::SeqCst);
+        let flushes = store.flushes() - flushes_before;
+        assert!(batches < asks / 2, "{batches} batches for {asks} asks");
+        assert!(
+            flushes <= batches as u64,
+            "{flushes} flushes for {batches} rounds"
+        );
+        assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
+    });
 }
 
 /// Scores as [`Counting`], never has room for a second round, tells when batches start,
@@ -602,17 +607,20 @@ impl Evaluator for NoRoom {
     }
 }
 
-/// A memory store that runs `before_write` ahead of each evaluation write.
-struct HookedStore<F> {
+/// A memory store that runs `before_write` ahead of each evaluation write and
+/// `before_lookup` ahead of each lookup.
+struct HookedStore<F, G> {
     inner: MemoryStore,
     before_write: F,
+    before_lookup: G,
 }
 
-impl<F: Fn() + Send + Sync> Store for HookedStore<F> {
+impl<F: Fn() + Send + Sync, G: Fn() + Send + Sync> Store for HookedStore<F, G> {
     fn get_evaluations(
         &self,
         keys: &[EvaluationKey],
     ) -> Result<Vec<Option<Evaluation>>, StoreError> {
+        (self.before_lookup)();
         self.inner.get_evaluations(keys)
     }
     fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
@@ -657,6 +665,7 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
     // The first write lasts until a second batch has started (at most 10 s).
     let store = HookedStore {
         inner: MemoryStore::new(),
+        before_lookup: || {},
         before_write: || {
             if first.swap(false, Ordering::SeqCst) {
                 let second = simulator.started(2, Duration::from_secs(10));
@@ -664,28 +673,29 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
             }
         },
     };
-    let evaluator = StoredEvaluator::new(&simulator, &store);
-    let objective = objective(false);
-    std::thread::scope(|scope| {
-        let (evaluator, objective, simulator) = (&evaluator, &objective, &simulator);
-        scope.spawn(move || evaluator.evaluate(objective, &[vec![0.1]]).unwrap());
-        scope.spawn(move || {
-            assert!(simulator.started(1, Duration::from_secs(10)));
-            evaluator.evaluate(objective, &[vec![0.2]]).unwrap()
+    StoredEvaluator::with(&simulator, &store, |evaluator| {
+        let objective = objective(false);
+        std::thread::scope(|scope| {
+            let (evaluator, objective, simulator) = (&evaluator, &objective, &simulator);
+            scope.spawn(move || evaluator.evaluate(objective, &[vec![0.1]]).unwrap());
+            scope.spawn(move || {
+                assert!(simulator.started(1, Duration::from_secs(10)));
+                evaluator.evaluate(objective, &[vec![0.2]]).unwrap()
+            });
+            // The first batch answers once the second caller waits for the next round.
+            scope.spawn(move || {
+                let queued = std::time::Instant::now() + Duration::from_secs(10);
+                while evaluator.rounds_waiting() == 0 && std::time::Instant::now() < queued {
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+                *simulator.let_go.0.lock().unwrap() = true;
+                simulator.let_go.1.notify_all();
+            });
         });
-        // The first batch answers once the second caller waits for the next round.
-        scope.spawn(move || {
-            let queued = std::time::Instant::now() + Duration::from_secs(10);
-            while evaluator.rounds_waiting() == 0 && std::time::Instant::now() < queued {
-                std::thread::sleep(Duration::from_millis(1));
-            }
-            *simulator.let_go.0.lock().unwrap() = true;
-            simulator.let_go.1.notify_all();
-        });
+        assert!(saw_second.load(Ordering::SeqCst));
+        assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 2);
+        assert_eq!(store.stats().unwrap().evaluations, 2);
     });
-    assert!(saw_second.load(Ordering::SeqCst));
-    assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 2);
-    assert_eq!(store.stats().unwrap().evaluations, 2);
 }
 
 #[test]
@@ -696,14 +706,16 @@ fn rounds_still_gather_when_durable_writes_are_slow() {
     let store = HookedStore {
         inner: MemoryStore::new(),
         before_write: || std::thread::sleep(Duration::from_millis(30)),
+        before_lookup: || {},
     };
     let inner = Counting::default();
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let asks = ask_from_runs(&evaluator, &objective, 1);
-    assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
-    let batches = inner.batches.load(Ordering::SeqCst);
-    assert!(batches < asks / 2, "{batches} batches for {asks} asks");
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let asks = ask_from_runs(&evaluator, &objective, 1);
+        assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
+        let batches = inner.batches.load(Ordering::SeqCst);
+        assert!(batches < asks / 2, "{batches} batches for {asks} asks");
+    });
 }
 
 /// Has no worker for one objective (by fingerprint); scores the others as [`Counting`].
@@ -734,86 +746,89 @@ fn a_round_of_two_objectives_stores_the_answered_one_and_faults_only_the_other()
         fingerprint: bad.fingerprint(),
         inner: Counting::default(),
     };
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let (answered, faulted) = std::thread::scope(|scope| {
-        let callers: Vec<_> = (0..6)
-            .map(|c| {
-                let (evaluator, objective) = (&evaluator, if c % 2 == 0 { &good } else { &bad });
-                scope.spawn(move || {
-                    (0..4)
-                        .map(|r| {
-                            let x = f64::from(c * 10 + r);
-                            evaluator
-                                .evaluate(objective, &[vec![x]])
-                                .map(|a| (a[0].objective, x))
-                        })
-                        .collect::<Vec<_>>()
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let (answered, faulted) = std::thread::scope(|scope| {
+            let callers: Vec<_> = (0..6)
+                .map(|c| {
+                    let (evaluator, objective) =
+                        (&evaluator, if c % 2 == 0 { &good } else { &bad });
+                    scope.spawn(move || {
+                        (0..4)
+                            .map(|r| {
+                                let x = f64::from(c * 10 + r);
+                                evaluator
+                                    .evaluate(objective, &[vec![x]])
+                                    .map(|a| (a[0].objective, x))
+                            })
+                            .collect::<Vec<_>>()
+                    })
                 })
-            })
-            .collect();
-        let mut answered = 0;
-        let mut faulted = 0;
-        for (c, caller) in callers.into_iter().enumerate() {
-            for result in caller.join().unwrap() {
-                match result {
-                    Ok((objective, x)) => {
-                        assert_eq!(c % 2, 0, "the unavailable objective was answered");
-                        assert_eq!(objective, x);
-                        answered += 1;
-                    }
-                    Err(fault) => {
-                        assert_eq!(c % 2, 1, "the answered objective faulted: {fault}");
-                        faulted += 1;
+                .collect();
+            let mut answered = 0;
+            let mut faulted = 0;
+            for (c, caller) in callers.into_iter().enumerate() {
+                for result in caller.join().unwrap() {
+                    match result {
+                        Ok((objective, x)) => {
+                            assert_eq!(c % 2, 0, "the unavailable objective was answered");
+                            assert_eq!(objective, x);
+                            answered += 1;
+                        }
+                        Err(fault) => {
+                            assert_eq!(c % 2, 1, "the answered objective faulted: {fault}");
+                            faulted += 1;
+                        }
                     }
                 }
             }
-        }
-        (answered, faulted)
+            (answered, faulted)
+        });
+        assert_eq!((answered, faulted), (12, 12));
+        // Only the answered objective's points were stored.
+        assert_eq!(store.stats().unwrap().evaluations, 12);
+        assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 12);
     });
-    assert_eq!((answered, faulted), (12, 12));
-    // Only the answered objective's points were stored.
-    assert_eq!(store.stats().unwrap().evaluations, 12);
-    assert_eq!(inner.inner.simulated.load(Ordering::SeqCst), 12);
 }
 
 #[test]
 fn overlapping_asks_of_many_runs_simulate_each_point_once() {
     let store = MemoryStore::new();
     let inner = Counting::default();
-    let evaluator = StoredEvaluator::new(&inner, &store);
-    let objective = objective(false);
-    let pool: Vec<Vec<f64>> = (0..40).map(|i| vec![f64::from(i)]).collect();
-    let asked = std::sync::Mutex::new(std::collections::HashSet::new());
-    std::thread::scope(|scope| {
-        for t in 0..8usize {
-            let (evaluator, objective, pool, asked) = (&evaluator, &objective, &pool, &asked);
-            scope.spawn(move || {
-                for c in 0..12usize {
-                    // Three points each, overlapping other runs' asks and earlier rounds.
-                    let batch: Vec<Vec<f64>> = (0..3)
-                        .map(|k| pool[(t * 7 + c * 5 + k * 11) % pool.len()].clone())
-                        .collect();
-                    for p in &batch {
-                        asked.lock().unwrap().insert(p[0].to_bits());
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let pool: Vec<Vec<f64>> = (0..40).map(|i| vec![f64::from(i)]).collect();
+        let asked = std::sync::Mutex::new(std::collections::HashSet::new());
+        std::thread::scope(|scope| {
+            for t in 0..8usize {
+                let (evaluator, objective, pool, asked) = (&evaluator, &objective, &pool, &asked);
+                scope.spawn(move || {
+                    for c in 0..12usize {
+                        // Three points each, overlapping other runs' asks and earlier rounds.
+                        let batch: Vec<Vec<f64>> = (0..3)
+                            .map(|k| pool[(t * 7 + c * 5 + k * 11) % pool.len()].clone())
+                            .collect();
+                        for p in &batch {
+                            asked.lock().unwrap().insert(p[0].to_bits());
+                        }
+                        let answers = evaluator.evaluate(objective, &batch).unwrap();
+                        for (p, a) in batch.iter().zip(answers) {
+                            assert_eq!(a.objective, p[0]);
+                        }
                     }
-                    let answers = evaluator.evaluate(objective, &batch).unwrap();
-                    for (p, a) in batch.iter().zip(answers) {
-                        assert_eq!(a.objective, p[0]);
-                    }
-                }
-            });
-        }
+                });
+            }
+        });
+        let distinct = asked.lock().unwrap().len();
+        assert_eq!(inner.simulated.load(Ordering::SeqCst), distinct);
+        let stats = evaluator.stats();
+        assert_eq!(stats.requested, 8 * 12 * 3);
+        assert_eq!(stats.simulated, distinct as u64);
+        let store_stats = store.stats().unwrap();
+        assert_eq!(
+            (store_stats.hits, store_stats.misses),
+            (stats.requested - distinct as u64, distinct as u64)
+        );
     });
-    let distinct = asked.lock().unwrap().len();
-    assert_eq!(inner.simulated.load(Ordering::SeqCst), distinct);
-    let stats = evaluator.stats();
-    assert_eq!(stats.requested, 8 * 12 * 3);
-    assert_eq!(stats.simulated, distinct as u64);
-    let store_stats = store.stats().unwrap();
-    assert_eq!(
-        (store_stats.hits, store_stats.misses),
-        (stats.requested - distinct as u64, distinct as u64)
-    );
 }
 
 /// Answers one point fewer than it was asked for.
@@ -837,10 +852,83 @@ impl Evaluator for AnswersShort {
 #[test]
 fn a_batch_answered_short_is_a_fault_and_stores_nothing() {
     let store = MemoryStore::new();
-    let evaluator = StoredEvaluator::new(AnswersShort, &store);
-    let objective = objective(false);
-    let points: Vec<Vec<f64>> = (0..3).map(|i| vec![f64::from(i)]).collect();
-    let fault = evaluator.evaluate(&objective, &points).unwrap_err();
-    assert!(fault.message.contains("2 answers for 3 points"), "{fault}");
-    assert_eq!(store.stats().unwrap().evaluations, 0);
+    StoredEvaluator::with(AnswersShort, &store, |evaluator| {
+        let objective = objective(false);
+        let points: Vec<Vec<f64>> = (0..3).map(|i| vec![f64::from(i)]).collect();
+        let fault = evaluator.evaluate(&objective, &points).unwrap_err();
+        assert!(fault.message.contains("2 answers for 3 points"), "{fault}");
+        assert_eq!(store.stats().unwrap().evaluations, 0);
+    });
+}
+
+#[test]
+fn asks_that_arrive_together_share_one_store_lookup() {
+    // A slow disk: each lookup takes 10 ms, during which the other runs' asks arrive. The
+    // dispatcher looks up everything that waits with one lookup, not one per ask.
+    let lookups = AtomicUsize::new(0);
+    let store = HookedStore {
+        inner: MemoryStore::new(),
+        before_write: || {},
+        before_lookup: || {
+            lookups.fetch_add(1, Ordering::SeqCst);
+            std::thread::sleep(Duration::from_millis(10));
+        },
+    };
+    let inner = Counting::default();
+    StoredEvaluator::with(&inner, &store, |evaluator| {
+        let objective = objective(false);
+        let asks = ask_from_runs(evaluator, &objective, 1);
+        assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
+        let lookups = lookups.load(Ordering::SeqCst);
+        assert!(lookups < asks / 2, "{lookups} lookups for {asks} asks");
+    });
+}
+
+/// Scores as [`Counting`], has room as told, and records the most batches it ran at once.
+#[derive(Default)]
+struct Gauge {
+    counting: Counting,
+    room: bool,
+    running: AtomicUsize,
+    most: AtomicUsize,
+}
+
+impl Evaluator for Gauge {
+    fn evaluate(
+        &self,
+        objective: &Objective,
+        points: &[Vec<f64>],
+    ) -> Result<Vec<Evaluation>, Fault> {
+        let now = self.running.fetch_add(1, Ordering::SeqCst) + 1;
+        self.most.fetch_max(now, Ordering::SeqCst);
+        let answers = self.counting.evaluate(objective, points);
+        self.running.fetch_sub(1, Ordering::SeqCst);
+        answers
+    }
+
+    fn has_room(&self) -> bool {
+        self.room
+    }
+}
+
+#[test]
+fn a_second_round_travels_only_where_there_is_room_and_never_a_third() {
+    for room in [false, true] {
+        let store = MemoryStore::new();
+        let inner = Gauge {
+            room,
+            ..Gauge::default()
+        };
+        StoredEvaluator::with(&inner, &store, |evaluator| {
+            let objective = objective(false);
+            let asks = ask_from_runs(evaluator, &objective, 1);
+            assert_eq!(inner.counting.simulated.load(Ordering::SeqCst), asks);
+        });
+        let most = inner.most.load(Ordering::SeqCst);
+        if room {
+            assert!(most <= super::evaluator::ROUNDS, "{most} rounds at once");
+        } else {
+            assert_eq!(most, 1, "a second round went without room");
+        }
+    }
 }

@@ -14,14 +14,15 @@
 //! whose outputs the diagnosis needs, as one `Simulate` request per point of the chunk, all
 //! at once ([`WireSimulation`]). Both take the same path through the pool.
 //!
-//! [`Evaluator::evaluate`] and [`Simulator::simulate`] are synchronous and called from many
-//! run threads at once; each call drives its batch on the pool's tokio runtime with
-//! [`Handle::block_on`].
+//! [`Evaluator::evaluate`] and [`Simulator::simulate`] are synchronous: the evaluation
+//! store's dispatcher calls them from its round threads (plain threads, outside the
+//! runtime), and each call drives its batch on the pool's tokio runtime with
+//! [`Handle::block_on`]. Gathering the points of many runs into rounds is the dispatcher's
+//! work ([`calib_engine::store::StoredEvaluator`]), not this evaluator's.
 
 use super::client::{WireObjective, WireSimulation, WorkerClient};
 use super::error::WorkerError;
 use super::pool::{Lease, WorkerPool};
-use calib_engine::coalesce::Coalescer;
 use calib_engine::evaluator::{Evaluator, Fault, Outputs, Simulator};
 use calib_engine::objective::{Evaluation, Objective};
 use std::collections::{HashMap, VecDeque};
@@ -39,8 +40,6 @@ pub struct GrpcEvaluator {
     /// The experiments of objectives of several, each as an objective of its own, by the
     /// whole objective's fingerprint (split once, not per batch).
     parts: Mutex<HashMap<[u8; 32], Arc<Vec<Objective>>>>,
-    /// Concurrent callers' points, sent together.
-    coalescer: Coalescer<[u8; 32]>,
 }
 
 impl GrpcEvaluator {
@@ -51,21 +50,11 @@ impl GrpcEvaluator {
             runtime,
             wire: Mutex::new(HashMap::new()),
             parts: Mutex::new(HashMap::new()),
-            coalescer: Coalescer::default(),
         }
     }
 
     pub fn pool(&self) -> &Arc<WorkerPool> {
         &self.pool
-    }
-
-    /// The wire form of an objective already seen, by fingerprint.
-    fn wire_of(&self, fingerprint: &[u8; 32]) -> Option<Arc<WireObjective>> {
-        self.wire
-            .lock()
-            .expect("wire lock")
-            .get(fingerprint)
-            .cloned()
     }
 
     fn wire(&self, objective: &Objective) -> Arc<WireObjective> {
@@ -126,39 +115,9 @@ impl Evaluator for GrpcEvaluator {
         if !objective.more.is_empty() {
             return self.evaluate_experiments(objective, points);
         }
-        // Put in wire form before the round: whichever caller leads it finds it by key.
-        self.wire(objective);
-        // Every group of a round is one objective: sent side by side, each its own batch.
-        self.coalescer.evaluate(
-            objective.fingerprint(),
-            points.to_vec(),
-            self.has_room(),
-            |groups, _| {
-                let mut batches = groups.into_iter().map(|(fingerprint, points)| {
-                    let wire = self
-                        .wire_of(&fingerprint)
-                        .expect("each caller puts its objective in wire form first");
-                    dispatch(self.pool.clone(), wire, points)
-                });
-                self.runtime.block_on(async move {
-                    if batches.len() == 1 {
-                        return vec![batches.next().expect("one group").await];
-                    }
-                    let running: Vec<_> = batches.map(tokio::spawn).collect();
-                    let mut answers = Vec::with_capacity(running.len());
-                    for batch in running {
-                        answers.push(match batch.await {
-                            Ok(answer) => answer,
-                            Err(e) if e.is_panic() => std::panic::resume_unwind(e.into_panic()),
-                            Err(_) => Err(Fault::unavailable(
-                                "dispatch stopped: the coordinator is shutting down",
-                            )),
-                        });
-                    }
-                    answers
-                })
-            },
-        )
+        let wire = self.wire(objective);
+        self.runtime
+            .block_on(dispatch(self.pool.clone(), wire, points.to_vec()))
     }
 
     fn has_room(&self) -> bool {

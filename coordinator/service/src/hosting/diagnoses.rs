@@ -83,9 +83,11 @@ impl Campaigns {
         let outcome = diagnosis::diagnose_with_store(&campaign, &engine, &*self.store, &progress)
             .and_then(|d| {
                 let found = if discover {
-                    let stored = StoredEngine::new(&engine, &*self.store);
-                    let found = found_outside_the_library(&d, &stored, &progress);
-                    if let Some(e) = stored.error() {
+                    let (found, error) = StoredEngine::with(&engine, &*self.store, |stored| {
+                        let found = found_outside_the_library(&d, stored, &progress);
+                        (found, stored.error())
+                    });
+                    if let Some(e) = error {
                         return Err(e.into());
                     }
                     Some(found?)

@@ -141,7 +141,7 @@ impl Powell {
     where
         O: CostFunction<Param = Vec<f64>, Output = f64> + SyncAlias,
     {
-        let k = best_index(&samples);
+        let k = best_index(samples);
         let last = samples.len() - 1;
         if last == 0 {
             return Ok(Bracketed::Done(samples[0]));

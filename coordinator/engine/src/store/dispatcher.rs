@@ -1,0 +1,435 @@
+//! The dispatcher of [`super::StoredEvaluator`]: every decision about points, on one thread
+//! (see the [evaluator's module](super::evaluator) for what it does and why).
+
+use super::evaluator::{Ask, Group, Message, Reply, Round, Shared, Write, ROUNDS};
+use super::{EvaluationKey, Store};
+use crate::evaluator::{Evaluator, Fault};
+use crate::objective::{Evaluation, Objective};
+use std::any::Any;
+use std::collections::HashMap;
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::{Receiver, Sender, SyncSender};
+use std::sync::Arc;
+
+/// A point a drained batch of asks looks up: who asks for it (ask, position), its objective
+/// and the point.
+type Looked = (Vec<(u64, usize)>, Arc<Objective>, Vec<f64>);
+
+/// A point being simulated: the round it went in, who waits for it (ask, position), the
+/// first being the ask that sent it.
+struct Flight {
+    objective: Arc<Objective>,
+    point: Vec<f64>,
+    waiters: Vec<(u64, usize)>,
+    /// The round it went in, once sent.
+    round: Option<u64>,
+    /// Its answer, once arrived and until written.
+    answer: Option<Evaluation>,
+}
+
+/// An ask not yet answered.
+struct Pending {
+    answers: Vec<Option<Evaluation>>,
+    missing: usize,
+    /// Of its points, those it sent and were simulated: the rest were hits.
+    simulated: u64,
+    reply: SyncSender<Reply>,
+}
+
+/// A round under way: its points by group, and whether it holds a place while written.
+struct Travelling {
+    keys: Vec<Vec<EvaluationKey>>,
+    holds_place: bool,
+}
+
+/// The dispatcher's state: everything about points lives here, on one thread.
+pub(super) struct Dispatcher<'d, E> {
+    inner: &'d E,
+    store: &'d dyn Store,
+    shared: &'d Shared,
+    rounds: Sender<Round>,
+    writes: Sender<Write>,
+    pending: HashMap<u64, Pending>,
+    in_flight: HashMap<EvaluationKey, Flight>,
+    /// Keys to send in the next round, in order of asking.
+    queue: Vec<EvaluationKey>,
+    travelling: HashMap<u64, Travelling>,
+    /// Rounds travelling, and arrived ones that keep their place until written.
+    places: usize,
+    /// Asks whose points are all answered, to reply to.
+    done: Vec<u64>,
+    next_ask: u64,
+    next_round: u64,
+    closing: bool,
+}
+
+impl<'d, E: Evaluator> Dispatcher<'d, E> {
+    pub(super) fn new(
+        inner: &'d E,
+        store: &'d dyn Store,
+        shared: &'d Shared,
+        rounds: Sender<Round>,
+        writes: Sender<Write>,
+    ) -> Self {
+        Self {
+            inner,
+            store,
+            shared,
+            rounds,
+            writes,
+            pending: HashMap::new(),
+            in_flight: HashMap::new(),
+            queue: Vec::new(),
+            travelling: HashMap::new(),
+            places: 0,
+            done: Vec::new(),
+            next_ask: 0,
+            next_round: 0,
+            closing: false,
+        }
+    }
+
+    /// Serve until the handle is gone and nothing is under way: every message waiting is
+    /// taken before a round sets out, so that asks arriving together go together.
+    pub(super) fn run(mut self, messages: Receiver<Message>) {
+        while !(self.closing && self.travelling.is_empty()) {
+            let Ok(first) = messages.recv() else { return };
+            let mut asks = Vec::new();
+            for message in std::iter::once(first).chain(messages.try_iter()) {
+                match message {
+                    Message::Ask(ask) => asks.push(ask),
+                    Message::Arrived { round, groups } => self.arrived(round, groups),
+                    Message::Panicked { round, payload } => self.panicked(round, payload),
+                    Message::Written { round } => self.written(round),
+                    Message::Close => self.closing = true,
+                }
+            }
+            if !asks.is_empty() {
+                self.take_asks(asks);
+            }
+            self.send_round();
+        }
+    }
+
+    /// Register asks: points already in flight join their flight; the others are looked up
+    /// in the store with one lookup, and what it lacks is queued.
+    fn take_asks(&mut self, asks: Vec<Ask>) {
+        let mut lookup: Vec<EvaluationKey> = Vec::new();
+        // Per key looked up: the asks' positions, the objective and the point.
+        let mut looked: HashMap<EvaluationKey, Looked> = HashMap::new();
+        for ask in asks {
+            let id = self.next_ask;
+            self.next_ask += 1;
+            let Ask {
+                objective,
+                keys,
+                points,
+                reply,
+            } = ask;
+            self.pending.insert(
+                id,
+                Pending {
+                    answers: vec![None; keys.len()],
+                    missing: keys.len(),
+                    simulated: 0,
+                    reply,
+                },
+            );
+            for (position, (key, point)) in keys.into_iter().zip(points).enumerate() {
+                if let Some(flight) = self.in_flight.get_mut(&key) {
+                    flight.waiters.push((id, position));
+                    self.shared.joined.fetch_add(1, Ordering::SeqCst);
+                    continue;
+                }
+                looked
+                    .entry(key)
+                    .or_insert_with(|| {
+                        lookup.push(key);
+                        (Vec::new(), objective.clone(), point)
+                    })
+                    .0
+                    .push((id, position));
+            }
+        }
+        let found = self.store.get_evaluations(&lookup).unwrap_or_else(|e| {
+            self.shared.note(e);
+            vec![None; lookup.len()]
+        });
+        for (key, found) in lookup.into_iter().zip(found) {
+            let (waiters, objective, point) = looked.remove(&key).expect("each key looked up");
+            match found {
+                Some(evaluation) => {
+                    for (id, position) in waiters {
+                        self.answer(id, position, &evaluation);
+                    }
+                }
+                None => {
+                    self.shared
+                        .joined
+                        .fetch_add(waiters.len() - 1, Ordering::SeqCst);
+                    self.queue_flight(key, objective, point, waiters);
+                }
+            }
+        }
+        self.finish_answered();
+    }
+
+    fn queue_flight(
+        &mut self,
+        key: EvaluationKey,
+        objective: Arc<Objective>,
+        point: Vec<f64>,
+        waiters: Vec<(u64, usize)>,
+    ) {
+        self.in_flight.insert(
+            key,
+            Flight {
+                objective,
+                point,
+                waiters,
+                round: None,
+                answer: None,
+            },
+        );
+        self.queue.push(key);
+        self.shared.queued.fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Send everything queued as one round, when a place is free: at once when nothing
+    /// travels, a second round only when the inner evaluator has room for it.
+    fn send_round(&mut self) {
+        if self.queue.is_empty()
+            || !(self.places == 0 || (self.places < ROUNDS && self.inner.has_room()))
+        {
+            return;
+        }
+        let queue = std::mem::take(&mut self.queue);
+        self.shared.queued.fetch_sub(queue.len(), Ordering::SeqCst);
+        // One group per objective, in order of first appearance.
+        let mut groups: Vec<Group> = Vec::new();
+        let id = self.next_round;
+        self.next_round += 1;
+        for key in queue {
+            let Some(flight) = self.in_flight.get_mut(&key) else {
+                continue;
+            };
+            flight.round = Some(id);
+            let fingerprint = flight.objective.fingerprint();
+            let group = match groups
+                .iter_mut()
+                .position(|g| g.objective.fingerprint() == fingerprint)
+            {
+                Some(g) => &mut groups[g],
+                None => {
+                    groups.push(Group {
+                        objective: flight.objective.clone(),
+                        keys: Vec::new(),
+                        points: Vec::new(),
+                    });
+                    groups.last_mut().expect("just pushed")
+                }
+            };
+            group.keys.push(key);
+            group.points.push(flight.point.clone());
+        }
+        tracing::trace!(
+            round = id,
+            points = groups.iter().map(|g| g.points.len()).sum::<usize>(),
+            "round"
+        );
+        self.travelling.insert(
+            id,
+            Travelling {
+                keys: groups.iter().map(|g| g.keys.clone()).collect(),
+                holds_place: true,
+            },
+        );
+        self.places += 1;
+        if self.rounds.send(Round { id, groups }).is_err() {
+            // The runners are gone (the scope is ending): nothing will answer.
+            let keys = self.travelling.remove(&id).expect("just inserted").keys;
+            self.places -= 1;
+            let fault = Fault::unavailable("the evaluation dispatcher stopped");
+            for key in keys.into_iter().flatten() {
+                self.fail_flight(&key, &fault);
+            }
+        }
+    }
+
+    /// A round's answers: faulted groups answer their asks with the fault; the others go to
+    /// the writer, and are answered once written. The round's place goes to the next round
+    /// when points wait, else it is kept until the write is done.
+    fn arrived(&mut self, round: u64, results: Vec<Result<Vec<Evaluation>, Fault>>) {
+        let keys = self.travelling[&round].keys.clone();
+        let mut entries = Vec::new();
+        for (keys, result) in keys.iter().zip(results) {
+            let result = result.and_then(|evaluations| {
+                if evaluations.len() == keys.len() {
+                    Ok(evaluations)
+                } else {
+                    Err(Fault::unavailable(format!(
+                        "{} answers for {} points",
+                        evaluations.len(),
+                        keys.len()
+                    )))
+                }
+            });
+            match result {
+                Ok(evaluations) => {
+                    let failed = evaluations.iter().filter(|e| e.failure.is_some()).count();
+                    if failed > 0 {
+                        let first = evaluations.iter().find_map(|e| e.failure.as_ref());
+                        tracing::info!(failed, first = ?first, "simulations failed");
+                        self.shared
+                            .failed
+                            .fetch_add(failed as u64, Ordering::Relaxed);
+                    }
+                    self.shared
+                        .simulated
+                        .fetch_add(evaluations.len() as u64, Ordering::Relaxed);
+                    for (key, evaluation) in keys.iter().zip(evaluations) {
+                        if let Some(flight) = self.in_flight.get_mut(key) {
+                            if flight.round == Some(round) {
+                                flight.answer = Some(evaluation.clone());
+                            }
+                        }
+                        entries.push((*key, evaluation));
+                    }
+                }
+                Err(fault) => {
+                    for key in keys {
+                        if self.in_flight.get(key).and_then(|f| f.round) == Some(round) {
+                            self.fail_flight(key, &fault);
+                        }
+                    }
+                }
+            }
+        }
+        self.finish_answered();
+        let travelling = self.travelling.get_mut(&round).expect("a round under way");
+        if !self.queue.is_empty() {
+            travelling.holds_place = false;
+            self.places -= 1;
+        }
+        // Nothing to write (or no writer left): published at once.
+        if entries.is_empty() || self.writes.send(Write { round, entries }).is_err() {
+            self.written(round);
+        }
+    }
+
+    /// A round's answers are durable: publish them, and free the round's place.
+    fn written(&mut self, round: u64) {
+        let Some(travelling) = self.travelling.remove(&round) else {
+            return;
+        };
+        if travelling.holds_place {
+            self.places -= 1;
+        }
+        let mut simulated = 0;
+        for key in travelling.keys.iter().flatten() {
+            if self.in_flight.get(key).and_then(|f| f.round) != Some(round) {
+                continue;
+            }
+            let flight = self.in_flight.remove(key).expect("just seen");
+            self.shared
+                .joined
+                .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+            let Some(answer) = flight.answer else {
+                continue;
+            };
+            simulated += 1;
+            if let Some(sender) = self.pending.get_mut(&flight.waiters[0].0) {
+                sender.simulated += 1;
+            }
+            for (id, position) in flight.waiters {
+                self.answer(id, position, &answer);
+            }
+        }
+        self.store.count_lookups(0, simulated);
+        self.finish_answered();
+    }
+
+    /// A round's simulation panicked: the asks that sent its points panic too; asks that
+    /// joined them send them again.
+    fn panicked(&mut self, round: u64, payload: Box<dyn Any + Send>) {
+        let Some(travelling) = self.travelling.remove(&round) else {
+            return;
+        };
+        if travelling.holds_place {
+            self.places -= 1;
+        }
+        let mut payload = Some(payload);
+        for key in travelling.keys.into_iter().flatten() {
+            if self.in_flight.get(&key).and_then(|f| f.round) != Some(round) {
+                continue;
+            }
+            let flight = self.in_flight.remove(&key).expect("just seen");
+            self.shared
+                .joined
+                .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+            let sender = flight.waiters[0].0;
+            if let Some(pending) = self.pending.remove(&sender) {
+                let payload = payload.take().unwrap_or_else(|| {
+                    Box::new("the simulation of this batch panicked".to_string())
+                });
+                let _ = pending.reply.send(Reply::Panic(payload));
+            }
+            let others: Vec<(u64, usize)> = flight
+                .waiters
+                .into_iter()
+                .filter(|(id, _)| self.pending.contains_key(id))
+                .collect();
+            if !others.is_empty() {
+                self.shared
+                    .joined
+                    .fetch_add(others.len() - 1, Ordering::SeqCst);
+                self.queue_flight(key, flight.objective, flight.point, others);
+            }
+        }
+    }
+
+    /// A point that has no answer (its batch faulted): every ask waiting on it gets the
+    /// fault.
+    fn fail_flight(&mut self, key: &EvaluationKey, fault: &Fault) {
+        let Some(flight) = self.in_flight.remove(key) else {
+            return;
+        };
+        self.shared
+            .joined
+            .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+        for (id, _) in flight.waiters {
+            if let Some(pending) = self.pending.remove(&id) {
+                let _ = pending.reply.send(Reply::Answer(Err(fault.clone())));
+            }
+        }
+    }
+
+    fn answer(&mut self, id: u64, position: usize, evaluation: &Evaluation) {
+        if let Some(pending) = self.pending.get_mut(&id) {
+            if pending.answers[position].is_none() {
+                pending.answers[position] = Some(evaluation.clone());
+                pending.missing -= 1;
+                if pending.missing == 0 {
+                    self.done.push(id);
+                }
+            }
+        }
+    }
+
+    /// Reply to every ask whose points are all answered.
+    fn finish_answered(&mut self) {
+        for id in std::mem::take(&mut self.done) {
+            let Some(pending) = self.pending.remove(&id) else {
+                continue;
+            };
+            let points = pending.answers.len() as u64;
+            self.store.count_lookups(points - pending.simulated, 0);
+            let answers = pending
+                .answers
+                .into_iter()
+                .map(|a| a.expect("every point answered"))
+                .collect();
+            let _ = pending.reply.send(Reply::Answer(Ok(answers)));
+        }
+    }
+}
