@@ -176,21 +176,24 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
             .find(|f| f.effects.len() == 1 && f.effects[0] == c.effect)
             .map(|f| f.objective);
     }
+    Ok(judged(baseline, refits, noise_floor))
+}
 
-    // 5. Select, 7. judge.
+/// Steps 5 and 7: select among the refits, and judge the selection against the noise floor.
+fn judged(baseline: &Fit, refits: Vec<Fit>, noise_floor: f64) -> Judgement {
     let chosen = verdict::select(baseline, &refits);
     let (verdict, explained_fraction) = verdict::judge(baseline, chosen, noise_floor);
     let (final_fit, selected) = match chosen {
         None => (baseline.clone(), Vec::new()),
         Some(fit) => (fit.clone(), fit.effects.clone()),
     };
-    Ok(Judgement {
+    Judgement {
         refits,
         selected,
         final_fit,
         verdict,
         explained_fraction,
-    })
+    }
 }
 
 /// What every refit of one diagnosis shares.

@@ -32,12 +32,7 @@ pub(super) fn read(
         path: path.to_owned(),
     })?;
     let data = &bytes[header.offset..];
-    let mut reader = ::csv::ReaderBuilder::new()
-        .has_headers(false)
-        .flexible(true)
-        .trim(::csv::Trim::All)
-        .delimiter(header.delimiter)
-        .from_reader(data);
+    let mut reader = reader_of(data, header.delimiter);
     let lines = LineIndex::new(data, header.line);
     let line_of = |position: Option<&::csv::Position>| {
         position.map_or(header.line, |position| {
@@ -113,10 +108,21 @@ pub(super) fn read(
         time,
         columns: columns
             .iter()
-            .map(|name| (*name).to_owned())
+            .map(|name| name.to_string())
             .zip(values)
             .collect(),
     })
+}
+
+/// A reader of the records from the header on: no header row of its own (the header is read
+/// as the first record), rows of any length (checked against the header's), cells trimmed.
+fn reader_of(data: &[u8], delimiter: u8) -> ::csv::Reader<&[u8]> {
+    ::csv::ReaderBuilder::new()
+        .has_headers(false)
+        .flexible(true)
+        .trim(::csv::Trim::All)
+        .delimiter(delimiter)
+        .from_reader(data)
 }
 
 /// The index of the header's one column called `name` (missing or named twice: an error at
