@@ -163,17 +163,14 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                         self.answer(id, position, &evaluation);
                     }
                 }
-                None => {
-                    self.shared
-                        .joined
-                        .fetch_add(waiters.len() - 1, Ordering::SeqCst);
-                    self.queue_flight(key, objective, point, waiters);
-                }
+                None => self.queue_flight(key, objective, point, waiters),
             }
         }
         self.finish_answered();
     }
 
+    /// Queue `point` for the next round, `waiters` (at least one) waiting on it, the first
+    /// the ask that sends it.
     fn queue_flight(
         &mut self,
         key: EvaluationKey,
@@ -181,6 +178,9 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         point: Vec<f64>,
         waiters: Vec<(u64, usize)>,
     ) {
+        self.shared
+            .joined
+            .fetch_add(waiters.len() - 1, Ordering::SeqCst);
         self.in_flight.insert(
             key,
             Flight {
@@ -207,6 +207,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         self.shared.queued.fetch_sub(queue.len(), Ordering::SeqCst);
         // One group per objective, in order of first appearance.
         let mut groups: Vec<Group> = Vec::new();
+        let mut keys: Vec<Vec<EvaluationKey>> = Vec::new();
         let id = self.next_round;
         self.next_round += 1;
         for key in queue {
@@ -215,22 +216,22 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
             };
             flight.round = Some(id);
             let fingerprint = flight.objective.fingerprint();
-            let group = match groups
-                .iter_mut()
+            let g = match groups
+                .iter()
                 .position(|g| g.objective.fingerprint() == fingerprint)
             {
-                Some(g) => &mut groups[g],
+                Some(g) => g,
                 None => {
                     groups.push(Group {
                         objective: flight.objective.clone(),
-                        keys: Vec::new(),
                         points: Vec::new(),
                     });
-                    groups.last_mut().expect("just pushed")
+                    keys.push(Vec::new());
+                    groups.len() - 1
                 }
             };
-            group.keys.push(key);
-            group.points.push(flight.point.clone());
+            keys[g].push(key);
+            groups[g].points.push(flight.point.clone());
         }
         tracing::trace!(
             round = id,
@@ -240,7 +241,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         self.travelling.insert(
             id,
             Travelling {
-                keys: groups.iter().map(|g| g.keys.clone()).collect(),
+                keys,
                 holds_place: true,
             },
         );
@@ -251,7 +252,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
             self.places -= 1;
             let fault = Fault::unavailable("the evaluation dispatcher stopped");
             for key in keys.into_iter().flatten() {
-                self.fail_flight(&key, &fault);
+                self.fail_flight(&key, id, &fault);
             }
         }
     }
@@ -298,9 +299,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                 }
                 Err(fault) => {
                     for key in keys {
-                        if self.in_flight.get(key).and_then(|f| f.round) == Some(round) {
-                            self.fail_flight(key, &fault);
-                        }
+                        self.fail_flight(key, round, &fault);
                     }
                 }
             }
@@ -327,13 +326,9 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         }
         let mut simulated = 0;
         for key in travelling.keys.iter().flatten() {
-            if self.in_flight.get(key).and_then(|f| f.round) != Some(round) {
+            let Some(flight) = self.land(key, round) else {
                 continue;
-            }
-            let flight = self.in_flight.remove(key).expect("just seen");
-            self.shared
-                .joined
-                .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+            };
             let Some(answer) = flight.answer else {
                 continue;
             };
@@ -360,13 +355,9 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         }
         let mut payload = Some(payload);
         for key in travelling.keys.into_iter().flatten() {
-            if self.in_flight.get(&key).and_then(|f| f.round) != Some(round) {
+            let Some(flight) = self.land(&key, round) else {
                 continue;
-            }
-            let flight = self.in_flight.remove(&key).expect("just seen");
-            self.shared
-                .joined
-                .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+            };
             let sender = flight.waiters[0].0;
             if let Some(pending) = self.pending.remove(&sender) {
                 let payload = payload.take().unwrap_or_else(|| {
@@ -380,23 +371,30 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                 .filter(|(id, _)| self.pending.contains_key(id))
                 .collect();
             if !others.is_empty() {
-                self.shared
-                    .joined
-                    .fetch_add(others.len() - 1, Ordering::SeqCst);
                 self.queue_flight(key, flight.objective, flight.point, others);
             }
         }
     }
 
-    /// A point that has no answer (its batch faulted): every ask waiting on it gets the
-    /// fault.
-    fn fail_flight(&mut self, key: &EvaluationKey, fault: &Fault) {
-        let Some(flight) = self.in_flight.remove(key) else {
-            return;
-        };
+    /// The flight of `key` sent in `round`, taken out of the in-flight map (none when the
+    /// key's flight is of another round: this one's was failed and the key asked again).
+    fn land(&mut self, key: &EvaluationKey, round: u64) -> Option<Flight> {
+        if self.in_flight.get(key)?.round != Some(round) {
+            return None;
+        }
+        let flight = self.in_flight.remove(key)?;
         self.shared
             .joined
             .fetch_sub(flight.waiters.len() - 1, Ordering::SeqCst);
+        Some(flight)
+    }
+
+    /// A point of `round` that has no answer (its batch faulted): every ask waiting on it
+    /// gets the fault.
+    fn fail_flight(&mut self, key: &EvaluationKey, round: u64, fault: &Fault) {
+        let Some(flight) = self.land(key, round) else {
+            return;
+        };
         for (id, _) in flight.waiters {
             if let Some(pending) = self.pending.remove(&id) {
                 let _ = pending.reply.send(Reply::Answer(Err(fault.clone())));

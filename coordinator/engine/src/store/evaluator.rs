@@ -232,7 +232,6 @@ pub(super) enum Message {
 /// Points of one objective in a round.
 pub(super) struct Group {
     pub(super) objective: Arc<Objective>,
-    pub(super) keys: Vec<EvaluationKey>,
     pub(super) points: Vec<Vec<f64>>,
 }
 
