@@ -306,16 +306,7 @@ fn search(
     evaluator: &dyn Evaluator,
     progress: &dyn Progress,
 ) -> Result<Found> {
-    let nominal_point = campaign.nominal();
-    let nominal = evaluator
-        .evaluate(objective, std::slice::from_ref(&nominal_point))?
-        .remove(0);
-    progress.evaluated(1, nominal.objective);
-    tracing::info!(
-        campaign = %campaign.name,
-        objective = nominal.objective,
-        "nominal point scored"
-    );
+    let (nominal_point, nominal) = score_nominal(campaign, objective, evaluator, progress)?;
 
     let space = UnitBox::new(&campaign.free);
     let nominal_unit = space.to_unit(&nominal_point);
@@ -345,12 +336,7 @@ fn search(
             .map(|r| (r.method.name().to_string(), r.start))
             .collect::<Vec<_>>(),
     );
-    // Tolerances are relative to the nominal objective; a perfect nominal fit keeps 1.
-    let scale = if nominal.objective > 0.0 && nominal.failure.is_none() {
-        nominal.objective
-    } else {
-        1.0
-    };
+    let scale = tolerance_scale(&nominal);
     let context = RunContext {
         objective,
         evaluator,
@@ -368,6 +354,45 @@ fn search(
         .first()
         .map(|c| c.best_run)
         .ok_or_else(|| Error::Optimiser("no run produced a result".into()))?;
+    log_runs(campaign, &runs);
+    let best_evaluation = evaluator
+        .evaluate(objective, std::slice::from_ref(&runs[best].point))?
+        .remove(0);
+    Ok((nominal, screened, runs, clusters, best, best_evaluation))
+}
+
+/// The campaign's nominal point and its evaluation, which every run is compared with.
+fn score_nominal(
+    campaign: &Campaign,
+    objective: &Objective,
+    evaluator: &dyn Evaluator,
+    progress: &dyn Progress,
+) -> Result<(Vec<f64>, Evaluation)> {
+    let nominal_point = campaign.nominal();
+    let nominal = evaluator
+        .evaluate(objective, std::slice::from_ref(&nominal_point))?
+        .remove(0);
+    progress.evaluated(1, nominal.objective);
+    tracing::info!(
+        campaign = %campaign.name,
+        objective = nominal.objective,
+        "nominal point scored"
+    );
+    Ok((nominal_point, nominal))
+}
+
+/// The objective scale the optimisers' tolerances are relative to.
+fn tolerance_scale(nominal: &Evaluation) -> f64 {
+    // Tolerances are relative to the nominal objective; a perfect nominal fit keeps 1.
+    if nominal.objective > 0.0 && nominal.failure.is_none() {
+        nominal.objective
+    } else {
+        1.0
+    }
+}
+
+/// Logs (at debug level) where each run started and what it reached.
+fn log_runs(campaign: &Campaign, runs: &[RunOutcome]) {
     for (i, run) in runs.iter().enumerate() {
         tracing::debug!(
             campaign = %campaign.name,
@@ -379,10 +404,6 @@ fn search(
             "run finished"
         );
     }
-    let best_evaluation = evaluator
-        .evaluate(objective, std::slice::from_ref(&runs[best].point))?
-        .remove(0);
-    Ok((nominal, screened, runs, clusters, best, best_evaluation))
 }
 
 /// The starts after the nominal and informed ones (`taken`, unit box): the best distinct

@@ -1,7 +1,7 @@
 //! The typed outcome ([`crate::outcome`]) of a calibration from what it found.
 
 use super::Calibration;
-use crate::evidence;
+use crate::evidence::{self, Bound};
 use crate::optim::multistart::RunOutcome;
 use crate::outcome::{
     Best, CalibrationOutcome, ExperimentFit, ExperimentInput, Minimum, Named, Range, Run, Spread,
@@ -40,18 +40,7 @@ impl CalibrationOutcome {
         let agreeing: Vec<_> = c.runs.iter().filter(|r| r.objective <= threshold).collect();
         let spread = spread(&agreeing, &names);
         let objectives: Vec<f64> = c.runs.iter().map(|r| r.objective).collect();
-        let at_bound = c
-            .campaign
-            .free
-            .iter()
-            .zip(&best.point)
-            .map(|(p, &v)| {
-                (
-                    p.name.clone(),
-                    evidence::at_bound(v, p.nominal, p.min, p.max),
-                )
-            })
-            .collect();
+        let at_bound = bounds_reached(c, best);
         let info = c.campaign.model.info();
         CalibrationOutcome {
             version: VERSION,
@@ -59,16 +48,7 @@ impl CalibrationOutcome {
             model: info.name.clone(),
             model_version: info.version,
             measurement: c.measurement.source.display().to_string(),
-            window: WindowSummary {
-                start: c.campaign.window.0,
-                stop: c.campaign.window.1,
-                samples: c.objective.grid.len(),
-                windows: if c.campaign.windows.len() > 1 {
-                    c.campaign.windows.clone()
-                } else {
-                    Vec::new()
-                },
-            },
+            window: window_summary(c),
             free_parameters: c.campaign.free.clone(),
             nominal_objective: c.nominal.objective,
             nominal_rms: per_output(&nominal_rms),
@@ -98,6 +78,35 @@ impl CalibrationOutcome {
             experiments: experiments(c),
         }
     }
+}
+
+/// The time window fitted and its samples; the separate windows only when there are several.
+fn window_summary(c: &Calibration) -> WindowSummary {
+    WindowSummary {
+        start: c.campaign.window.0,
+        stop: c.campaign.window.1,
+        samples: c.objective.grid.len(),
+        windows: if c.campaign.windows.len() > 1 {
+            c.campaign.windows.clone()
+        } else {
+            Vec::new()
+        },
+    }
+}
+
+/// The bound of its range each free parameter of the best run sits on, if any.
+fn bounds_reached(c: &Calibration, best: &RunOutcome) -> Named<Option<Bound>> {
+    c.campaign
+        .free
+        .iter()
+        .zip(&best.point)
+        .map(|(p, &v)| {
+            (
+                p.name.clone(),
+                evidence::at_bound(v, p.nominal, p.min, p.max),
+            )
+        })
+        .collect()
 }
 
 /// Every run: where it started, where it ended, what it cost and why it stopped.

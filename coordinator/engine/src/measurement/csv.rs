@@ -32,26 +32,16 @@ pub(super) fn read(
         path: path.to_owned(),
     })?;
     let data = &bytes[header.offset..];
-    let mut reader = reader_of(data, header.delimiter);
-    let lines = LineIndex::new(data, header.line);
-    let line_of = |position: Option<&::csv::Position>| {
-        position.map_or(header.line, |position| {
-            lines.line_at(usize::try_from(position.byte()).unwrap_or(usize::MAX))
-        })
+    let mut records = Records {
+        path,
+        reader: reader_of(data, header.delimiter),
+        lines: LineIndex::new(data, header.line),
+        header_line: header.line,
     };
 
     let mut record = ::csv::ByteRecord::new();
-    let read_record = |reader: &mut ::csv::Reader<&[u8]>, record: &mut ::csv::ByteRecord| {
-        reader
-            .read_byte_record(record)
-            .map_err(|error| MeasurementError::MalformedCsv {
-                path: path.to_owned(),
-                line: line_of(error.position()),
-                detail: error.to_string(),
-            })
-    };
     // find_header saw a non-blank line here, so the reader yields a record.
-    read_record(&mut reader, &mut record)?;
+    records.read(&mut record)?;
     let names: Vec<String> = record.iter().map(cell_text).collect();
 
     let find_column = |name: &str| column_index(path, header.line, &names, name);
@@ -60,42 +50,13 @@ pub(super) fn read(
         .iter()
         .map(|name| find_column(name))
         .collect::<Result<Vec<usize>, _>>()?;
-
-    let mut time = Vec::new();
-    let mut values: Vec<Vec<f64>> = vec![Vec::new(); columns.len()];
-    let mut previous_time: Option<(Location, f64)> = None;
-    while read_record(&mut reader, &mut record)? {
-        if record.iter().all(<[u8]>::is_empty) {
-            continue;
-        }
-        let line = line_of(record.position());
-        if record.len() != names.len() {
-            return Err(MeasurementError::RaggedRow {
-                path: path.to_owned(),
-                line,
-                expected: names.len(),
-                found: record.len(),
-            });
-        }
-        let location = Location::Line(line);
-        let cell_value =
-            |index: usize, column: &str| cell_number(path, line, &record, index, column);
-
-        let sample_time = cell_value(time_index, time_column)?;
-        check_time_step(
-            path,
-            time_column,
-            previous_time,
-            location,
-            sample_time,
-            TimeOrder::Strict,
-        )?;
-        previous_time = Some((location, sample_time));
-        time.push(sample_time);
-        for ((&index, name), column_values) in column_indices.iter().zip(columns).zip(&mut values) {
-            column_values.push(cell_value(index, name)?);
-        }
-    }
+    let wanted = Wanted {
+        header_len: names.len(),
+        time: (time_index, time_column),
+        indices: &column_indices,
+        columns,
+    };
+    let (time, values) = records.rows(&mut record, &wanted)?;
 
     if time.is_empty() {
         return Err(MeasurementError::NoRows {
@@ -112,6 +73,99 @@ pub(super) fn read(
             .zip(values)
             .collect(),
     })
+}
+
+/// The records of a CSV file from its header on, with what is needed to place them in
+/// the file for error messages.
+struct Records<'p, 'a> {
+    path: &'p Path,
+    reader: ::csv::Reader<&'a [u8]>,
+    lines: LineIndex<'a>,
+    /// 1-based line number of the header.
+    header_line: usize,
+}
+
+/// The cells a row is read for, and how many cells each row must have.
+struct Wanted<'w> {
+    /// Cells of the header row.
+    header_len: usize,
+    /// Index and name of the time column.
+    time: (usize, &'w str),
+    /// Indices of the requested columns, in the order of `columns`.
+    indices: &'w [usize],
+    columns: &'w [&'w str],
+}
+
+impl Records<'_, '_> {
+    /// The file line of a record at reader position `position` (the header's when the
+    /// reader reports none), for error messages.
+    fn line_of(&self, position: Option<&::csv::Position>) -> usize {
+        position.map_or(self.header_line, |position| {
+            self.lines
+                .line_at(usize::try_from(position.byte()).unwrap_or(usize::MAX))
+        })
+    }
+
+    /// Reads the next record into `record` (`false` at the end), a reader error becoming
+    /// a malformed-CSV error at its line.
+    fn read(&mut self, record: &mut ::csv::ByteRecord) -> Result<bool, MeasurementError> {
+        self.reader
+            .read_byte_record(record)
+            .map_err(|error| MeasurementError::MalformedCsv {
+                path: self.path.to_owned(),
+                line: self.line_of(error.position()),
+                detail: error.to_string(),
+            })
+    }
+
+    /// Reads every data row after the header: the times, checked to increase strictly,
+    /// and the values of each wanted column. Blank rows are skipped.
+    fn rows(
+        &mut self,
+        record: &mut ::csv::ByteRecord,
+        wanted: &Wanted<'_>,
+    ) -> Result<(Vec<f64>, Vec<Vec<f64>>), MeasurementError> {
+        let path = self.path;
+        let (time_index, time_column) = wanted.time;
+        let mut time = Vec::new();
+        let mut values: Vec<Vec<f64>> = vec![Vec::new(); wanted.columns.len()];
+        let mut previous_time: Option<(Location, f64)> = None;
+        while self.read(record)? {
+            if record.iter().all(<[u8]>::is_empty) {
+                continue;
+            }
+            let line = self.line_of(record.position());
+            if record.len() != wanted.header_len {
+                return Err(MeasurementError::RaggedRow {
+                    path: path.to_owned(),
+                    line,
+                    expected: wanted.header_len,
+                    found: record.len(),
+                });
+            }
+            let location = Location::Line(line);
+            let cell_value =
+                |index: usize, column: &str| cell_number(path, line, record, index, column);
+
+            let sample_time = cell_value(time_index, time_column)?;
+            check_time_step(
+                path,
+                time_column,
+                previous_time,
+                location,
+                sample_time,
+                TimeOrder::Strict,
+            )?;
+            previous_time = Some((location, sample_time));
+            time.push(sample_time);
+            for ((&index, name), column_values) in
+                wanted.indices.iter().zip(wanted.columns).zip(&mut values)
+            {
+                column_values.push(cell_value(index, name)?);
+            }
+        }
+        Ok((time, values))
+    }
 }
 
 /// A reader of the records from the header on: no header row of its own (the header is read

@@ -91,10 +91,6 @@ pub(super) struct ResultFile<'m, 'a> {
 
 impl<'m, 'a> ResultFile<'m, 'a> {
     pub fn open(path: &Path, matrices: &'m [Matrix<'a>]) -> Result<Self, MeasurementError> {
-        let unsupported = |detail: String| MeasurementError::UnsupportedMat {
-            path: path.to_owned(),
-            detail,
-        };
         let malformed = |detail: String| MeasurementError::MalformedMat {
             path: path.to_owned(),
             detail,
@@ -108,37 +104,13 @@ impl<'m, 'a> ResultFile<'m, 'a> {
             })
         };
 
-        let aclass = Table {
-            matrix: require("Aclass")?,
-            transposed: false,
-        };
-        let class_row = |row: usize| {
-            if row < aclass.rows() {
-                aclass.text_row(row)
-            } else {
-                String::new()
-            }
-        };
-        let (class, version, layout) = (class_row(0), class_row(1), class_row(3));
-        if class != "Atrajectory" {
-            return Err(unsupported(format!(
-                "Aclass names the class \"{class}\"; only \"Atrajectory\" result files can be read"
-            )));
-        }
-        if version != "1.1" {
-            return Err(unsupported(format!(
-                "Aclass names result file version \"{version}\"; only version 1.1 can be read"
-            )));
-        }
-        let transposed = match layout.as_str() {
-            "binTrans" => true,
-            "binNormal" | "" => false,
-            other => {
-                return Err(unsupported(format!(
-                    "Aclass names the layout \"{other}\"; only binNormal and binTrans can be read"
-                )))
-            }
-        };
+        let transposed = aclass_layout(
+            path,
+            Table {
+                matrix: require("Aclass")?,
+                transposed: false,
+            },
+        )?;
         let table = |matrix| Table { matrix, transposed };
 
         let name_table = table(require("name")?);
@@ -159,15 +131,7 @@ impl<'m, 'a> ResultFile<'m, 'a> {
             .collect();
         let data_2 = table(require("data_2")?);
         let data_1 = find("data_1").map(table);
-        for data in std::iter::once(&data_2).chain(&data_1) {
-            if data.matrix.complex {
-                return Err(unsupported(format!(
-                    "\"{}\" is a {} matrix",
-                    data.matrix.name,
-                    data.matrix.describe()
-                )));
-            }
-        }
+        reject_complex(path, &data_2, data_1.as_ref())?;
         Ok(ResultFile {
             names,
             data_info,
@@ -192,6 +156,75 @@ impl<'m, 'a> ResultFile<'m, 'a> {
             }),
         }
     }
+}
+
+/// An unsupported-file error saying `detail`.
+fn unsupported(path: &Path, detail: String) -> MeasurementError {
+    MeasurementError::UnsupportedMat {
+        path: path.to_owned(),
+        detail,
+    }
+}
+
+/// Checks that `aclass` names an `Atrajectory` result file of version 1.1, and returns
+/// whether its layout stores the other matrices transposed (`binTrans`).
+fn aclass_layout(path: &Path, aclass: Table<'_, '_>) -> Result<bool, MeasurementError> {
+    let class_row = |row: usize| {
+        if row < aclass.rows() {
+            aclass.text_row(row)
+        } else {
+            String::new()
+        }
+    };
+    let (class, version, layout) = (class_row(0), class_row(1), class_row(3));
+    if class != "Atrajectory" {
+        return Err(unsupported(
+            path,
+            format!(
+                "Aclass names the class \"{class}\"; only \"Atrajectory\" result files can be read"
+            ),
+        ));
+    }
+    if version != "1.1" {
+        return Err(unsupported(
+            path,
+            format!("Aclass names result file version \"{version}\"; only version 1.1 can be read"),
+        ));
+    }
+    let transposed = match layout.as_str() {
+        "binTrans" => true,
+        "binNormal" | "" => false,
+        other => {
+            return Err(unsupported(
+                path,
+                format!(
+                    "Aclass names the layout \"{other}\"; only binNormal and binTrans can be read"
+                ),
+            ))
+        }
+    };
+    Ok(transposed)
+}
+
+/// Refuses complex data matrices: only real values can be read as variables.
+fn reject_complex(
+    path: &Path,
+    data_2: &Table<'_, '_>,
+    data_1: Option<&Table<'_, '_>>,
+) -> Result<(), MeasurementError> {
+    for data in std::iter::once(data_2).chain(data_1) {
+        if data.matrix.complex {
+            return Err(unsupported(
+                path,
+                format!(
+                    "\"{}\" is a {} matrix",
+                    data.matrix.name,
+                    data.matrix.describe()
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 impl Variables for ResultFile<'_, '_> {

@@ -189,43 +189,9 @@ fn decode_header(bytes: &[u8]) -> Result<Header, HeaderProblem> {
             ByteOrder::Big => i32::from_be_bytes(raw),
         }
     };
-    // The type field, read in the right byte order, is M·1000 + …, so M tells the order.
-    let little = field(0, ByteOrder::Little);
-    let big = field(0, ByteOrder::Big);
-    let (byte_order, type_code) = if (0..1000).contains(&little) {
-        (ByteOrder::Little, little)
-    } else if (1000..2000).contains(&big) {
-        (ByteOrder::Big, big - 1000)
-    } else if (2000..5000).contains(&little) || (2000..5000).contains(&big) {
-        return Err(HeaderProblem::Unsupported(format!(
-            "type {} uses the VAX or Cray number format",
-            if (2000..5000).contains(&little) {
-                little
-            } else {
-                big
-            }
-        )));
-    } else {
-        return Err(HeaderProblem::Invalid(format!(
-            "type field {little} is not a MAT v4 matrix type"
-        )));
-    };
-    let precision_digit = type_code / 10 % 10;
-    let (Some(precision), 0) = (Precision::from_digit(precision_digit), type_code / 100) else {
-        return Err(HeaderProblem::Invalid(format!(
-            "type field {type_code} is not a MAT v4 matrix type"
-        )));
-    };
-    let kind = match type_code % 10 {
-        0 => MatrixKind::Numeric,
-        1 => MatrixKind::Text,
-        2 => MatrixKind::Sparse,
-        other => {
-            return Err(HeaderProblem::Invalid(format!(
-                "type field {type_code} has matrix kind {other} (0 numeric, 1 text, 2 sparse)"
-            )))
-        }
-    };
+    let (byte_order, type_code) =
+        byte_order_of(field(0, ByteOrder::Little), field(0, ByteOrder::Big))?;
+    let (precision, kind) = matrix_type(type_code)?;
     let rows = field(1, byte_order);
     let cols = field(2, byte_order);
     let imaginary = field(3, byte_order);
@@ -257,6 +223,51 @@ fn decode_header(bytes: &[u8]) -> Result<Header, HeaderProblem> {
         complex: imaginary == 1,
         name_len,
     })
+}
+
+/// The byte order of a header whose type field reads `little` in little-endian and `big`
+/// in big-endian order, and the type code without its byte-order digit M.
+fn byte_order_of(little: i32, big: i32) -> Result<(ByteOrder, i32), HeaderProblem> {
+    // The type field, read in the right byte order, is M·1000 + …, so M tells the order.
+    if (0..1000).contains(&little) {
+        Ok((ByteOrder::Little, little))
+    } else if (1000..2000).contains(&big) {
+        Ok((ByteOrder::Big, big - 1000))
+    } else if (2000..5000).contains(&little) || (2000..5000).contains(&big) {
+        Err(HeaderProblem::Unsupported(format!(
+            "type {} uses the VAX or Cray number format",
+            if (2000..5000).contains(&little) {
+                little
+            } else {
+                big
+            }
+        )))
+    } else {
+        Err(HeaderProblem::Invalid(format!(
+            "type field {little} is not a MAT v4 matrix type"
+        )))
+    }
+}
+
+/// The precision (P digit) and kind (T digit) of type code `type_code` (O must be 0).
+fn matrix_type(type_code: i32) -> Result<(Precision, MatrixKind), HeaderProblem> {
+    let precision_digit = type_code / 10 % 10;
+    let (Some(precision), 0) = (Precision::from_digit(precision_digit), type_code / 100) else {
+        return Err(HeaderProblem::Invalid(format!(
+            "type field {type_code} is not a MAT v4 matrix type"
+        )));
+    };
+    let kind = match type_code % 10 {
+        0 => MatrixKind::Numeric,
+        1 => MatrixKind::Text,
+        2 => MatrixKind::Sparse,
+        other => {
+            return Err(HeaderProblem::Invalid(format!(
+                "type field {type_code} has matrix kind {other} (0 numeric, 1 text, 2 sparse)"
+            )))
+        }
+    };
+    Ok((precision, kind))
 }
 
 /// Whether `bytes` start with a plausible MAT v4 matrix header and name.

@@ -480,35 +480,19 @@ fn scan_array(
     order: ByteOrder,
     scan: &mut Scan,
 ) -> Result<(), MeasurementError> {
-    let malformed = |detail: String| MeasurementError::MalformedMat {
-        path: path.to_owned(),
-        detail: format!("the {place} {detail}"),
-    };
+    let at = ArrayPlace { path, place };
     let mut class = None;
     let mut name = String::new();
     // Dimensions and value count of a numeric array over MAX_MAT_VALUES, refused once its
     // name is known (before `matfile` reads any of its values).
     let mut too_large: Option<(Vec<i64>, i64)> = None;
-    let refuse = |name: Option<&str>, dims: &[i64], count: i64| {
-        let what = match name {
-            Some(name) => format!("variable \"{name}\" ({place})"),
-            None => format!("the {place}"),
-        };
-        MeasurementError::MatTooLarge {
-            path: path.to_owned(),
-            detail: format!(
-                "{what} has dimensions {dims:?}, {count} values, more than the \
-                 {MAX_MAT_VALUES} (MAX_MAT_VALUES) a variable may hold"
-            ),
-        }
-    };
     let mut position = 0;
     let mut index = 0;
     while position < array.len() {
         let tag = read_tag(array, position, order, true)
             .filter(|tag| tag.size <= array.len().saturating_sub(tag.data_start))
             .ok_or_else(|| {
-                malformed(format!(
+                at.malformed(format!(
                     "has a sub-element overrunning it at byte {position}"
                 ))
             })?;
@@ -516,28 +500,14 @@ fn scan_array(
         match index {
             0 => class = order.u32_at(data, 0).map(|flags| flags & 0xff),
             1 => {
-                let dims: Vec<i64> = data
-                    .chunks_exact(4)
-                    .filter_map(|chunk| order.u32_at(chunk, 0))
-                    .map(|dim| i64::from(dim as i32))
-                    .collect();
-                let count = dims.iter().try_fold(1i64, |count, &dim| {
-                    (dim >= 0).then(|| count.checked_mul(dim)).flatten()
-                });
-                match count {
-                    Some(count) if count <= i64::from(i32::MAX) => {
-                        let numeric = class.is_some_and(|class| NUMERIC_CLASSES.contains(&class));
-                        if numeric && count > MAX_MAT_VALUES as i64 {
-                            too_large = Some((dims, count));
-                        }
-                    }
-                    _ => return Err(malformed(format!("has invalid dimensions {dims:?}"))),
+                if let Some(oversized) = at.dimensions(data, order, class)? {
+                    too_large = Some(oversized);
                 }
             }
             2 => {
                 name = String::from_utf8_lossy(data).into_owned();
                 if let Some((dims, count)) = &too_large {
-                    return Err(refuse(Some(&name), dims, *count));
+                    return Err(at.refuse(Some(&name), dims, *count));
                 }
             }
             3 if class == Some(CLASS_INT32) && tag.data_type == MI_INT32 => {
@@ -559,8 +529,72 @@ fn scan_array(
         position = tag.next;
     }
     match too_large {
-        Some((dims, count)) => Err(refuse(None, &dims, count)),
+        Some((dims, count)) => Err(at.refuse(None, &dims, count)),
         None => Ok(()),
+    }
+}
+
+/// The array [`scan_array`] is checking, named in its errors.
+struct ArrayPlace<'p> {
+    path: &'p Path,
+    /// Where the array is, as the errors describe it.
+    place: &'p str,
+}
+
+impl ArrayPlace<'_> {
+    /// A malformed-file error saying `detail` about the array.
+    fn malformed(&self, detail: String) -> MeasurementError {
+        let place = self.place;
+        MeasurementError::MalformedMat {
+            path: self.path.to_owned(),
+            detail: format!("the {place} {detail}"),
+        }
+    }
+
+    /// The refusal of a numeric array of `count` values, over MAX_MAT_VALUES, naming
+    /// the variable when its name is known.
+    fn refuse(&self, name: Option<&str>, dims: &[i64], count: i64) -> MeasurementError {
+        let place = self.place;
+        let what = match name {
+            Some(name) => format!("variable \"{name}\" ({place})"),
+            None => format!("the {place}"),
+        };
+        MeasurementError::MatTooLarge {
+            path: self.path.to_owned(),
+            detail: format!(
+                "{what} has dimensions {dims:?}, {count} values, more than the \
+                 {MAX_MAT_VALUES} (MAX_MAT_VALUES) a variable may hold"
+            ),
+        }
+    }
+
+    /// Checks the dimensions sub-element `data` of an array of class `class`: the
+    /// dimensions and value count when it is numeric and over MAX_MAT_VALUES (refused
+    /// once its name is known), an error when they are invalid.
+    fn dimensions(
+        &self,
+        data: &[u8],
+        order: ByteOrder,
+        class: Option<u32>,
+    ) -> Result<Option<(Vec<i64>, i64)>, MeasurementError> {
+        let dims: Vec<i64> = data
+            .chunks_exact(4)
+            .filter_map(|chunk| order.u32_at(chunk, 0))
+            .map(|dim| i64::from(dim as i32))
+            .collect();
+        let count = dims.iter().try_fold(1i64, |count, &dim| {
+            (dim >= 0).then(|| count.checked_mul(dim)).flatten()
+        });
+        match count {
+            Some(count) if count <= i64::from(i32::MAX) => {
+                let numeric = class.is_some_and(|class| NUMERIC_CLASSES.contains(&class));
+                if numeric && count > MAX_MAT_VALUES as i64 {
+                    return Ok(Some((dims, count)));
+                }
+                Ok(None)
+            }
+            _ => Err(self.malformed(format!("has invalid dimensions {dims:?}"))),
+        }
     }
 }
 
