@@ -21,35 +21,14 @@ pub(super) fn fit_of<E: Simulator>(
     let objective = &calibration.objective;
     let best = calibration.best_run();
     let point = best.point.clone();
-    let simulated = engine
-        .simulate(objective, std::slice::from_ref(&point))?
-        .remove(0)
-        .map_err(|e| Error::Optimiser(format!("simulation at the optimum failed: {e}")))?;
-    let residual_series: Vec<Vec<f64>> = objective
-        .measured
-        .iter()
-        .zip(&simulated)
-        .map(|(w, y)| w.iter().zip(y).map(|(a, b)| a - b).collect())
-        .collect();
+    let residual_series = residual_at(engine, objective, std::slice::from_ref(&point))?;
     let residual: Vec<ResidualStats> = residual_series
         .iter()
         .map(|r| ResidualStats::of(r))
         .collect();
 
     // The held-out window, with the same free parameters.
-    let held = holdout.fixed_at(objective.full_parameters(&point));
-    let held_out = engine.simulate(&held, &[Vec::new()])?.remove(0);
-    let (held_out_objective, held_out_rms) = match held_out {
-        Ok(values) => {
-            let e = held.score(&values);
-            let n = held.grid.len() as f64;
-            (e.objective, e.sse.iter().map(|s| (s / n).sqrt()).collect())
-        }
-        Err(_) => (
-            calib_engine::objective::FAILURE_PENALTY,
-            vec![f64::NAN; objective.outputs.len()],
-        ),
-    };
+    let (held_out_objective, held_out_rms) = held_out_error(engine, objective, holdout, &point)?;
 
     let samples = objective.grid.len();
     let pooled: Vec<f64> = residual_series.iter().flatten().copied().collect();
@@ -99,5 +78,47 @@ pub(super) fn fit_of<E: Simulator>(
         point,
         free: campaign.free.clone(),
         residual_series,
+    })
+}
+
+/// The residual series (measured − model) per output at the optimum (`at`, one point),
+/// simulated once: what the statistics, the information criteria and the report use.
+fn residual_at<E: Simulator>(
+    engine: &E,
+    objective: &Objective,
+    at: &[Vec<f64>],
+) -> Result<Vec<Vec<f64>>> {
+    let simulated = engine
+        .simulate(objective, at)?
+        .remove(0)
+        .map_err(|e| Error::Optimiser(format!("simulation at the optimum failed: {e}")))?;
+    Ok(objective
+        .measured
+        .iter()
+        .zip(&simulated)
+        .map(|(w, y)| w.iter().zip(y).map(|(a, b)| a - b).collect())
+        .collect())
+}
+
+/// The objective and per-output RMS on the held-out window at `point` (the failure penalty
+/// and NaN where that simulation fails), which guards the selection against over-fitting.
+fn held_out_error<E: Simulator>(
+    engine: &E,
+    objective: &Objective,
+    holdout: &Objective,
+    point: &[f64],
+) -> Result<(f64, Vec<f64>)> {
+    let held = holdout.fixed_at(objective.full_parameters(point));
+    let held_out = engine.simulate(&held, &[Vec::new()])?.remove(0);
+    Ok(match held_out {
+        Ok(values) => {
+            let e = held.score(&values);
+            let n = held.grid.len() as f64;
+            (e.objective, e.sse.iter().map(|s| (s / n).sqrt()).collect())
+        }
+        Err(_) => (
+            calib_engine::objective::FAILURE_PENALTY,
+            vec![f64::NAN; objective.outputs.len()],
+        ),
     })
 }

@@ -233,45 +233,24 @@ where
         &baseline,
         replaced.as_ref(),
     )?;
-
+    // 4–7. Refit, select and judge.
+    let setting = escalation::Setting {
+        fit_campaign: &fit_campaign,
+        measurement: &measurement,
+        engine,
+        progress,
+        baseline: &baseline,
+        specs: &candidate_specs,
+        holdout: &holdout_objective,
+        noise_floor,
+    };
     let Judgement {
         refits,
         selected,
         final_fit,
         verdict,
         explained_fraction,
-    } = if baseline.objective <= NOISE_FACTOR * noise_floor {
-        Judgement {
-            refits: Vec::new(),
-            selected: Vec::new(),
-            final_fit: baseline.clone(),
-            verdict: Verdict::Noise,
-            explained_fraction: 1.0,
-        }
-    } else {
-        let first = refit_and_select(
-            &fit_campaign,
-            &measurement,
-            engine,
-            progress,
-            &baseline,
-            &mut candidates,
-            &candidate_specs,
-            &holdout_objective,
-            noise_floor,
-        )?;
-        let setting = escalation::Setting {
-            fit_campaign: &fit_campaign,
-            measurement: &measurement,
-            engine,
-            progress,
-            baseline: &baseline,
-            specs: &candidate_specs,
-            holdout: &holdout_objective,
-            noise_floor,
-        };
-        escalation::escalate(&setting, first, &calibration, &mut candidates)?
-    };
+    } = judge(&setting, &calibration, &mut candidates)?;
     Ok(Diagnosis {
         campaign: fit_campaign,
         measurement,
@@ -290,6 +269,39 @@ where
         elapsed: started.elapsed(),
         profiles: Vec::new(),
         profile_threshold: None,
+    })
+}
+
+/// Steps 4–7: a baseline already within the noise floor is judged noise as it is; otherwise
+/// the best candidates are refitted and selected, then escalated where that leaves more.
+fn judge<E: Evaluator + Simulator>(
+    setting: &escalation::Setting<'_, E>,
+    calibration: &Calibration,
+    candidates: &mut [Candidate],
+) -> Result<Judgement> {
+    let baseline = setting.baseline;
+    let noise_floor = setting.noise_floor;
+    Ok(if baseline.objective <= NOISE_FACTOR * noise_floor {
+        Judgement {
+            refits: Vec::new(),
+            selected: Vec::new(),
+            final_fit: baseline.clone(),
+            verdict: Verdict::Noise,
+            explained_fraction: 1.0,
+        }
+    } else {
+        let first = refit_and_select(
+            setting.fit_campaign,
+            setting.measurement,
+            setting.engine,
+            setting.progress,
+            baseline,
+            candidates,
+            setting.specs,
+            setting.holdout,
+            noise_floor,
+        )?;
+        escalation::escalate(setting, first, calibration, candidates)?
     })
 }
 

@@ -534,6 +534,47 @@ pub fn local_statistics(
     Ok((intervals, correlation, threshold))
 }
 
+/// The point to profile around, its objective, where it came from and, when a calibration
+/// had to find it first (the store holds no finished one), that calibration's statistics.
+fn best_point<E: Evaluator + Simulator>(
+    campaign: &Campaign,
+    engine: &E,
+    store: &dyn Store,
+    dataset: &[u8; 32],
+) -> Result<(Vec<f64>, f64, BestFrom, Option<CacheStats>)> {
+    Ok(match stored_best(campaign, dataset, store)? {
+        Some((point, objective)) => (point, objective, BestFrom::Store, None),
+        None => {
+            let c = calibrate_with_store(campaign, engine, store, &Silent)?;
+            let best = c.best_run();
+            (
+                best.point.clone(),
+                best.objective,
+                BestFrom::Calibrated,
+                Some(c.stats),
+            )
+        }
+    })
+}
+
+/// The unit of each free parameter, as the model declares it (empty when it does not), for
+/// the report's axes.
+fn units(campaign: &Campaign) -> Vec<String> {
+    campaign
+        .free
+        .iter()
+        .map(|p| {
+            campaign
+                .model
+                .info()
+                .parameters
+                .get(p.index)
+                .map(|s| s.unit.clone())
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
 /// Profile `campaign`'s free parameters (those `settings` names) around its best point:
 /// the store's when the campaign has finished there, else a calibration's, run first
 /// through the same store.
@@ -558,19 +599,7 @@ pub fn profile<E: Evaluator + Simulator>(
     }
     let objective = Objective::new(campaign, &measurement)?;
     let (point, best_objective, best_from, calibration) =
-        match stored_best(campaign, &dataset, store)? {
-            Some((point, objective)) => (point, objective, BestFrom::Store, None),
-            None => {
-                let c = calibrate_with_store(campaign, engine, store, &Silent)?;
-                let best = c.best_run();
-                (
-                    best.point.clone(),
-                    best.objective,
-                    BestFrom::Calibrated,
-                    Some(c.stats),
-                )
-            }
-        };
+        best_point(campaign, engine, store, &dataset)?;
     let (outcome, error, stored_stats) = StoredEngine::with(engine, store, |stored| {
         let outcome = (|| {
             let (linearised, correlation, threshold) =
@@ -601,19 +630,7 @@ pub fn profile<E: Evaluator + Simulator>(
     Ok(Profiles {
         campaign: campaign.name.clone(),
         names: campaign.free.iter().map(|p| p.name.clone()).collect(),
-        units: campaign
-            .free
-            .iter()
-            .map(|p| {
-                campaign
-                    .model
-                    .info()
-                    .parameters
-                    .get(p.index)
-                    .map(|s| s.unit.clone())
-                    .unwrap_or_default()
-            })
-            .collect(),
+        units: units(campaign),
         best: point,
         best_objective,
         best_from,

@@ -91,6 +91,15 @@ pub fn table(s: &Profiles) -> String {
         .unwrap_or(9)
         .max(9);
     let mut out = String::new();
+    write_header(&mut out, s, width);
+    write_rows(&mut out, s, width);
+    write_footer(&mut out, s);
+    out
+}
+
+/// Where the best point came from and the threshold (with what it is made of), then the
+/// column headings of the table.
+fn write_header(out: &mut String, s: &Profiles, width: usize) {
     let from = match s.best_from {
         super::BestFrom::Store => "from the store",
         super::BestFrom::Calibrated => "calibrated first",
@@ -117,6 +126,11 @@ pub fn table(s: &Profiles) -> String {
         "identifiable",
         "evaluations"
     );
+}
+
+/// One row per profiled parameter: its value, both 95% intervals, whether it is
+/// identifiable and what its profile cost.
+fn write_rows(out: &mut String, s: &Profiles, width: usize) {
     for p in &s.profiles {
         let _ = writeln!(
             out,
@@ -132,6 +146,11 @@ pub fn table(s: &Profiles) -> String {
             p.low.evaluations + p.high.evaluations
         );
     }
+}
+
+/// A note when a profile found a lower objective than the best point's, the evaluations,
+/// and the conclusions.
+fn write_footer(out: &mut String, s: &Profiles) {
     let _ = writeln!(out);
     if s.lowest < s.best_objective - 0.1 * s.threshold.delta {
         let _ = writeln!(
@@ -162,7 +181,6 @@ pub fn table(s: &Profiles) -> String {
     for c in conclusions {
         let _ = writeln!(out, "{c}");
     }
-    out
 }
 
 /// Write `profile.json` and one plot per profiled parameter into `dir` (created).

@@ -9,6 +9,7 @@ use calib_engine::campaign::Experiment;
 use calib_engine::error::{Error, Result};
 use calib_engine::measurement::Measurement;
 use calib_engine::objective::Objective;
+use calib_worker::ModelInfo;
 use std::path::{Path, PathBuf};
 
 pub use super::chart::{Dash, Series};
@@ -252,40 +253,85 @@ impl ExperimentPlots<'_> {
         let Self {
             c,
             experiment,
-            part,
-            measurement,
-            several,
             start,
+            ..
         } = *self;
         let campaign = &c.campaign;
         let info = campaign.model.info();
         let mut written = Vec::new();
-        let prefix = if several {
-            format!("{}.", sanitize(&experiment.name))
+        let (prefix, title) = self.names();
+        let grid = uniform_grid(start, experiment.stop_time, CURVE_POINTS);
+        let nominal = self.simulate(&grid, &campaign.nominal());
+        let calibrated = self.simulate(&grid, &c.best_run().point);
+        let page = Page {
+            dir,
+            prefix,
+            title,
+            grid,
+            info,
+        };
+        self.write_outputs(&page, [&nominal, &calibrated], &mut written)?;
+        self.write_inputs(&page, &mut written)?;
+        Ok(written)
+    }
+
+    /// The file-name prefix and the title of this experiment's plots: its name, when the
+    /// campaign fits several experiments, so that their plots do not collide.
+    fn names(&self) -> (String, String) {
+        let campaign = &self.c.campaign;
+        let prefix = if self.several {
+            format!("{}.", sanitize(&self.experiment.name))
         } else {
             String::new()
         };
-        let title = if several {
-            format!("{} ({})", campaign.name, experiment.name)
+        let title = if self.several {
+            format!("{} ({})", campaign.name, self.experiment.name)
         } else {
             campaign.name.clone()
         };
-        let grid = uniform_grid(start, experiment.stop_time, CURVE_POINTS);
-        let simulate = |free: &[f64]| {
-            campaign
-                .model
-                .simulate_driven(
-                    &part.full_parameters(free),
-                    &grid,
-                    &part.outputs,
-                    &part.solver,
-                    &part.inputs,
-                )
-                .map(|t| t.values)
-                .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; part.outputs.len()])
-        };
-        let nominal = simulate(&campaign.nominal());
-        let calibrated = simulate(&c.best_run().point);
+        (prefix, title)
+    }
+
+    /// The outputs simulated at the free values `free` on `grid`, NaN throughout where the
+    /// simulation fails (the plots are written all the same).
+    fn simulate(&self, grid: &[f64], free: &[f64]) -> Vec<Vec<f64>> {
+        let part = self.part;
+        self.c
+            .campaign
+            .model
+            .simulate_driven(
+                &part.full_parameters(free),
+                grid,
+                &part.outputs,
+                &part.solver,
+                &part.inputs,
+            )
+            .map(|t| t.values)
+            .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; part.outputs.len()])
+    }
+
+    /// One plot per output: the measured data over the simulated span against the nominal
+    /// and the calibrated model (`models`, in that order).
+    fn write_outputs(
+        &self,
+        page: &Page,
+        models: [&[Vec<f64>]; 2],
+        written: &mut Vec<PathBuf>,
+    ) -> Result<()> {
+        let Self {
+            experiment,
+            measurement,
+            start,
+            ..
+        } = *self;
+        let Page {
+            dir,
+            prefix,
+            title,
+            grid,
+            info,
+        } = page;
+        let [nominal, calibrated] = models;
         let shown = simulated_span(&measurement.time, start, experiment.stop_time);
         let measured_time: Vec<f64> = shown.iter().map(|&i| measurement.time[i]).collect();
         for (j, o) in experiment.outputs.iter().enumerate() {
@@ -303,15 +349,27 @@ impl ExperimentPlots<'_> {
                     &with_unit(&o.model, unit),
                     (&measured_time, &measured),
                     &[
-                        ("nominal model", &grid, &nominal[j]),
-                        ("calibrated model", &grid, &calibrated[j]),
+                        ("nominal model", grid, &nominal[j]),
+                        ("calibrated model", grid, &calibrated[j]),
                     ],
                     &experiment.windows,
                 ),
             )?;
             written.push(path);
         }
-        for signal in &part.inputs.signals {
+        Ok(())
+    }
+
+    /// One plot per driven input: the signal the simulations were driven with, on the grid.
+    fn write_inputs(&self, page: &Page, written: &mut Vec<PathBuf>) -> Result<()> {
+        let Page {
+            dir,
+            prefix,
+            title,
+            grid,
+            info,
+        } = page;
+        for signal in &self.part.inputs.signals {
             let spec = &info.inputs[signal.input];
             let values: Vec<f64> = grid.iter().map(|&t| signal.at(t)).collect();
             let path = dir.join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
@@ -324,14 +382,24 @@ impl ExperimentPlots<'_> {
                         signal.interpolation.as_str()
                     ),
                     &with_unit(&spec.name, &spec.unit),
-                    (&grid, &values),
-                    &experiment.windows,
+                    (grid, &values),
+                    &self.experiment.windows,
                 ),
             )?;
             written.push(path);
         }
-        Ok(written)
+        Ok(())
     }
+}
+
+/// Where and under which names one experiment's plots go, and the grid their curves share.
+struct Page<'a> {
+    dir: &'a Path,
+    /// Prefix of every file name (the experiment's, when there are several).
+    prefix: String,
+    title: String,
+    grid: Vec<f64>,
+    info: &'a ModelInfo,
 }
 
 /// The waterfall plot of a calibration (`waterfall.svg`): every run's final objective,

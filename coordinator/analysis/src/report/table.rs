@@ -4,7 +4,7 @@ use super::evidence::{self, BEST_TOLERANCE};
 use calib_engine::calibration::Calibration;
 use calib_engine::campaign::FreeParameter;
 use calib_engine::optim::multistart::Stop;
-use calib_engine::outcome::{CalibrationOutcome, Named};
+use calib_engine::outcome::{CalibrationOutcome, Minimum, Named};
 use std::fmt::Write;
 
 /// Marks a value within 1% of its range from a bound, in the run table.
@@ -158,6 +158,26 @@ fn write_search(s: &mut String, result: &CalibrationOutcome) {
     );
     let clusters = &result.clusters;
     let minima = clusters.iter().filter(|k| k.kind == Stop::Minimum).count();
+    let stalls = stalls_note(clusters);
+
+    let _ = writeln!(
+        s,
+        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} rounds, {} \
+         simulated, {} from cache, {:.2} s",
+        minima,
+        runs.len(),
+        result.evaluations,
+        result.rounds,
+        result.simulated,
+        result.from_store(),
+        result.elapsed_seconds
+    );
+    write_minima(s, free, clusters);
+}
+
+/// The runs that stopped without a minimum, by why (`, 2 stalled on a plateau`), to append
+/// to the line of minima; empty when every run found one.
+fn stalls_note(clusters: &[Minimum]) -> String {
     let stalled = |of: Stop| {
         clusters
             .iter()
@@ -175,19 +195,12 @@ fn write_search(s: &mut String, result: &CalibrationOutcome) {
             let _ = write!(stalls, ", {n} {words}");
         }
     }
+    stalls
+}
 
-    let _ = writeln!(
-        s,
-        "{} distinct minima found by {} runs{stalls}; {} evaluations, {} rounds, {} \
-         simulated, {} from cache, {:.2} s",
-        minima,
-        runs.len(),
-        result.evaluations,
-        result.rounds,
-        result.simulated,
-        result.from_store(),
-        result.elapsed_seconds
-    );
+/// The best [`SHOWN_MINIMA`] minima, each with its runs and the parameters its runs spread
+/// over (a valley rather than a point).
+fn write_minima(s: &mut String, free: &[FreeParameter], clusters: &[Minimum]) {
     for k in clusters
         .iter()
         .filter(|k| k.kind == Stop::Minimum)

@@ -111,63 +111,24 @@ pub fn candidate_sensitivities(
         reference[0].as_ref().map_err(|e| failed(e))?,
         &objective.weights,
     );
-    let probe = |steps: &[f64]| -> Result<Vec<Option<Column>>> {
-        let points: Vec<Vec<f64>> = steps
-            .iter()
-            .enumerate()
-            .map(|(j, &s)| {
-                let mut p = at_base.clone();
-                p[n + j] = s;
-                p
-            })
-            .collect();
-        Ok(simulator
-            .simulate(objective, &points)?
-            .into_iter()
-            .zip(steps)
-            .map(|(r, s)| {
-                r.ok().map(|series| {
-                    stack(&series, &objective.weights)
-                        .iter()
-                        .zip(&y0)
-                        .map(|(a, b)| (a - b) / s)
-                        .collect()
-                })
-            })
-            .collect())
-    };
-    let clamp = |j: usize, s: f64| {
-        let c = &candidates[j];
-        if c.min >= 0.0 {
-            s.abs().min(c.max)
-        } else {
-            s.clamp(c.min, c.max)
-        }
+    let probe = Probe {
+        simulator,
+        objective,
+        candidates,
+        n,
+        at_base,
+        y0,
     };
     let mut steps: Vec<f64> = initial_steps
         .iter()
         .enumerate()
-        .map(|(j, s)| clamp(j, *s))
+        .map(|(j, s)| probe.clamp(j, *s))
         .collect();
-    let mut columns = probe(&steps)?;
+    let mut columns = probe.columns(&steps)?;
     // Rescale the steps whose effect was far from the residual's size, once.
-    let mut rescaled = steps.clone();
-    let mut again = Vec::new();
-    for j in 0..candidates.len() {
-        let change = columns[j]
-            .as_ref()
-            .map(|c| rms(c) * steps[j].abs())
-            .unwrap_or(0.0);
-        if residual_rms > 0.0 && change > 0.0 {
-            let ratio = change / residual_rms;
-            if !(0.3..=3.0).contains(&ratio) {
-                rescaled[j] = clamp(j, steps[j] / ratio);
-                again.push(j);
-            }
-        }
-    }
+    let (rescaled, again) = probe.rescaled(&columns, &steps, residual_rms);
     if !again.is_empty() {
-        let second = probe(&rescaled)?;
+        let second = probe.columns(&rescaled)?;
         for j in again {
             if second[j].is_some() {
                 columns[j] = second[j].clone();
@@ -175,7 +136,7 @@ pub fn candidate_sensitivities(
             }
         }
     }
-    let len = y0.len();
+    let len = probe.y0.len();
     Ok(Sensitivities {
         columns: columns
             .into_iter()
@@ -183,4 +144,83 @@ pub fn candidate_sensitivities(
             .collect(),
         steps,
     })
+}
+
+/// What probing the candidates needs: the point with every candidate off (`at_base`, the
+/// `n` base entries then one 0 per candidate) and the stacked outputs there (`y0`).
+struct Probe<'a> {
+    simulator: &'a dyn Simulator,
+    objective: &'a Objective,
+    candidates: &'a [FreeParameter],
+    n: usize,
+    at_base: Vec<f64>,
+    y0: Column,
+}
+
+impl Probe<'_> {
+    /// The secant columns for switching each candidate `j` on to `steps[j]` alone, one batch;
+    /// `None` where that simulation failed.
+    fn columns(&self, steps: &[f64]) -> Result<Vec<Option<Column>>> {
+        let points: Vec<Vec<f64>> = steps
+            .iter()
+            .enumerate()
+            .map(|(j, &s)| {
+                let mut p = self.at_base.clone();
+                p[self.n + j] = s;
+                p
+            })
+            .collect();
+        Ok(self
+            .simulator
+            .simulate(self.objective, &points)?
+            .into_iter()
+            .zip(steps)
+            .map(|(r, s)| {
+                r.ok().map(|series| {
+                    stack(&series, &self.objective.weights)
+                        .iter()
+                        .zip(&self.y0)
+                        .map(|(a, b)| (a - b) / s)
+                        .collect()
+                })
+            })
+            .collect())
+    }
+
+    /// Step `s` of candidate `j` held within its bounds (its magnitude, for an effect that
+    /// cannot be negative), so that no probe leaves the candidate's range.
+    fn clamp(&self, j: usize, s: f64) -> f64 {
+        let c = &self.candidates[j];
+        if c.min >= 0.0 {
+            s.abs().min(c.max)
+        } else {
+            s.clamp(c.min, c.max)
+        }
+    }
+
+    /// The steps rescaled so that each candidate's change is about the residual's size, and
+    /// the candidates whose change was far from it (outside 0.3–3 times), to probe again.
+    fn rescaled(
+        &self,
+        columns: &[Option<Column>],
+        steps: &[f64],
+        residual_rms: f64,
+    ) -> (Vec<f64>, Vec<usize>) {
+        let mut rescaled = steps.to_vec();
+        let mut again = Vec::new();
+        for j in 0..self.candidates.len() {
+            let change = columns[j]
+                .as_ref()
+                .map(|c| rms(c) * steps[j].abs())
+                .unwrap_or(0.0);
+            if residual_rms > 0.0 && change > 0.0 {
+                let ratio = change / residual_rms;
+                if !(0.3..=3.0).contains(&ratio) {
+                    rescaled[j] = self.clamp(j, steps[j] / ratio);
+                    again.push(j);
+                }
+            }
+        }
+        (rescaled, again)
+    }
 }

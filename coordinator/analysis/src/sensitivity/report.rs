@@ -44,50 +44,54 @@ fn statistics(s: &Sensitivity, q: usize, i: usize) -> Value {
     Value::Object(v)
 }
 
+/// The entry of parameter `i` in `sensitivity.json`: its range, whether it is influential
+/// and where it was kept, its statistics on the objective and on each output, and at the fit.
+fn parameter_json(s: &Sensitivity, i: usize) -> Value {
+    let mut p = serde_json::Map::new();
+    p.insert("name".into(), json!(s.parameters[i]));
+    p.insert(
+        "scale".into(),
+        json!(match s.scales[i] {
+            Scale::Lin => "lin",
+            Scale::Log10 => "log10",
+        }),
+    );
+    p.insert("min".into(), json!(s.bounds[i].0));
+    p.insert("max".into(), json!(s.bounds[i].1));
+    p.insert("influential".into(), json!(s.influential(i)));
+    p.insert(
+        "kept_for".into(),
+        s.kept_for(i)
+            .map_or(Value::Null, |q| json!(s.quantities[q].name)),
+    );
+    if let Value::Object(stats) = statistics(s, 0, i) {
+        p.extend(stats);
+    }
+    let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
+        .map(|q| (s.quantities[q].name.clone(), statistics(s, q, i)))
+        .collect();
+    p.insert("outputs".into(), Value::Object(outputs));
+    if let Some(a) = &s.at_fit {
+        let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
+            .map(|q| (s.quantities[q].name.clone(), number(a.indices[q][i])))
+            .collect();
+        p.insert(
+            "at_fit".into(),
+            json!({"objective": number(a.indices[0][i]), "outputs": outputs}),
+        );
+        p.insert(
+            "kept_at_fit".into(),
+            s.kept_at_fit(i)
+                .map_or(Value::Null, |q| json!(s.quantities[q].name)),
+        );
+    }
+    Value::Object(p)
+}
+
 /// The content of `sensitivity.json`.
 pub fn sensitivity_json(s: &Sensitivity) -> Value {
     let parameters: Vec<Value> = (0..s.parameters.len())
-        .map(|i| {
-            let mut p = serde_json::Map::new();
-            p.insert("name".into(), json!(s.parameters[i]));
-            p.insert(
-                "scale".into(),
-                json!(match s.scales[i] {
-                    Scale::Lin => "lin",
-                    Scale::Log10 => "log10",
-                }),
-            );
-            p.insert("min".into(), json!(s.bounds[i].0));
-            p.insert("max".into(), json!(s.bounds[i].1));
-            p.insert("influential".into(), json!(s.influential(i)));
-            p.insert(
-                "kept_for".into(),
-                s.kept_for(i)
-                    .map_or(Value::Null, |q| json!(s.quantities[q].name)),
-            );
-            if let Value::Object(stats) = statistics(s, 0, i) {
-                p.extend(stats);
-            }
-            let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
-                .map(|q| (s.quantities[q].name.clone(), statistics(s, q, i)))
-                .collect();
-            p.insert("outputs".into(), Value::Object(outputs));
-            if let Some(a) = &s.at_fit {
-                let outputs: serde_json::Map<String, Value> = (1..s.quantities.len())
-                    .map(|q| (s.quantities[q].name.clone(), number(a.indices[q][i])))
-                    .collect();
-                p.insert(
-                    "at_fit".into(),
-                    json!({"objective": number(a.indices[0][i]), "outputs": outputs}),
-                );
-                p.insert(
-                    "kept_at_fit".into(),
-                    s.kept_at_fit(i)
-                        .map_or(Value::Null, |q| json!(s.quantities[q].name)),
-                );
-            }
-            Value::Object(p)
-        })
+        .map(|i| parameter_json(s, i))
         .collect();
     let methods: Vec<&str> = [
         (s.quantities[0].morris.is_some(), "morris"),
