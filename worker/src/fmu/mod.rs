@@ -182,6 +182,64 @@ fn input_specs(description: &Description) -> Vec<InputSpec> {
         .collect()
 }
 
+/// The interface to run the FMU through (`interface`, by default Model Exchange when the FMU
+/// has it, else Co-Simulation) and its model identifier; an error when the FMU lacks it.
+fn interface_of(
+    description: &Description,
+    interface: Option<Interface>,
+) -> Result<(Interface, String), FmuError> {
+    let interface = match interface {
+        Some(i) => i,
+        None if description.model_exchange.is_some() => Interface::ModelExchange,
+        None => Interface::CoSimulation,
+    };
+    let identifier = match interface {
+        Interface::ModelExchange => description.model_exchange.clone(),
+        Interface::CoSimulation => description.co_simulation.clone(),
+    }
+    .ok_or_else(|| {
+        FmuError::Description(format!("the FMU does not support {}", interface.name()))
+    })?;
+    Ok((interface, identifier))
+}
+
+/// How each input variable is set: its kind, value reference, and whether it is held between
+/// samples (every non-real, and the discrete reals).
+fn input_refs(description: &Description) -> Vec<run::InputRef> {
+    description
+        .inputs()
+        .map(|v| run::InputRef {
+            kind: v.kind,
+            vr: v.value_reference,
+            discrete: v.kind != Kind::Real || v.variability == "discrete",
+        })
+        .collect()
+}
+
+/// The model's name, `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`: two
+/// different FMUs never share one.
+fn model_name(identifier: &str, interface: Interface, hash: &[u8; 32]) -> String {
+    let kind = match interface {
+        Interface::ModelExchange => "me",
+        Interface::CoSimulation => "cs",
+    };
+    format!("{identifier}.{kind}@{}", &hex(hash)[..12])
+}
+
+/// The model's description: the FMU's name, FMI version, interface and own description.
+fn model_description(description: &Description, interface: Interface) -> String {
+    format!(
+        "FMU {} (FMI {}, {}): {}",
+        description.model_name,
+        match description.version {
+            FmiVersion::V2 => "2.0",
+            FmiVersion::V3 => "3.0",
+        },
+        interface.name(),
+        description.description
+    )
+}
+
 struct Local {
     library: OnceLock<Result<Arc<ffi::Library>, FmuError>>,
     idle: Mutex<Vec<ffi::Instance>>,
@@ -198,18 +256,7 @@ impl FmuModel {
     ) -> Result<Self, FmuError> {
         let xml = archive::read_description(&dir)?;
         let description = Description::parse(&xml)?;
-        let interface = match interface {
-            Some(i) => i,
-            None if description.model_exchange.is_some() => Interface::ModelExchange,
-            None => Interface::CoSimulation,
-        };
-        let identifier = match interface {
-            Interface::ModelExchange => description.model_exchange.clone(),
-            Interface::CoSimulation => description.co_simulation.clone(),
-        }
-        .ok_or_else(|| {
-            FmuError::Description(format!("the FMU does not support {}", interface.name()))
-        })?;
+        let (interface, identifier) = interface_of(&description, interface)?;
         let parameters = parameter_specs(&description);
         let parameter_vrs = description
             .parameters()
@@ -222,31 +269,11 @@ impl FmuModel {
             .map(|v| (v.kind, v.value_reference))
             .collect();
         let inputs = input_specs(&description);
-        let input_refs = description
-            .inputs()
-            .map(|v| run::InputRef {
-                kind: v.kind,
-                vr: v.value_reference,
-                discrete: v.kind != Kind::Real || v.variability == "discrete",
-            })
-            .collect();
-        let kind = match interface {
-            Interface::ModelExchange => "me",
-            Interface::CoSimulation => "cs",
-        };
+        let input_refs = input_refs(&description);
         let info = ModelInfo {
-            name: format!("{identifier}.{kind}@{}", &hex(hash)[..12]),
+            name: model_name(&identifier, interface, hash),
             version: 1,
-            description: format!(
-                "FMU {} (FMI {}, {}): {}",
-                description.model_name,
-                match description.version {
-                    FmiVersion::V2 => "2.0",
-                    FmiVersion::V3 => "3.0",
-                },
-                interface.name(),
-                description.description
-            ),
+            description: model_description(&description, interface),
             parameters,
             outputs,
             effects: Vec::new(),

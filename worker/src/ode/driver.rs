@@ -127,46 +127,28 @@ pub(super) fn drive<S, M, F>(
     y0: &[f64],
     grid: &[f64],
     options: &SolverOptions,
-    mut out: F,
+    out: F,
 ) -> Result<SolverStats, SimulationError>
 where
     S: HybridSystem,
     M: Stepper,
     F: FnMut(usize, &[f64]),
 {
-    let n = system.dim();
-    assert_eq!(y0.len(), n, "state dimension");
     let mut stats = SolverStats::default();
-    let Some(&t_end) = grid.last() else {
+    let Some((t_end, mut run)) = Run::start(&*system, y0, grid, out) else {
         return Ok(stats);
     };
-    let next_out = outputs_at_start(grid, y0, &mut out);
-    if next_out == grid.len() {
-        return Ok(stats);
-    }
-    let mut run = Run::new(system.event_count(), n, grid, next_out, out);
 
     let mut t = 0.0;
-    stepper.restart(&*system, t, y0, &mut stats)?;
-    system.events(t, stepper.state(), &mut run.g_old);
+    restart(&*system, stepper, t, y0, &mut run.g_old, &mut stats)?;
     let mut h = stepper.initial_step(&*system, t, t_end - t, options, &mut stats);
     let mut last_rejected = false;
     loop {
         let last_step = step_size(&*system, stepper, t, t_end, &mut h, options, &mut stats)?;
-        let err = match stepper.attempt(&*system, t, h, options, &mut stats)? {
-            Trial::NonFinite => {
-                stats.rejected_steps += 1;
-                h = stepper.after_non_finite(h);
-                last_rejected = true;
-                continue;
-            }
-            Trial::Error(err) if err > 1.0 => {
-                stats.rejected_steps += 1;
-                h = stepper.after_rejected(h, err, last_rejected);
-                last_rejected = true;
-                continue;
-            }
-            Trial::Error(err) => err,
+        let trial = stepper.attempt(&*system, t, h, options, &mut stats)?;
+        let Some(err) = judge(stepper, trial, &mut h, last_rejected, &mut stats) else {
+            last_rejected = true;
+            continue;
         };
 
         stats.accepted_steps += 1;
@@ -182,17 +164,11 @@ where
                 if run.done() {
                     return Ok(stats);
                 }
-                if system.step_completed(t, stepper.state()) {
-                    // A step event: the system switches mode at the step's end.
-                    stats.events += 1;
-                    run.ytmp.copy_from_slice(stepper.state());
-                    let e = system.event_count();
-                    switch_mode(system, &mut run.zeno, t, &mut run.ytmp, e)?;
-                    true
-                } else {
+                let switched = run.step_event(system, stepper, t, &mut stats)?;
+                if !switched {
                     h = stepper.next_step(h, err, last_rejected);
-                    false
                 }
+                switched
             }
             Some((e, te)) => {
                 stats.events += 1;
@@ -204,13 +180,51 @@ where
             }
         };
         if switched {
-            stepper.restart(&*system, t, &run.ytmp, &mut stats)?;
-            system.events(t, stepper.state(), &mut run.g_old);
+            restart(&*system, stepper, t, &run.ytmp, &mut run.g_old, &mut stats)?;
             // Restart with the step that reached the event, at least a fraction of the
             // accepted one so the controller does not crawl after every switch.
             h = (t - t_step).max(0.1 * h).max(1e-6);
         }
         last_rejected = false;
+    }
+}
+
+/// Start `stepper` from state `y` at `t` (the start, or the restart after a switch) and
+/// evaluate the event functions there into `g`, after the method's right-hand sides.
+fn restart<S: HybridSystem, M: Stepper>(
+    system: &S,
+    stepper: &mut M,
+    t: f64,
+    y: &[f64],
+    g: &mut [f64],
+    stats: &mut SolverStats,
+) -> Result<(), SimulationError> {
+    stepper.restart(system, t, y, stats)?;
+    system.events(t, stepper.state(), g);
+    Ok(())
+}
+
+/// The error of an accepted attempt `trial` of `h`, or `None` for a rejected one: then it is
+/// counted and the step to retry with is in `h` (`again`: the attempt before was rejected too).
+fn judge<M: Stepper>(
+    stepper: &mut M,
+    trial: Trial,
+    h: &mut f64,
+    again: bool,
+    stats: &mut SolverStats,
+) -> Option<f64> {
+    match trial {
+        Trial::NonFinite => {
+            stats.rejected_steps += 1;
+            *h = stepper.after_non_finite(*h);
+            None
+        }
+        Trial::Error(err) if err > 1.0 => {
+            stats.rejected_steps += 1;
+            *h = stepper.after_rejected(*h, err, again);
+            None
+        }
+        Trial::Error(err) => Some(err),
     }
 }
 
@@ -239,6 +253,27 @@ impl<'g, F: FnMut(usize, &[f64])> Run<'g, F> {
             ytmp: vec![0.0; n],
             zeno: ZenoGuard::new(grid[grid.len() - 1]),
         }
+    }
+
+    /// Check the initial state `y0` against `system`, record the outputs at the grid times
+    /// up to the start; the end time and the run, or `None` when nothing is left to integrate.
+    fn start<S: HybridSystem>(
+        system: &S,
+        y0: &[f64],
+        grid: &'g [f64],
+        mut out: F,
+    ) -> Option<(f64, Self)> {
+        let n = system.dim();
+        assert_eq!(y0.len(), n, "state dimension");
+        let &t_end = grid.last()?;
+        let next_out = outputs_at_start(grid, y0, &mut out);
+        if next_out == grid.len() {
+            return None;
+        }
+        Some((
+            t_end,
+            Self::new(system.event_count(), n, grid, next_out, out),
+        ))
     }
 
     /// Whether every output is recorded.
@@ -283,6 +318,26 @@ impl<'g, F: FnMut(usize, &[f64])> Run<'g, F> {
         );
         self.next_out = next_out;
         event
+    }
+
+    /// At the end `t` of an accepted step without an event: whether the system asks for a
+    /// step event there, and then the state switched by the system into `ytmp`.
+    fn step_event<S: HybridSystem, M: Stepper>(
+        &mut self,
+        system: &mut S,
+        stepper: &M,
+        t: f64,
+        stats: &mut SolverStats,
+    ) -> Result<bool, SimulationError> {
+        if !system.step_completed(t, stepper.state()) {
+            return Ok(false);
+        }
+        // A step event: the system switches mode at the step's end.
+        stats.events += 1;
+        self.ytmp.copy_from_slice(stepper.state());
+        let e = system.event_count();
+        switch_mode(system, &mut self.zeno, t, &mut self.ytmp, e)?;
+        Ok(true)
     }
 
     /// At event `e` at `te` of the last accepted step: the state there into `ytmp`, switched

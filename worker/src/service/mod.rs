@@ -175,36 +175,8 @@ pub async fn start_worker(config: WorkerConfig) -> std::io::Result<RunningWorker
 /// Serve on an already bound listener (tests bind `127.0.0.1:0` first).
 pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Result<RunningWorker> {
     let address = listener.local_addr()?;
-    let fmus = match &config.fmu_cache {
-        Some((dir, bound)) => Some(fmu_cache::FmuCache::new(dir.clone(), *bound)?),
-        None => None,
-    };
-    let service = Arc::new(
-        simulator::SimulatorService::new(
-            pool::SimulationPool::new(config.slots, config.queue_bound),
-            cache::MeasurementCache::new(config.cache_bytes),
-        )
-        .with_fmus(fmus),
-    );
+    let service = simulator_service(&config)?;
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    // Reflection lists exactly what this server answers (not the coordinator's services,
-    // whose descriptors share the file set), over both versions of the protocol.
-    let reflection = || {
-        let mut builder = tonic_reflection::server::Builder::configure()
-            .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-            // Both versions of the reflection protocol describe both reflection services
-            // (each build adds only its own file): a client of either version can look up
-            // every service it is listed.
-            .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
-            .register_encoded_file_descriptor_set(
-                tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET,
-            );
-        for name in SERVED {
-            builder = builder.with_service_name(*name);
-        }
-        builder
-    };
     let reflection_v1 = reflection().build_v1().map_err(std::io::Error::other)?;
     let reflection_v1alpha = reflection()
         .build_v1alpha()
@@ -236,17 +208,7 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
             })
             .await
     });
-    let registration = config.register.clone().map(|coordinator| {
-        let advertised = config
-            .advertise
-            .clone()
-            .unwrap_or_else(|| registration::advertised_url(address, config.security.scheme()));
-        tokio::spawn(registration::heartbeat(
-            coordinator,
-            advertised,
-            config.register_security.clone(),
-        ))
-    });
+    let registration = spawn_registration(&config, address);
     tracing::info!(
         %address,
         slots = config.slots,
@@ -261,5 +223,55 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
         shutdown: Some(shutdown_tx),
         server,
         registration,
+    })
+}
+
+/// The Simulator service of `config`: its pool, its measurement cache and, when FMUs are
+/// accepted, its FMU cache (opened now, so a bad folder fails the start).
+fn simulator_service(config: &WorkerConfig) -> std::io::Result<Arc<simulator::SimulatorService>> {
+    let fmus = match &config.fmu_cache {
+        Some((dir, bound)) => Some(fmu_cache::FmuCache::new(dir.clone(), *bound)?),
+        None => None,
+    };
+    Ok(Arc::new(
+        simulator::SimulatorService::new(
+            pool::SimulationPool::new(config.slots, config.queue_bound),
+            cache::MeasurementCache::new(config.cache_bytes),
+        )
+        .with_fmus(fmus),
+    ))
+}
+
+/// The reflection service's builder, built once per protocol version. Reflection lists exactly
+/// what this server answers (not the coordinator's services, whose descriptors share the
+/// file set), over both versions of the protocol.
+fn reflection() -> tonic_reflection::server::Builder<'static> {
+    let mut builder = tonic_reflection::server::Builder::configure()
+        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        // Both versions of the reflection protocol describe both reflection services
+        // (each build adds only its own file): a client of either version can look up
+        // every service it is listed.
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET);
+    for name in SERVED {
+        builder = builder.with_service_name(*name);
+    }
+    builder
+}
+
+/// With a coordinator to register with: the heartbeat task that registers this worker (at
+/// its advertised URL, by default derived from the bound `address`) and renews it.
+fn spawn_registration(config: &WorkerConfig, address: SocketAddr) -> Option<JoinHandle<()>> {
+    config.register.clone().map(|coordinator| {
+        let advertised = config
+            .advertise
+            .clone()
+            .unwrap_or_else(|| registration::advertised_url(address, config.security.scheme()));
+        tokio::spawn(registration::heartbeat(
+            coordinator,
+            advertised,
+            config.register_security.clone(),
+        ))
     })
 }

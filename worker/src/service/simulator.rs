@@ -5,7 +5,7 @@ use super::cache::MeasurementCache;
 use super::error::{Error, Result};
 use super::fmu_cache::FmuCache;
 use super::pool::{PoolLoad, SimulationPool};
-use super::request::{self, driving_inputs, Evaluation, Simulation};
+use super::request::{self, driving_inputs, Evaluation, MeasuredData, Simulation};
 use crate::fmu::{self, archive};
 use crate::scoring::{self, Target, FAILURE_PENALTY};
 use crate::{models, Model, SimulationError};
@@ -165,25 +165,7 @@ impl SimulatorService {
     async fn evaluate(&self, request: proto::EvaluateRequest) -> Result<proto::EvaluateResponse> {
         self.resolve_fmu(&request.model, &request.fmu_hash)?;
         let mut evaluation = Evaluation::try_from(request)?;
-        let measured = match evaluation.measurement.take() {
-            Some(data) => self.cache.insert(evaluation.measurement_hash, data),
-            None => self
-                .cache
-                .get(&evaluation.measurement_hash)
-                .ok_or_else(|| Error::MeasurementMissing {
-                    hash: hex(&evaluation.measurement_hash),
-                })?,
-        };
-        if measured.columns.len() != evaluation.outputs.len() {
-            return Err(Error::invalid(
-                "outputs",
-                format!(
-                    "{} outputs compared with a measurement of {} columns",
-                    evaluation.outputs.len(),
-                    measured.columns.len()
-                ),
-            ));
-        }
+        let measured = self.measurement(&mut evaluation)?;
         let stop = measured.times[measured.times.len() - 1];
         let inputs = Arc::new(driving_inputs(
             evaluation.model,
@@ -218,30 +200,39 @@ impl SimulatorService {
         };
         let mut results = Vec::with_capacity(count);
         for outcome in outcomes {
-            results.push(match outcome {
-                Ok(e) => proto::PointResult {
-                    objective: e.objective,
-                    sse: e.sse,
-                    residuals: e.residuals,
-                    failure: e.failure.map(|message| proto::SimulationFailure {
-                        kind: proto::simulation_failure::Kind::NonFiniteOutput.into(),
-                        message,
-                        time: f64::NAN,
-                    }),
-                },
-                Err(e) => proto::PointResult {
-                    objective: FAILURE_PENALTY,
-                    sse: vec![f64::NAN; evaluation.outputs.len()],
-                    failure: Some(failure(&e)),
-                    residuals: Vec::new(),
-                },
-            });
+            results.push(point_result(outcome, evaluation.outputs.len()));
         }
         self.evaluations.fetch_add(count as u64, Ordering::Relaxed);
         Ok(proto::EvaluateResponse {
             results,
             measurement_hash: evaluation.measurement_hash.to_vec(),
         })
+    }
+
+    /// The measurement an evaluation compares with: the one it carries (now cached), else the
+    /// cached one of its hash; an error when it is not cached or its columns are not the
+    /// evaluation's outputs.
+    fn measurement(&self, evaluation: &mut Evaluation) -> Result<Arc<MeasuredData>> {
+        let measured = match evaluation.measurement.take() {
+            Some(data) => self.cache.insert(evaluation.measurement_hash, data),
+            None => self
+                .cache
+                .get(&evaluation.measurement_hash)
+                .ok_or_else(|| Error::MeasurementMissing {
+                    hash: hex(&evaluation.measurement_hash),
+                })?,
+        };
+        if measured.columns.len() != evaluation.outputs.len() {
+            return Err(Error::invalid(
+                "outputs",
+                format!(
+                    "{} outputs compared with a measurement of {} columns",
+                    evaluation.outputs.len(),
+                    measured.columns.len()
+                ),
+            ));
+        }
+        Ok(measured)
     }
 
     fn status(&self) -> proto::StatusResponse {
@@ -264,6 +255,32 @@ impl SimulatorService {
 
 fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// One point's result as the protocol reports it: its score, or the failure penalty with NaN
+/// errors for each of its `outputs` when the simulation failed.
+fn point_result(
+    outcome: std::result::Result<scoring::Evaluation, SimulationError>,
+    outputs: usize,
+) -> proto::PointResult {
+    match outcome {
+        Ok(e) => proto::PointResult {
+            objective: e.objective,
+            sse: e.sse,
+            residuals: e.residuals,
+            failure: e.failure.map(|message| proto::SimulationFailure {
+                kind: proto::simulation_failure::Kind::NonFiniteOutput.into(),
+                message,
+                time: f64::NAN,
+            }),
+        },
+        Err(e) => proto::PointResult {
+            objective: FAILURE_PENALTY,
+            sse: vec![f64::NAN; outputs],
+            failure: Some(failure(&e)),
+            residuals: Vec::new(),
+        },
+    }
 }
 
 /// A failed simulation as the protocol reports it.

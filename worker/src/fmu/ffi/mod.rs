@@ -290,74 +290,12 @@ impl Library {
         });
         let environment = &*sink as *const LogSink as Ptr;
         let name = CString::new("calib").expect("no NUL");
-        let mut callbacks = None;
-        let handle = match self.version {
+        let (handle, callbacks) = match self.version {
             FmiVersion::V2 => {
-                let instantiate: Fmi2Instantiate = sym!(self, "fmi2Instantiate")?;
-                let cb = Box::new(Fmi2Callbacks {
-                    logger: calib_fmi2_logger,
-                    allocate: fmi2_calloc,
-                    free: fmi2_free,
-                    step_finished: None,
-                    environment,
-                });
-                let kind = match self.interface {
-                    Interface::ModelExchange => 0,
-                    Interface::CoSimulation => 1,
-                };
-                // SAFETY: arguments as fmi2Instantiate declares them; `cb` outlives the instance.
-                let h = unsafe {
-                    instantiate(
-                        name.as_ptr(),
-                        kind,
-                        self.token.as_ptr(),
-                        self.resource_location.as_ptr(),
-                        &*cb,
-                        0,
-                        0,
-                    )
-                };
-                callbacks = Some(cb);
-                h
+                let (handle, callbacks) = self.instantiate_fmi2(&name, environment)?;
+                (handle, Some(callbacks))
             }
-            FmiVersion::V3 => match self.interface {
-                Interface::ModelExchange => {
-                    let instantiate: Fmi3InstantiateME =
-                        sym!(self, "fmi3InstantiateModelExchange")?;
-                    // SAFETY: arguments as fmi3InstantiateModelExchange declares them.
-                    unsafe {
-                        instantiate(
-                            name.as_ptr(),
-                            self.token.as_ptr(),
-                            self.resource_location.as_ptr(),
-                            false,
-                            false,
-                            environment,
-                            Some(fmi3_logger),
-                        )
-                    }
-                }
-                Interface::CoSimulation => {
-                    let instantiate: Fmi3InstantiateCS = sym!(self, "fmi3InstantiateCoSimulation")?;
-                    // SAFETY: arguments as fmi3InstantiateCoSimulation declares them.
-                    unsafe {
-                        instantiate(
-                            name.as_ptr(),
-                            self.token.as_ptr(),
-                            self.resource_location.as_ptr(),
-                            false,
-                            false,
-                            false,
-                            false,
-                            std::ptr::null(),
-                            0,
-                            environment,
-                            Some(fmi3_logger),
-                            std::ptr::null_mut(),
-                        )
-                    }
-                }
-            },
+            FmiVersion::V3 => (self.instantiate_fmi3(&name, environment)?, None),
         };
         let instance = Instance {
             lib: Arc::clone(self),
@@ -369,5 +307,81 @@ impl Library {
             return Err(instance.failure("instantiate", 3));
         }
         Ok(instance)
+    }
+
+    /// FMI 2.0's `fmi2Instantiate` of the instance `name`, its messages to the sink at
+    /// `environment`: the handle (null on failure), and the callbacks, which must outlive it.
+    fn instantiate_fmi2(
+        &self,
+        name: &CStr,
+        environment: Ptr,
+    ) -> Result<(Ptr, Box<Fmi2Callbacks>), FmuError> {
+        let instantiate: Fmi2Instantiate = sym!(self, "fmi2Instantiate")?;
+        let cb = Box::new(Fmi2Callbacks {
+            logger: calib_fmi2_logger,
+            allocate: fmi2_calloc,
+            free: fmi2_free,
+            step_finished: None,
+            environment,
+        });
+        let kind = match self.interface {
+            Interface::ModelExchange => 0,
+            Interface::CoSimulation => 1,
+        };
+        // SAFETY: arguments as fmi2Instantiate declares them; `cb` outlives the instance.
+        let h = unsafe {
+            instantiate(
+                name.as_ptr(),
+                kind,
+                self.token.as_ptr(),
+                self.resource_location.as_ptr(),
+                &*cb,
+                0,
+                0,
+            )
+        };
+        Ok((h, cb))
+    }
+
+    /// FMI 3.0's `fmi3Instantiate*` of this interface for the instance `name`, its messages to
+    /// the sink at `environment`: the handle (null on failure).
+    fn instantiate_fmi3(&self, name: &CStr, environment: Ptr) -> Result<Ptr, FmuError> {
+        Ok(match self.interface {
+            Interface::ModelExchange => {
+                let instantiate: Fmi3InstantiateME = sym!(self, "fmi3InstantiateModelExchange")?;
+                // SAFETY: arguments as fmi3InstantiateModelExchange declares them.
+                unsafe {
+                    instantiate(
+                        name.as_ptr(),
+                        self.token.as_ptr(),
+                        self.resource_location.as_ptr(),
+                        false,
+                        false,
+                        environment,
+                        Some(fmi3_logger),
+                    )
+                }
+            }
+            Interface::CoSimulation => {
+                let instantiate: Fmi3InstantiateCS = sym!(self, "fmi3InstantiateCoSimulation")?;
+                // SAFETY: arguments as fmi3InstantiateCoSimulation declares them.
+                unsafe {
+                    instantiate(
+                        name.as_ptr(),
+                        self.token.as_ptr(),
+                        self.resource_location.as_ptr(),
+                        false,
+                        false,
+                        false,
+                        false,
+                        std::ptr::null(),
+                        0,
+                        environment,
+                        Some(fmi3_logger),
+                        std::ptr::null_mut(),
+                    )
+                }
+            }
+        })
     }
 }

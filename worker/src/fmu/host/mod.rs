@@ -159,11 +159,30 @@ impl Hosts {
         // The channel: our end here, theirs (close-on-exec like every descriptor of this
         // process) the child's CHANNEL_FD.
         let (channel, theirs) = UnixStream::pair().map_err(cannot)?;
-        let their_fd = theirs.as_raw_fd();
-        let mut process = Command::new(&command.program);
+        let process = self.command(command, &dir, theirs.as_raw_fd());
+        let mut process = start_child(process).map_err(cannot)?;
+        // Only the child holds its end now: the replies end when it does.
+        drop(theirs);
+        let stdout = process.stdout.take().expect("piped");
+        let stderr = process.stderr.take().expect("piped");
+        let replies = follow_replies(channel.try_clone().map_err(cannot)?);
+        let output = self.follow_output(stdout, stderr);
+        Ok(Child {
+            process,
+            channel,
+            replies,
+            output,
+            ended: None,
+        })
+    }
+
+    /// The command that starts a child by `host` on the FMU at `dir`, with our descriptor
+    /// `their_fd` as its channel [`CHANNEL_FD`] and its stdout and stderr piped to us.
+    fn command(&self, host: &super::HostCommand, dir: &Path, their_fd: RawFd) -> Command {
+        let mut process = Command::new(&host.program);
         process
-            .args(&command.args)
-            .arg(&dir)
+            .args(&host.args)
+            .arg(dir)
             .arg(interface_arg(self.interface))
             .env(CHANNEL, CHANNEL_FD.to_string())
             .stdin(Stdio::null())
@@ -183,35 +202,16 @@ impl Hosts {
                 Ok(())
             });
         }
-        #[cfg(target_os = "linux")]
-        let started = {
-            static SAID: std::sync::Once = std::sync::Once::new();
-            SAID.call_once(|| {
-                let containment = super::contain::containment();
-                if containment.landlock_abi.is_some() {
-                    tracing::info!("FMUs: {containment}");
-                } else {
-                    tracing::warn!("FMUs: {containment}");
-                }
-            });
-            super::contain::spawn_supervisor(process)
-        };
-        #[cfg(not(target_os = "linux"))]
-        let started = process.spawn();
-        let mut process = started.map_err(cannot)?;
-        // Only the child holds its end now: the replies end when it does.
-        drop(theirs);
-        let stdout = process.stdout.take().expect("piped");
-        let stderr = process.stderr.take().expect("piped");
-        let mut replies_from = channel.try_clone().map_err(cannot)?;
-        let (send, replies) = mpsc::channel();
-        std::thread::spawn(move || loop {
-            let frame = read_frame(&mut replies_from);
-            let end = frame.is_err();
-            if send.send(frame).is_err() || end {
-                return;
-            }
-        });
+        process
+    }
+
+    /// The child's stdout and stderr, each read by a thread of its own as it comes (its lines
+    /// logged with the FMU's name, the last ones kept).
+    fn follow_output(
+        &self,
+        stdout: std::process::ChildStdout,
+        stderr: std::process::ChildStderr,
+    ) -> Arc<Output> {
         let output = Arc::new(Output::new(
             self.name.clone(),
             [
@@ -223,13 +223,7 @@ impl Hosts {
             let output = Arc::clone(&output);
             std::thread::spawn(move || output.follow(pipe));
         }
-        Ok(Child {
-            process,
-            channel,
-            replies,
-            output,
-            ended: None,
-        })
+        output
     }
 
     /// Children lost to a crash or a deadline so far.
@@ -318,6 +312,42 @@ impl Hosts {
             format!("{what}; the FMU says: {}", lines.join(" | "))
         }
     }
+}
+
+/// Start the child of `process`: on Linux a supervisor that contains the FMU's process
+/// (saying once, on the first start, how it is contained).
+#[cfg(target_os = "linux")]
+fn start_child(process: Command) -> std::io::Result<std::process::Child> {
+    static SAID: std::sync::Once = std::sync::Once::new();
+    SAID.call_once(|| {
+        let containment = super::contain::containment();
+        if containment.landlock_abi.is_some() {
+            tracing::info!("FMUs: {containment}");
+        } else {
+            tracing::warn!("FMUs: {containment}");
+        }
+    });
+    super::contain::spawn_supervisor(process)
+}
+
+/// Start the child of `process`.
+#[cfg(not(target_os = "linux"))]
+fn start_child(mut process: Command) -> std::io::Result<std::process::Child> {
+    process.spawn()
+}
+
+/// A thread that reads the replies off `channel` (our end) until it ends or fails; the
+/// replies, as they come.
+fn follow_replies(mut channel: UnixStream) -> mpsc::Receiver<std::io::Result<Vec<u8>>> {
+    let (send, replies) = mpsc::channel();
+    std::thread::spawn(move || loop {
+        let frame = read_frame(&mut channel);
+        let end = frame.is_err();
+        if send.send(frame).is_err() || end {
+            return;
+        }
+    });
+    replies
 }
 
 impl Drop for Hosts {

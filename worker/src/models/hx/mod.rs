@@ -156,7 +156,7 @@ mod tests;
 use crate::inputs::Inputs as Signals;
 use crate::model::{
     check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec,
-    SimulationError, SolverOptions, Trajectory,
+    SimulationError, SolverOptions, SolverStats, Trajectory,
 };
 use crate::ode::{integrate, rkc, HybridSystem};
 use boundary::{Driven, Inputs, Ramps};
@@ -580,7 +580,24 @@ struct LastMarch {
     worst: (f64, f64),
 }
 
-impl Dynamics<'_> {
+impl<'a> Dynamics<'a> {
+    /// The dynamics of `evap` from `t0` on: no march remembered yet, and no state outside the
+    /// tables.
+    fn new(evap: &'a Evaporator, t0: f64) -> Self {
+        Dynamics {
+            evap,
+            inv_capacity: 1.0 / evap.segment_capacity(),
+            t0,
+            last: RefCell::new(LastMarch {
+                t: f64::NAN,
+                y: Vec::new(),
+                margin: f64::NAN,
+                worst: (f64::NAN, f64::NAN),
+            }),
+            left: None,
+        }
+    }
+
     /// Margin and worst state of the march at `(t, y)`, from the last right-hand side when
     /// it was evaluated there.
     fn margin_at(&self, t: f64, y: &[f64]) -> (f64, (f64, f64)) {
@@ -632,6 +649,40 @@ impl HybridSystem for Dynamics<'_> {
     fn on_event(&mut self, t: f64, y: &mut [f64], _event: usize) {
         let (_, worst) = self.margin_at(t, y);
         self.left.get_or_insert((self.t0 + t, worst));
+    }
+}
+
+/// Where the integration of `evap` over `grid` starts. The inputs hold their values of t = 0
+/// until the first ramp (undriven) or the last sample before a signal moves (driven), and
+/// `y0` is the steady state there, so the exact solution is `y0` up to then: the integration
+/// starts there (a driven run whose inputs never move: at its last time).
+fn integration_start(evap: &Evaporator, grid: &[f64]) -> f64 {
+    if evap.is_driven() {
+        evap.steady_until().min(grid[grid.len() - 1])
+    } else {
+        boundary::FIRST_RAMP
+    }
+}
+
+/// Integrate `system` from `y0` over the times `rest` after its start: by RKC at rtol ≥
+/// [`RKC_MAX_ACCURACY`] (at [`RKC_TOLERANCE_SCALE`] times the tolerances), else by
+/// Dormand–Prince, as the module documentation explains.
+fn integrate_dynamics(
+    system: &mut Dynamics<'_>,
+    y0: &[f64],
+    rest: &[f64],
+    options: &SolverOptions,
+    out: impl FnMut(usize, &[f64]),
+) -> Result<SolverStats, SimulationError> {
+    if options.rtol >= RKC_MAX_ACCURACY {
+        let options = SolverOptions {
+            rtol: RKC_TOLERANCE_SCALE * options.rtol,
+            atol: RKC_TOLERANCE_SCALE * options.atol,
+            ..*options
+        };
+        rkc::integrate(system, y0, rest, &options, out)
+    } else {
+        integrate(system, y0, rest, options, out)
     }
 }
 
@@ -706,27 +757,8 @@ impl Model for HxModel {
             .map_err(failed(0.0))?
             .driven_by(Driven::new(inputs));
         let y0 = evap.steady_state(0.0).map_err(failed(0.0))?;
-        // The inputs hold their values of t = 0 until the first ramp (undriven) or the last
-        // sample before a signal moves (driven), and `y0` is the steady state there, so the
-        // exact solution is `y0` up to then: the integration starts there (a driven run
-        // whose inputs never move: at its last time).
-        let t0 = if evap.is_driven() {
-            evap.steady_until().min(grid[grid.len() - 1])
-        } else {
-            boundary::FIRST_RAMP
-        };
-        let mut system = Dynamics {
-            evap: &evap,
-            inv_capacity: 1.0 / evap.segment_capacity(),
-            t0,
-            last: RefCell::new(LastMarch {
-                t: f64::NAN,
-                y: Vec::new(),
-                margin: f64::NAN,
-                worst: (f64::NAN, f64::NAN),
-            }),
-            left: None,
-        };
+        let t0 = integration_start(&evap, grid);
+        let mut system = Dynamics::new(&evap, t0);
         let mut values = vec![Vec::with_capacity(grid.len()); outputs.len()];
         let mut scratch = vec![0.0; evap.segments()];
         // Up to `t0` the inputs hold their values of t = 0 exactly and the state is `y0`: one
@@ -745,20 +777,9 @@ impl Model for HxModel {
             }
         };
         let rest: Vec<f64> = grid[flat..].iter().map(|t| t - t0).collect();
-        let result = if options.rtol >= RKC_MAX_ACCURACY {
-            let options = SolverOptions {
-                rtol: RKC_TOLERANCE_SCALE * options.rtol,
-                atol: RKC_TOLERANCE_SCALE * options.atol,
-                ..*options
-            };
-            rkc::integrate(&mut system, &y0, &rest, &options, |i, y| {
-                record(grid[flat + i], y)
-            })
-        } else {
-            integrate(&mut system, &y0, &rest, options, |i, y| {
-                record(grid[flat + i], y)
-            })
-        };
+        let result = integrate_dynamics(&mut system, &y0, &rest, options, |i, y| {
+            record(grid[flat + i], y)
+        });
         if let Some((time, (p, h))) = system.left {
             return Err(failed(time)(describe_out_of_range(p, h)));
         }
