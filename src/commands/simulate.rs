@@ -151,19 +151,7 @@ pub fn run(args: Args) -> Outcome {
     let outputs = chosen_outputs(info, &args.outputs)?;
     let grid = output_times(args.start, args.stop, args.step);
     validate::output_grid(&grid).map_err(|e| Failure::input(format!("--stop/--step: {e}")))?;
-    // A profile is NAME=T:V,...; anything else names a file.
-    let is_profile = |a: &str| {
-        a.split_once('=')
-            .is_some_and(|(name, points)| !name.contains(['/', '.']) && points.contains(':'))
-    };
-    let (profiles, files): (Vec<&String>, Vec<&String>) =
-        args.input.iter().partition(|a| is_profile(a));
-    if files.len() > 1 {
-        return Err(Failure::input(format!(
-            "--input {}: one input file at most (put every input's column in it)",
-            files[1]
-        )));
-    }
+    let (profiles, file) = split_inputs(&args.input)?;
     let inputs = Inputs {
         signals: profiles
             .iter()
@@ -174,23 +162,7 @@ pub fn run(args: Args) -> Outcome {
         .check(info, 0.0f64.min(args.start), args.stop)
         .map_err(|e| Failure::input(format!("--input: {e}")))?;
     let noise = noise_levels(info, &outputs, &inputs, &args.noise)?;
-    // The file's signals drive the model beside the profiles; only the profiles are written
-    // (the file holds its own columns already).
-    let mut driving = inputs.clone();
-    if let Some(path) = files.first() {
-        let path = PathBuf::from(path.as_str());
-        let interpolation = match args.input_interpolation {
-            InterpolationArg::Linear => Interpolation::Linear,
-            InterpolationArg::Hold => Interpolation::Hold,
-        };
-        let read = read_inputs(&path, info, interpolation)?;
-        read.check(info, options.start_time, args.stop)
-            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
-        driving.signals.extend(read.signals);
-        driving
-            .check(info, options.start_time, args.stop)
-            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
-    }
+    let driving = driving_inputs(info, &inputs, file, &args, options.start_time)?;
     let mut trajectory = model
         .simulate_driven(&params, &grid, &outputs, &options, &driving)
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
@@ -205,14 +177,7 @@ pub fn run(args: Args) -> Outcome {
         &noise,
         args.seed,
     )?;
-    let mut header = vec!["time".to_string()];
-    header.extend(
-        inputs
-            .signals
-            .iter()
-            .map(|s| info.inputs[s.input].name.clone()),
-    );
-    header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
+    let header = csv_header(info, &inputs, &outputs);
     let series: Vec<&Vec<f64>> = columns.iter().chain(&trajectory.values).collect();
     write_csv(args.out.as_deref(), &header, &grid, &series)?;
     if let Some(path) = &args.out {
@@ -224,6 +189,66 @@ pub fn run(args: Args) -> Outcome {
         );
     }
     Ok(())
+}
+
+/// The `--input` profiles (NAME=T:V,...) and the one input file at most (anything else), in
+/// the order given: profiles are written as columns, a file is not.
+fn split_inputs(input: &[String]) -> Result<(Vec<&String>, Option<&String>), Failure> {
+    // A profile is NAME=T:V,...; anything else names a file.
+    let is_profile = |a: &str| {
+        a.split_once('=')
+            .is_some_and(|(name, points)| !name.contains(['/', '.']) && points.contains(':'))
+    };
+    let (profiles, files): (Vec<&String>, Vec<&String>) = input.iter().partition(|a| is_profile(a));
+    if files.len() > 1 {
+        return Err(Failure::input(format!(
+            "--input {}: one input file at most (put every input's column in it)",
+            files[1]
+        )));
+    }
+    Ok((profiles, files.first().copied()))
+}
+
+/// The signals that drive the model: the profiles' `inputs` and those of the input `file`,
+/// checked over the simulated span from `start_time`.
+fn driving_inputs(
+    info: &ModelInfo,
+    inputs: &Inputs,
+    file: Option<&String>,
+    args: &Args,
+    start_time: f64,
+) -> Result<Inputs, Failure> {
+    // The file's signals drive the model beside the profiles; only the profiles are written
+    // (the file holds its own columns already).
+    let mut driving = inputs.clone();
+    if let Some(path) = file {
+        let path = PathBuf::from(path.as_str());
+        let interpolation = match args.input_interpolation {
+            InterpolationArg::Linear => Interpolation::Linear,
+            InterpolationArg::Hold => Interpolation::Hold,
+        };
+        let read = read_inputs(&path, info, interpolation)?;
+        read.check(info, start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+        driving.signals.extend(read.signals);
+        driving
+            .check(info, start_time, args.stop)
+            .map_err(|e| Failure::input(format!("--input {}: {e}", path.display())))?;
+    }
+    Ok(driving)
+}
+
+/// The written CSV's column names: time, each profiled input, then each chosen output.
+fn csv_header(info: &ModelInfo, inputs: &Inputs, outputs: &[usize]) -> Vec<String> {
+    let mut header = vec!["time".to_string()];
+    header.extend(
+        inputs
+            .signals
+            .iter()
+            .map(|s| info.inputs[s.input].name.clone()),
+    );
+    header.extend(outputs.iter().map(|&o| info.outputs[o].name.clone()));
+    header
 }
 
 /// The model's default parameters with each `--set NAME=VALUE` applied, checked.

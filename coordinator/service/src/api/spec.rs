@@ -386,20 +386,12 @@ fn search_message(s: &Table) -> pb::Search {
     pb::Search {
         // A file's [search] without `methods` takes its documented default, which the
         // message states: the API refuses an empty list.
-        methods: s
-            .get("methods")
-            .and_then(|v| v.as_array())
-            .map(|a| {
-                a.iter()
-                    .filter_map(|m| m.as_str().map(str::to_string))
-                    .collect()
-            })
-            .unwrap_or_else(|| {
-                calib_engine::campaign::default_methods()
-                    .iter()
-                    .map(|m| m.name().to_string())
-                    .collect()
-            }),
+        methods: strings(s, "methods").unwrap_or_else(|| {
+            calib_engine::campaign::default_methods()
+                .iter()
+                .map(|m| m.name().to_string())
+                .collect()
+        }),
         starts: uint(s, "starts"),
         max_evaluations: uint(s, "max_evaluations"),
         seed: uint(s, "seed").unwrap_or_default(),
@@ -438,15 +430,7 @@ fn diagnosis_message(d: &Table) -> pb::DiagnosisSettings {
         holdout_start: float(d, "holdout_start"),
         holdout_stop: float(d, "holdout_stop"),
         refit: uint(d, "refit"),
-        candidates: d
-            .get("candidates")
-            .and_then(|v| v.as_array())
-            .map(|a| {
-                a.iter()
-                    .filter_map(|c| c.as_str().map(str::to_string))
-                    .collect()
-            })
-            .unwrap_or_default(),
+        candidates: strings(d, "candidates").unwrap_or_default(),
     }
 }
 
@@ -469,6 +453,16 @@ fn string(t: &Table, k: &str) -> String {
         .and_then(|v| v.as_str())
         .map(str::to_string)
         .unwrap_or_default()
+}
+
+/// The strings of the array `k` of `t`, others left out; `None` when `k` is no array, so
+/// each caller picks its own default.
+fn strings(t: &Table, k: &str) -> Option<Vec<String>> {
+    t.get(k).and_then(|v| v.as_array()).map(|a| {
+        a.iter()
+            .filter_map(|v| v.as_str().map(str::to_string))
+            .collect()
+    })
 }
 
 /// The tables of the array `k` of `t` (`[[outputs]]`, an experiment's `inputs = [...]`).

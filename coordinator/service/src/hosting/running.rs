@@ -31,8 +31,15 @@ impl Campaigns {
 
     /// Run a campaign to its end, retrying while no worker can serve it.
     fn run(&self, id: CampaignId, campaign: Campaign, live: Arc<Live>) {
+        let outcome = self.calibrate_until_served(&campaign, &live);
+        self.conclude(&id, &campaign, &live, outcome);
+    }
+
+    /// Calibrate `campaign` live, waiting (the pause doubling up to `MAX_PAUSE`) and starting
+    /// again while no worker can serve it: an absent fleet is not the campaign's failure.
+    fn calibrate_until_served(&self, campaign: &Campaign, live: &Live) -> Result<Calibration> {
         let progress = LiveProgress {
-            live: &live,
+            live,
             evaluations: AtomicU64::new(0),
         };
         let evaluator = Cancellable {
@@ -40,7 +47,7 @@ impl Campaigns {
             cancel: &live.cancel,
         };
         let mut pause = Duration::from_secs(1);
-        let outcome = loop {
+        loop {
             progress.evaluations.store(0, Ordering::SeqCst);
             // A run again replays the store from the start: so does its progress.
             live.state.send_modify(|s| {
@@ -48,8 +55,7 @@ impl Campaigns {
                 s.runs.clear();
                 s.run_best.clear();
             });
-            match calibration::calibrate_with_store(&campaign, &evaluator, &*self.store, &progress)
-            {
+            match calibration::calibrate_with_store(campaign, &evaluator, &*self.store, &progress) {
                 Err(Error::Fault(fault)) if fault.kind == FaultKind::Unavailable => {
                     tracing::warn!(campaign = %campaign.name, error = %fault, "waiting for workers");
                     live.state
@@ -65,10 +71,21 @@ impl Campaigns {
                 }
                 other => break other,
             }
-        };
+        }
+    }
+
+    /// Show and record how the campaign ended: finished (its result and plots), cancelled
+    /// or failed (its public failure).
+    fn conclude(
+        &self,
+        id: &CampaignId,
+        campaign: &Campaign,
+        live: &Live,
+        outcome: Result<Calibration>,
+    ) {
         match outcome {
             Ok(c) => {
-                let plots = self.report(&id, &c);
+                let plots = self.report(id, &c);
                 live.state.send_modify(|s| {
                     s.run_best = c.runs.iter().map(|r| r.objective).collect();
                     s.best_objective = c.best_run().objective;
@@ -79,7 +96,7 @@ impl Campaigns {
                     s.plots = plots;
                 });
                 let kept = live.state.borrow().clone();
-                if let Err(e) = self.close(&id, None, &kept) {
+                if let Err(e) = self.close(id, None, &kept) {
                     tracing::error!(error = %e, "cannot record the campaign's progress");
                 }
                 live.state.send_modify(|s| {
@@ -89,7 +106,7 @@ impl Campaigns {
             }
             Err(Error::Fault(fault)) if fault.kind == FaultKind::Cancelled => {
                 let kept = live.state.borrow().clone();
-                if let Err(e) = self.close(&id, Some((CampaignStatus::Cancelled, None)), &kept) {
+                if let Err(e) = self.close(id, Some((CampaignStatus::Cancelled, None)), &kept) {
                     tracing::error!(error = %e, "cannot record the cancellation");
                 }
                 live.state.send_modify(|s| {
@@ -103,7 +120,7 @@ impl Campaigns {
                 let failure = self.public(&e.to_string());
                 let kept = live.state.borrow().clone();
                 let _ = self.close(
-                    &id,
+                    id,
                     Some((CampaignStatus::Failed, Some(failure.clone()))),
                     &kept,
                 );

@@ -2,6 +2,8 @@
 //! ([`calib_analysis::report::plot::line_plot_svg`]), the one code path of every plot calib draws.
 
 use super::{ApiError, WebApp};
+use crate::hosting::datasets::DatasetInfo;
+use crate::hosting::Campaigns;
 use axum::extract::{Path, State};
 use axum::http::header;
 use axum::response::{IntoResponse, Response};
@@ -187,6 +189,41 @@ pub async fn plot(body: axum::body::Bytes) -> Result<Response, ApiError> {
     Ok(svg(text))
 }
 
+/// One column of an uploaded dataset, loaded with its times: what the dataset's plot and
+/// its JSON column are both made of.
+struct DatasetColumn {
+    /// The dataset's description (its file name and time column title the plot).
+    info: DatasetInfo,
+    /// The column's name.
+    column: String,
+    /// The dataset's times and the one column.
+    measurement: Measurement,
+}
+
+impl DatasetColumn {
+    /// Load `column` of the dataset `id`; one place for the routes' errors (no such
+    /// dataset, a file that does not load).
+    fn load(campaigns: &Campaigns, id: &str, column: String) -> Result<Self, ApiError> {
+        let datasets = campaigns.datasets();
+        let info = datasets
+            .get(id)
+            .map_err(|e| invalid(e.to_string()))?
+            .ok_or_else(|| ApiError(Status::not_found(format!("id: no dataset `{id}` here"))))?;
+        let measurement = Measurement::load(&datasets.file(&info), &info.time_column, &[&column])
+            .map_err(|e| invalid(format!("data: {e}")))?;
+        Ok(Self {
+            info,
+            column,
+            measurement,
+        })
+    }
+
+    /// The column's values, none when the file lacks it.
+    fn values(&self) -> &[f64] {
+        self.measurement.column(&self.column).unwrap_or(&[])
+    }
+}
+
 /// `GET /ui/datasets/{id}/plot/{column}`: one column of an uploaded dataset over time.
 pub async fn dataset_plot(
     State(app): State<WebApp>,
@@ -194,19 +231,19 @@ pub async fn dataset_plot(
 ) -> Result<Response, ApiError> {
     let campaigns = app.campaigns.clone();
     let text = tokio::task::spawn_blocking(move || {
-        let datasets = campaigns.datasets();
-        let info = datasets
-            .get(&id)
-            .map_err(|e| invalid(e.to_string()))?
-            .ok_or_else(|| ApiError(Status::not_found(format!("id: no dataset `{id}` here"))))?;
-        let m = Measurement::load(&datasets.file(&info), &info.time_column, &[&column])
-            .map_err(|e| invalid(format!("data: {e}")))?;
-        let values = m.column(&column).unwrap_or(&[]);
+        let loaded = DatasetColumn::load(&campaigns, &id, column)?;
+        let (info, column) = (&loaded.info, &loaded.column);
         line_plot_svg(
             &format!("{}: {column}", info.file_name),
             &format!("{} [s]", info.time_column),
-            &column,
-            &[Series::new("measured", &m.time, values, MEASURED, 1)],
+            column,
+            &[Series::new(
+                "measured",
+                &loaded.measurement.time,
+                loaded.values(),
+                MEASURED,
+                1,
+            )],
             None,
         )
         .map_err(|e| ApiError(Status::internal(format!("cannot draw the plot: {e}"))))
@@ -282,24 +319,120 @@ pub fn compare_svg(
             request.campaigns.len()
         )));
     }
-    let public = |e: calib_engine::error::Error| campaigns.public(&e.to_string());
-    let mut fits = Vec::new();
-    let mut measured: Option<(Vec<f64>, Vec<f64>)> = None;
-    let mut windows = Vec::new();
-    let mut unit = String::new();
-    let mut names: Vec<String> = Vec::new();
+    let mut gathered = Comparison::default();
     for (k, id) in request.campaigns.iter().enumerate() {
         let place = format!("campaigns[{k}]");
         let (campaign, name, result, j) = compared(campaigns, &place, id, &request.output)?;
+        let curve = Curve::of(campaigns, &place, &campaign, &result, j)?;
+        if gathered.measured.is_none() {
+            gathered.keep_measured(&campaign, &curve.measurement, j);
+        }
+        let label = gathered.label(name, id);
+        let objective_value = result.best.objective;
+        gathered.fits.push((
+            format!("{label}: objective {objective_value:.4e}"),
+            curve.grid,
+            curve.values,
+        ));
+    }
+    let Comparison {
+        fits,
+        measured,
+        windows,
+        unit,
+        names,
+    } = gathered;
+    let (t, v) = measured.unwrap_or_default();
+    Ok(comparison_svg(
+        &format!("{}: {}", request.output, names.join(" vs ")),
+        &with_unit(&request.output, &unit),
+        (&t, &v),
+        &fits,
+        &windows,
+    ))
+}
+
+/// What a comparison gathers campaign by campaign: each fit, with the first campaign's
+/// measured data, fitted windows and output unit.
+#[derive(Default)]
+struct Comparison {
+    /// Each campaign's label and its calibrated curve (times, values).
+    fits: Vec<(String, Vec<f64>, Vec<f64>)>,
+    /// The first campaign's measured data within its simulated span (times, values).
+    measured: Option<(Vec<f64>, Vec<f64>)>,
+    /// The first campaign's fitted windows.
+    windows: Vec<(f64, f64)>,
+    /// The unit of the compared output.
+    unit: String,
+    /// The campaigns' labels so far.
+    names: Vec<String>,
+}
+
+impl Comparison {
+    /// Keep the first campaign's measured data of output `j` within its simulated span, its
+    /// windows and the output's unit: those the plot draws under every fit.
+    fn keep_measured(&mut self, campaign: &Campaign, measurement: &Measurement, j: usize) {
+        let o = &campaign.outputs[j];
+        let column = measurement.column(&o.measured).unwrap_or(&[]);
+        let shown: Vec<usize> = (0..measurement.time.len())
+            .filter(|&i| {
+                (campaign.solver.start_time..=campaign.stop_time).contains(&measurement.time[i])
+            })
+            .collect();
+        self.measured = Some((
+            shown.iter().map(|&i| measurement.time[i]).collect(),
+            shown
+                .iter()
+                .filter_map(|&i| column.get(i).copied())
+                .collect(),
+        ));
+        self.windows = campaign.windows.clone();
+        self.unit = campaign.model.info().outputs[o.model_index].unit.clone();
+    }
+
+    /// The campaign's label, `name` with the start of its `id` when another campaign has
+    /// that name already (the legend tells them apart); kept.
+    fn label(&mut self, name: String, id: &str) -> String {
+        let mut label = name;
+        if self.names.contains(&label) {
+            label = format!("{label} ({})", &id[..id.len().min(8)]);
+        }
+        self.names.push(label.clone());
+        label
+    }
+}
+
+/// A campaign's calibrated model of the compared output over its span, with the measured
+/// data it was fitted to.
+struct Curve {
+    /// The campaign's measured data.
+    measurement: Measurement,
+    /// The times the curve is simulated at.
+    grid: Vec<f64>,
+    /// The output's simulated values at those times.
+    values: Vec<f64>,
+}
+
+impl Curve {
+    /// Simulate `campaign` at its best parameters (the nominal value of any the result
+    /// lacks) and keep output `j`; `place` names the campaign in errors.
+    fn of(
+        campaigns: &Campaigns,
+        place: &str,
+        campaign: &Campaign,
+        result: &CalibrationOutcome,
+        j: usize,
+    ) -> Result<Self, ApiError> {
+        let public = |e: calib_engine::error::Error| campaigns.public(&e.to_string());
         let best = &result.best.parameters;
         let point: Vec<f64> = campaign
             .free
             .iter()
             .map(|p| best.get(&p.name).copied().unwrap_or(p.nominal))
             .collect();
-        let measurement = calib_engine::calibration::load_measurement(&campaign)
+        let measurement = calib_engine::calibration::load_measurement(campaign)
             .map_err(|e| invalid(format!("{place}: {}", public(e))))?;
-        let objective = calib_engine::objective::Objective::new(&campaign, &measurement)
+        let objective = calib_engine::objective::Objective::new(campaign, &measurement)
             .map_err(|e| invalid(format!("{place}: {}", campaigns.public(&e.to_string()))))?;
         let grid = uniform_grid(campaign.solver.start_time, campaign.stop_time, CURVE_POINTS);
         let values = campaign
@@ -317,44 +450,12 @@ pub fn compare_svg(
                     "{place}: the calibrated model does not simulate: {e}"
                 ))
             })?;
-        if measured.is_none() {
-            let o = &campaign.outputs[j];
-            let column = measurement.column(&o.measured).unwrap_or(&[]);
-            let shown: Vec<usize> = (0..measurement.time.len())
-                .filter(|&i| {
-                    (campaign.solver.start_time..=campaign.stop_time).contains(&measurement.time[i])
-                })
-                .collect();
-            measured = Some((
-                shown.iter().map(|&i| measurement.time[i]).collect(),
-                shown
-                    .iter()
-                    .filter_map(|&i| column.get(i).copied())
-                    .collect(),
-            ));
-            windows = campaign.windows.clone();
-            unit = campaign.model.info().outputs[o.model_index].unit.clone();
-        }
-        let mut label = name;
-        if names.contains(&label) {
-            label = format!("{label} ({})", &id[..id.len().min(8)]);
-        }
-        names.push(label.clone());
-        let objective_value = result.best.objective;
-        fits.push((
-            format!("{label}: objective {objective_value:.4e}"),
+        Ok(Self {
+            measurement,
             grid,
             values,
-        ));
+        })
     }
-    let (t, v) = measured.unwrap_or_default();
-    Ok(comparison_svg(
-        &format!("{}: {}", request.output, names.join(" vs ")),
-        &with_unit(&request.output, &unit),
-        (&t, &v),
-        &fits,
-        &windows,
-    ))
 }
 
 /// `POST /ui/compare`: the fits of one output by two or more finished campaigns over the
@@ -379,15 +480,11 @@ pub async fn dataset_column(
 ) -> Result<Response, ApiError> {
     let campaigns = app.campaigns.clone();
     let body = tokio::task::spawn_blocking(move || {
-        let datasets = campaigns.datasets();
-        let info = datasets
-            .get(&id)
-            .map_err(|e| invalid(e.to_string()))?
-            .ok_or_else(|| ApiError(Status::not_found(format!("id: no dataset `{id}` here"))))?;
-        let m = Measurement::load(&datasets.file(&info), &info.time_column, &[&column])
-            .map_err(|e| invalid(format!("data: {e}")))?;
-        let values = m.column(&column).unwrap_or(&[]);
-        Ok::<_, ApiError>(serde_json::json!({ "times": m.time, "values": values }).to_string())
+        let loaded = DatasetColumn::load(&campaigns, &id, column)?;
+        let values = loaded.values();
+        Ok::<_, ApiError>(
+            serde_json::json!({ "times": loaded.measurement.time, "values": values }).to_string(),
+        )
     })
     .await
     .map_err(|e| ApiError(Status::internal(e.to_string())))??;
