@@ -177,8 +177,10 @@ pub fn serve_worker(listener: TcpListener, config: WorkerConfig) -> std::io::Res
     let address = listener.local_addr()?;
     let service = simulator_service(&config)?;
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    let reflection_v1 = reflection().build_v1().map_err(std::io::Error::other)?;
-    let reflection_v1alpha = reflection()
+    let reflection_v1 = reflection(SERVED)
+        .build_v1()
+        .map_err(std::io::Error::other)?;
+    let reflection_v1alpha = reflection(SERVED)
         .build_v1alpha()
         .map_err(std::io::Error::other)?;
     let simulator = SimulatorServer::from_arc(service.clone())
@@ -242,10 +244,11 @@ fn simulator_service(config: &WorkerConfig) -> std::io::Result<Arc<simulator::Si
     ))
 }
 
-/// The reflection service's builder, built once per protocol version. Reflection lists exactly
-/// what this server answers (not the coordinator's services, whose descriptors share the
-/// file set), over both versions of the protocol.
-fn reflection() -> tonic_reflection::server::Builder<'static> {
+/// The reflection service's builder for a server answering the services `served`, built once
+/// per protocol version: reflection lists exactly what that server answers (the worker's and
+/// the coordinator's services share one file set of descriptors), over both versions of the
+/// protocol.
+pub fn reflection(served: &[&str]) -> tonic_reflection::server::Builder<'static> {
     let mut builder = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
@@ -254,7 +257,7 @@ fn reflection() -> tonic_reflection::server::Builder<'static> {
         // every service it is listed.
         .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET);
-    for name in SERVED {
+    for name in served {
         builder = builder.with_service_name(*name);
     }
     builder

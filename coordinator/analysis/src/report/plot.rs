@@ -362,17 +362,13 @@ impl ExperimentPlots<'_> {
 
     /// One plot per driven input: the signal the simulations were driven with, on the grid.
     fn write_inputs(&self, page: &Page, written: &mut Vec<PathBuf>) -> Result<()> {
-        let Page {
-            dir,
-            prefix,
-            title,
-            grid,
-            info,
-        } = page;
+        let (prefix, title, grid) = (&page.prefix, &page.title, &page.grid);
         for signal in &self.part.inputs.signals {
-            let spec = &info.inputs[signal.input];
+            let spec = &page.info.inputs[signal.input];
             let values: Vec<f64> = grid.iter().map(|&t| signal.at(t)).collect();
-            let path = dir.join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
+            let path = page
+                .dir
+                .join(format!("{prefix}input.{}.svg", sanitize(&spec.name)));
             write_svg(
                 &path,
                 &input_svg(

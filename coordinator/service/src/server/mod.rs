@@ -290,22 +290,6 @@ fn start_web(
     )
 }
 
-/// Reflection that lists exactly what this server answers (not the workers' Simulator).
-fn reflection() -> tonic_reflection::server::Builder<'static> {
-    let mut builder = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(calib_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        // Both versions of the reflection protocol describe both reflection services (each
-        // build adds only its own file): a client of either version can look up every
-        // service it is listed.
-        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_reflection::pb::v1alpha::FILE_DESCRIPTOR_SET);
-    for name in SERVED {
-        builder = builder.with_service_name(*name);
-    }
-    builder
-}
-
 /// The gRPC server's task: it ends when the server stops.
 type GrpcTask = JoinHandle<std::result::Result<(), tonic::transport::Error>>;
 
@@ -325,10 +309,10 @@ fn spawn_grpc(
         config.dispatch.heartbeat,
     ));
     let (health_reporter, health) = tonic_health::server::health_reporter();
-    let reflection_v1 = reflection()
+    let reflection_v1 = calib_worker::service::reflection(SERVED)
         .build_v1()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
-    let reflection_v1alpha = reflection()
+    let reflection_v1alpha = calib_worker::service::reflection(SERVED)
         .build_v1alpha()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
     let mut builder = config
