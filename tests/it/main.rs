@@ -24,6 +24,7 @@ mod cluster;
 mod cluster_cli;
 mod cluster_persistence;
 mod cma_es;
+mod code_size;
 mod deploy;
 mod diagnosis;
 mod diagnosis_matrix;
