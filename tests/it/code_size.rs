@@ -81,8 +81,11 @@ fn skeleton(text: &str) -> Vec<String> {
                     i += 1;
                 }
             }
-        } else if c == 'r' && (next == Some('"') || next == Some('#')) && !word_before(&chars, i) {
-            // A raw string: r"…" or r#"…"#, closed by a quote and as many hashes.
+        } else if c == 'r'
+            && (next == Some('"') || next == Some('#'))
+            && (!word_before(&chars, i) || (chars[i - 1] == 'b' && !word_before(&chars, i - 1)))
+        {
+            // A raw string: r"…", r#"…"# or br"…", closed by a quote and as many hashes.
             let hashes = chars[i + 1..].iter().take_while(|&&h| h == '#').count();
             if chars.get(i + 1 + hashes) != Some(&'"') {
                 out.push(c);
@@ -119,10 +122,11 @@ fn skeleton(text: &str) -> Vec<String> {
         } else if c == '\'' {
             // A character literal ('x', '\n', '\u{7f}'), not a lifetime ('a).
             let end = if next == Some('\\') {
-                chars[i + 2..]
-                    .iter()
-                    .position(|&q| q == '\'')
-                    .map(|p| i + 2 + p)
+                // The escaped character may itself be a quote: '\''.
+                chars
+                    .get(i + 3..)
+                    .and_then(|rest| rest.iter().position(|&q| q == '\''))
+                    .map(|p| i + 3 + p)
             } else if chars.get(i + 2) == Some(&'\'') {
                 Some(i + 2)
             } else {
@@ -146,8 +150,8 @@ fn skeleton(text: &str) -> Vec<String> {
     out.lines().map(str::to_string).collect()
 }
 
-/// Whether the character before `i` continues an identifier (`br"…"`, `for"`: not a raw
-/// string's `r`).
+/// Whether the character before `i` continues an identifier (the `r` of `for"` is no raw
+/// string's).
 fn word_before(chars: &[char], i: usize) -> bool {
     i > 0 && (chars[i - 1].is_alphanumeric() || chars[i - 1] == '_')
 }
@@ -185,17 +189,21 @@ fn functions(lines: &[String]) -> Vec<(String, usize, usize)> {
             continue;
         };
         let mut depth = 0i64;
+        // Parentheses and brackets of the signature: `[u8; 32]` holds a `;`.
+        let mut nested = 0i64;
         let mut opened = false;
         'lines: for (end, line) in lines.iter().enumerate().skip(start) {
             for c in line.chars() {
                 match c {
+                    '(' | '[' if !opened => nested += 1,
+                    ')' | ']' if !opened => nested -= 1,
                     '{' => {
                         depth += 1;
                         opened = true;
                     }
                     '}' => depth -= 1,
                     // A declaration without a body (a trait's method, an extern function).
-                    ';' if !opened => break 'lines,
+                    ';' if !opened && nested == 0 => break 'lines,
                     _ => {}
                 }
                 if opened && depth == 0 {
@@ -220,13 +228,18 @@ fn the_reading_finds_functions_and_skips_what_is_not_code() {
         "/// Doc with a brace {{\nfn long<'a>(s: &'a str) -> char {{\n    let q = '{{';\n    \
          let t = \"}} ; {{\";\n    let r = r#\"}}\"#;\n    // }}\n{body}    '}}'\n}}\n\
          trait T {{\n    fn declared(&self);\n}}\npub(crate) async fn short() {{}}\n\
+         fn keyed(k: [u8; 32]) -> char {{\n    let _ = br\"}}\";\n    '\\''\n}}\n\
          #[cfg(test)]\nmod tests {{\n    fn ignored() {{}}\n}}\n"
     );
     let lines = skeleton(&text);
     let found = functions(&lines);
     assert_eq!(
         found,
-        vec![("long".to_string(), 2, 92), ("short".to_string(), 97, 1)],
+        vec![
+            ("long".to_string(), 2, 92),
+            ("short".to_string(), 97, 1),
+            ("keyed".to_string(), 98, 4)
+        ],
         "{lines:#?}"
     );
 }
