@@ -187,8 +187,9 @@ impl Probe<'_> {
             .collect())
     }
 
-    /// Step `s` of candidate `j` held within its bounds (its magnitude, for an effect that
-    /// cannot be negative), so that no probe leaves the candidate's range.
+    /// Step `s` of candidate `j` held below its upper bound and, for an effect that may be
+    /// negative, above its lower bound (an effect that cannot be negative is probed with the
+    /// step's magnitude).
     fn clamp(&self, j: usize, s: f64) -> f64 {
         let c = &self.candidates[j];
         if c.min >= 0.0 {

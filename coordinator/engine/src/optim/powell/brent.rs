@@ -127,7 +127,8 @@ impl BrentState {
     }
 
     /// Tries the step to the vertex of the parabola through the three best samples,
-    /// storing it as `step` when it is safe (shifting the step history either way).
+    /// storing it as `step` when it is safe (the step history shifts whether it is taken or
+    /// not; a converged parabola leaves it).
     fn parabolic_step(&mut self, mid: f64, tol1: f64, tol2: f64) -> Parabola {
         let BrentState {
             a,
