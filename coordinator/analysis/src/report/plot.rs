@@ -102,7 +102,7 @@ pub fn fit_svg(
     models: &[(&str, &[f64], &[f64])],
     windows: &[(f64, f64)],
 ) -> String {
-    let mut series: Vec<Series> = models
+    let series: Vec<Series> = models
         .iter()
         .enumerate()
         .map(|(k, &(label, t, v))| match k {
@@ -114,15 +114,7 @@ pub fn fit_svg(
             }
         })
         .collect();
-    series.push(Series::new("measured", measured.0, measured.1, MEASURED, 1));
-    chart::render(&Chart {
-        title,
-        x_label: "time [s]",
-        y_label,
-        series: &series,
-        shades: windows,
-        ..Chart::default()
-    })
+    with_measured(title, y_label, series, measured, windows)
 }
 
 /// The SVG of a comparison of several fits of one output: the measured data once, drawn
@@ -134,7 +126,7 @@ pub fn comparison_svg(
     fits: &[(String, Vec<f64>, Vec<f64>)],
     windows: &[(f64, f64)],
 ) -> String {
-    let mut series: Vec<Series> = fits
+    let series: Vec<Series> = fits
         .iter()
         .enumerate()
         .map(|(k, (label, t, v))| {
@@ -142,6 +134,18 @@ pub fn comparison_svg(
             Series::new(label, t, v, color, 2).dashed(dash)
         })
         .collect();
+    with_measured(title, y_label, series, measured, windows)
+}
+
+/// The chart of `series` over time with the measured data drawn last (on top), the fitted
+/// intervals `windows` shaded.
+fn with_measured<'a>(
+    title: &str,
+    y_label: &str,
+    mut series: Vec<Series<'a>>,
+    measured: (&'a [f64], &'a [f64]),
+    windows: &[(f64, f64)],
+) -> String {
     series.push(Series::new("measured", measured.0, measured.1, MEASURED, 1));
     chart::render(&Chart {
         title,
