@@ -18,8 +18,9 @@ use crate::measurement::Measurement;
 use crate::objective::Evaluation;
 use std::path::PathBuf;
 
-/// Version of the layouts above; stored in the `meta` tree of a sled store.
-pub const LAYOUT_VERSION: u32 = 1;
+/// Version of the layouts above; stored in the `meta` tree of a sled store. 2: evaluations
+/// are also written a batch per value (`store::batch_log`), which version 1 does not read.
+pub const LAYOUT_VERSION: u32 = 2;
 
 const V1: u8 = 1;
 

@@ -18,6 +18,7 @@
 //! has lost at most the evaluations it had not yet reported. The byte layouts are in
 //! [`encoding`]; [`export`] writes and reads a versioned, line-oriented copy of a store.
 
+mod batch_log;
 mod damage;
 mod dispatcher;
 pub mod encoding;

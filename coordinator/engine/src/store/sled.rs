@@ -2,7 +2,9 @@
 //! before 1.0, hence `calib store export`/`import`).
 //!
 //! One tree per collection plus `meta` (layout version, lookup counters); the layouts are
-//! in [`super::encoding`]. sled allows one open database per path per process: open it
+//! in [`super::encoding`]. Evaluations the campaigns simulate are written a batch per value
+//! ([`super::batch_log`]); those imported, and those of stores written before layout 2, are
+//! one value per key in `evaluations`. Both are read by every lookup. sled allows one open database per path per process: open it
 //! once and share the [`SledStore`].
 //!
 //! Durability: `flush` fsyncs and blocks, so it runs on the calling (run) thread, never on
@@ -11,6 +13,7 @@
 //! runs writing at once therefore share a few flushes instead of queueing one each.
 //! `flush_async` is not used (it can deadlock in 0.34).
 
+use super::batch_log::BatchLog;
 use super::damage::{self, guarded};
 use super::encoding::{self, LAYOUT_VERSION};
 use super::key_filter::KeyFilter;
@@ -24,6 +27,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Condvar, Mutex};
 
 const LAYOUT_KEY: &[u8] = b"layout";
+/// Layouts this version opens: 1 (no evaluation batches) is taken as it is and marked 2.
+const READABLE_LAYOUTS: [u32; 2] = [1, LAYOUT_VERSION];
+const BATCHES_TREE: &str = "evaluation-batches";
 const HITS_KEY: &[u8] = b"hits";
 const MISSES_KEY: &[u8] = b"misses";
 
@@ -32,6 +38,7 @@ pub struct SledStore {
     path: PathBuf,
     db: sled::Db,
     evaluations: sled::Tree,
+    batches: BatchLog,
     campaigns: sled::Tree,
     datasets: sled::Tree,
     meta: sled::Tree,
@@ -94,6 +101,7 @@ impl SledStore {
         let evaluation_keys = KeyFilter::build(evaluations.clone());
         let store = Self {
             evaluations,
+            batches: BatchLog::open(tree(BATCHES_TREE)?)?,
             evaluation_keys,
             campaigns: tree(Collection::Campaigns.name())?,
             datasets: tree(Collection::Datasets.name())?,
@@ -106,14 +114,12 @@ impl SledStore {
             flushes: AtomicU64::new(0),
             sled_lookups: AtomicU64::new(0),
         };
-        match store.meta.get(LAYOUT_KEY)? {
-            None => {
-                store
-                    .meta
-                    .insert(LAYOUT_KEY, &LAYOUT_VERSION.to_le_bytes())?;
-                store.db.flush()?;
-            }
+        let layout = store.meta.get(LAYOUT_KEY)?;
+        let readable = |v: &[u8]| READABLE_LAYOUTS.iter().any(|l| v == l.to_le_bytes());
+        match layout {
             Some(v) if v.as_ref() == LAYOUT_VERSION.to_le_bytes() => {}
+            None => store.mark_layout()?,
+            Some(v) if readable(&v) => store.mark_layout()?,
             Some(v) => {
                 return Err(open_error(format!(
                     "its layout version is {:?}, this calib reads {LAYOUT_VERSION}: \
@@ -123,6 +129,14 @@ impl SledStore {
             }
         }
         Ok(store)
+    }
+
+    /// Mark the store as of this version's layout (what older versions refuse to open).
+    fn mark_layout(&self) -> Result<(), StoreError> {
+        self.meta
+            .insert(LAYOUT_KEY, &LAYOUT_VERSION.to_le_bytes())?;
+        self.db.flush()?;
+        Ok(())
     }
 
     pub fn path(&self) -> &Path {
@@ -215,6 +229,21 @@ impl SledStore {
     }
 }
 
+impl SledStore {
+    /// Evaluations the batches hold that `evaluations` does not.
+    fn batched_only(&self) -> Result<u64, StoreError> {
+        let keys = self.batches.keys();
+        let maybe = self.evaluation_keys.may_hold(keys.iter().map(|k| &k[..]));
+        let mut only = 0;
+        for (k, maybe) in keys.iter().zip(maybe) {
+            if !maybe || !self.evaluations.contains_key(k)? {
+                only += 1;
+            }
+        }
+        Ok(only)
+    }
+}
+
 impl Drop for SledStore {
     fn drop(&mut self) {
         if let Err(e) = self.guard(|| self.flush_now()) {
@@ -229,12 +258,14 @@ impl Store for SledStore {
         keys: &[EvaluationKey],
     ) -> Result<Vec<Option<Evaluation>>, StoreError> {
         self.guard(|| {
+            let batched = self.batches.get(keys)?;
             let maybe = self.evaluation_keys.may_hold(keys.iter().map(|k| &k[..]));
             keys.iter()
                 .zip(maybe)
-                .map(|(k, maybe)| {
-                    if !maybe {
-                        return Ok(None);
+                .zip(batched)
+                .map(|((k, maybe), batched)| {
+                    if batched.is_some() || !maybe {
+                        return Ok(batched);
                     }
                     self.sled_lookups.fetch_add(1, Ordering::Relaxed);
                     self.evaluations
@@ -246,19 +277,13 @@ impl Store for SledStore {
         })
     }
 
-    /// Inserted one by one, not as a `sled::Batch`: an evaluation is complete in itself, so
-    /// a crash between two inserts only means the later points are simulated again, while
-    /// sled's atomic batch writes and syncs the log twice more (it rolls the log buffer
-    /// before its manifest and seals the manifest's buffer after), tripling the syncs of a
-    /// round.
+    /// One value for all of `entries` ([`BatchLog`]), not a `sled::Batch` of one insert
+    /// each: sled's cost is per insert, and its atomic batch also writes and syncs the log
+    /// twice more (it rolls the log buffer before its manifest and seals the manifest's
+    /// buffer after).
     fn put_evaluations(&self, entries: &[(EvaluationKey, Evaluation)]) -> Result<(), StoreError> {
         self.guard(|| {
-            self.evaluation_keys
-                .note(entries.iter().map(|(k, _)| &k[..]));
-            for (k, e) in entries {
-                self.evaluations
-                    .insert(&k[..], encoding::encode_evaluation(e))?;
-            }
+            self.batches.append(entries)?;
             self.make_durable()
         })
     }
@@ -312,15 +337,29 @@ impl Store for SledStore {
         self.guard(|| Ok(self.datasets.get(hash)?.map(|v| v.to_vec())))
     }
 
+    /// Evaluations in key order whether batched or not, as each was one value per key.
     fn raw_entries(&self, collection: Collection) -> Result<Vec<RawEntry>, StoreError> {
         self.guard(|| {
-            self.tree(collection)
+            let mut entries = self
+                .tree(collection)
                 .iter()
                 .map(|entry| {
                     let (k, v) = entry?;
                     Ok((k.to_vec(), v.to_vec()))
                 })
-                .collect()
+                .collect::<Result<Vec<RawEntry>, StoreError>>()?;
+            if collection == Collection::Evaluations {
+                let keyed: std::collections::HashSet<Vec<u8>> =
+                    entries.iter().map(|(k, _)| k.clone()).collect();
+                let batched = self.batches.raw_entries()?.into_iter();
+                entries.extend(
+                    batched
+                        .map(|(k, v)| (k.to_vec(), v))
+                        .filter(|(k, _)| !keyed.contains(k)),
+                );
+                entries.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+            }
+            Ok(entries)
         })
     }
 
@@ -342,7 +381,7 @@ impl Store for SledStore {
     fn stats(&self) -> Result<StoreStats, StoreError> {
         self.guard(|| {
             Ok(StoreStats {
-                evaluations: self.evaluations.len() as u64,
+                evaluations: self.evaluations.len() as u64 + self.batched_only()?,
                 campaigns: self.campaigns.len() as u64,
                 datasets: self.datasets.len() as u64,
                 bytes: self.db.size_on_disk()?,

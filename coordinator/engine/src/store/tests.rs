@@ -216,6 +216,100 @@ fn lookups_of_new_points_skip_sled_and_stored_ones_are_found() {
     check(&store, &keys);
 }
 
+/// Evaluations written a batch per value list as one value per key would, in key order, a
+/// key written twice once: the same entries as the memory store's.
+#[test]
+fn batched_evaluations_list_as_the_memory_store_lists_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let sled = SledStore::open(dir.path()).unwrap();
+    contract(&sled);
+    let memory = MemoryStore::new();
+    contract(&memory);
+    let listed = sled.raw_entries(Collection::Evaluations).unwrap();
+    assert_eq!(listed.len(), 40);
+    assert_eq!(listed, memory.raw_entries(Collection::Evaluations).unwrap());
+}
+
+/// Write a sled database as a calib of layout `layout` left it, with `evaluations` one
+/// value per key.
+fn write_layout(path: &Path, layout: u32, evaluations: &[(EvaluationKey, Evaluation)]) {
+    let db = ::sled::open(path).unwrap();
+    db.open_tree("meta")
+        .unwrap()
+        .insert("layout", &layout.to_le_bytes())
+        .unwrap();
+    let tree = db.open_tree("evaluations").unwrap();
+    for (k, e) in evaluations {
+        tree.insert(k, encoding::encode_evaluation(e)).unwrap();
+    }
+    db.flush().unwrap();
+}
+
+/// A store of layout 1 (every evaluation one value per key) opens as it is: its evaluations
+/// are found beside the batched ones written after, counted once each, and it is marked
+/// layout 2, which the calib of layout 1 refuses rather than missing the batches.
+#[test]
+fn a_store_of_layout_1_is_read_and_marked_2() {
+    let dir = tempfile::tempdir().unwrap();
+    let old: Vec<_> = (0..5).map(|i| (key(i), evaluation(i))).collect();
+    write_layout(dir.path(), 1, &old);
+    {
+        let store = SledStore::open(dir.path()).unwrap();
+        store.put_evaluations(&[(key(7), evaluation(7))]).unwrap();
+        // Written again by a run that missed it: still one evaluation.
+        store.put_evaluations(&[(key(3), evaluation(3))]).unwrap();
+        let keys: Vec<_> = (0..8).map(key).collect();
+        let got = store.get_evaluations(&keys).unwrap();
+        for (i, g) in got.iter().enumerate() {
+            match g {
+                Some(e) => assert!(same(e, &evaluation(i as u64)), "entry {i}"),
+                None => assert!(i == 5 || i == 6, "entry {i} missing"),
+            }
+        }
+        assert_eq!(store.stats().unwrap().evaluations, 6);
+        assert_eq!(store.raw_entries(Collection::Evaluations).unwrap().len(), 6);
+    }
+    let db = ::sled::open(dir.path()).unwrap();
+    let layout = db
+        .open_tree("meta")
+        .unwrap()
+        .get("layout")
+        .unwrap()
+        .unwrap();
+    assert_eq!(layout.as_ref(), 2u32.to_le_bytes());
+}
+
+#[test]
+fn a_store_of_a_later_layout_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    write_layout(dir.path(), 3, &[]);
+    let error = SledStore::open(dir.path()).err().expect("refused");
+    assert!(error.to_string().contains("layout version"), "{error}");
+}
+
+/// A batch cut short on disk is reported as damage at opening, naming what is wrong, not
+/// read as fewer evaluations.
+#[test]
+fn a_damaged_batch_is_reported_at_opening() {
+    let dir = tempfile::tempdir().unwrap();
+    {
+        let store = SledStore::open(dir.path()).unwrap();
+        store
+            .put_evaluations(&[(key(1), evaluation(1)), (key(2), evaluation(2))])
+            .unwrap();
+    }
+    {
+        let db = ::sled::open(dir.path()).unwrap();
+        let batches = db.open_tree("evaluation-batches").unwrap();
+        let (k, v) = batches.first().unwrap().unwrap();
+        batches.insert(k, &v[..v.len() - 3]).unwrap();
+        db.flush().unwrap();
+    }
+    let error = SledStore::open(dir.path()).err().expect("damage found");
+    assert!(matches!(error, StoreError::Damaged { .. }), "{error:?}");
+    assert!(error.to_string().contains("cut short"), "{error}");
+}
+
 #[test]
 fn a_sled_store_opens_once_at_a_time() {
     let dir = tempfile::tempdir().unwrap();
