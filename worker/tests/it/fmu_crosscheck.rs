@@ -169,6 +169,7 @@ fn not_here(message: &str) -> Option<String> {
 const UNCOMPARABLE: [&str; 1] = ["CPUtime"];
 
 fn run(case: &Case, scratch: &Path) -> Outcome {
+    let _alone = crate::one_real_tool_fmu_at_a_time();
     if let Some(why) = left_out(&description_xml(&case.path)) {
         return Outcome::Left(why);
     }

@@ -298,6 +298,7 @@ fn an_openmodelica_fmu_driven_by_a_force_agrees_with_fmpy() {
     let Some(dir) = real_tool_fmus() else {
         return;
     };
+    let _alone = crate::one_real_tool_fmu_at_a_time();
     let path = dir.join("gemseo-fmu/Mass_Damper.fmu");
     let scratch = tempfile::tempdir().unwrap();
     let times: Vec<f64> = (0..=100).map(|k| f64::from(k) * 0.01).collect();

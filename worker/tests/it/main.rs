@@ -14,3 +14,14 @@ mod fmu_inputs;
 mod fmu_reference;
 mod request_validation;
 mod solver_fingerprints;
+
+/// FMUs exported by tools may keep simulation state in globals of their shared library
+/// (OpenModelica's runtime does), so two instances of one such FMU running in one process at
+/// once may corrupt each other. calib never does that (it runs each instance in a child
+/// process of its own); the tests that run a tool's FMU in this process hold this lock
+/// meanwhile, so that tests running side by side do not.
+fn one_real_tool_fmu_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
