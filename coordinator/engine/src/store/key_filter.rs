@@ -1,6 +1,8 @@
-//! Which evaluation keys a store on disk holds, as a Bloom filter: a key the filter lacks is
-//! not in the store, so the lookup of a new point skips sled, where a miss walks the tree
-//! (about a sixth of the coordinator's CPU per new point in batches of 256).
+//! Which evaluation keys a store on disk holds one value per key (its `evaluations` tree:
+//! imported evaluations and those of layout 1), as a Bloom filter: a key the filter lacks is
+//! not in that tree, so the lookup of a new point skips sled, where a miss walks the tree
+//! (about a sixth of the coordinator's CPU per new point in batches of 256). Evaluations
+//! written a round per value are found through their own index (`batch_log.rs`).
 //!
 //! The filter is built from the keys on disk by a thread of its own (about 1 µs per stored
 //! key), so that opening a large store does not wait for it; until it is ready every lookup
