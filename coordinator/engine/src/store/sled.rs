@@ -4,8 +4,8 @@
 //! One tree per collection plus `meta` (layout version, lookup counters); the layouts are
 //! in [`super::encoding`]. Evaluations the campaigns simulate are written a batch per value
 //! ([`super::batch_log`]); those imported, and those of stores written before layout 2, are
-//! one value per key in `evaluations`. Both are read by every lookup. sled allows one open database per path per process: open it
-//! once and share the [`SledStore`].
+//! one value per key in `evaluations`. Both are read by every lookup. sled allows one open
+//! database per path per process: open it once and share the [`SledStore`].
 //!
 //! Durability: `flush` fsyncs and blocks, so it runs on the calling (run) thread, never on
 //! an async runtime, and writes are grouped: a writer that finds a flush in progress waits
@@ -221,15 +221,6 @@ impl SledStore {
         Ok(())
     }
 
-    fn counter(&self, key: &[u8]) -> Result<u64, StoreError> {
-        Ok(self
-            .meta
-            .get(key)?
-            .map_or(0, |v| encoding::decode_counter(&v)))
-    }
-}
-
-impl SledStore {
     /// Evaluations the batches hold that `evaluations` does not.
     fn batched_only(&self) -> Result<u64, StoreError> {
         let keys = self.batches.keys();
@@ -241,6 +232,13 @@ impl SledStore {
             }
         }
         Ok(only)
+    }
+
+    fn counter(&self, key: &[u8]) -> Result<u64, StoreError> {
+        Ok(self
+            .meta
+            .get(key)?
+            .map_or(0, |v| encoding::decode_counter(&v)))
     }
 }
 
