@@ -709,3 +709,205 @@ fn an_upload_without_a_time_column_gets_the_guessed_one() {
     assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
     c.assert_no_path(status.message());
 }
+
+/// 2,000 nested parentheses around a joint's speed (4 KB): the formula that overflowed the
+/// stack of whatever parsed it.
+fn nested_formula(depth: usize) -> String {
+    format!("-b * {}armJoint.w{}", "(".repeat(depth), ")".repeat(depth))
+}
+
+fn deep_effect(formula: &str) -> pb::DefinedEffect {
+    pb::DefinedEffect {
+        name: "damping.arm".into(),
+        torque: "armJoint".into(),
+        formula: formula.into(),
+        parameters: vec![pb::DefinedEffectParameter {
+            name: "b".into(),
+            nominal: Some(0.001),
+            min: 0.0,
+            max: 1.0,
+            fixed: false,
+        }],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn formulas_too_deep_or_too_long_are_refused_at_every_door_and_nothing_overflows() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 1);
+    let c = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = c.upload();
+    let deep = nested_formula(2_000);
+    assert!(deep.len() > 4_000);
+    let long = format!("b{}", " + b".repeat(35_000));
+    let with = |formula: &str| {
+        let mut campaign = message(SEARCH, &dataset.id);
+        campaign.defined_effects = vec![deep_effect(formula)];
+        campaign
+    };
+
+    // The coordinator's gRPC and JSON doors: a problem naming the field, then a refusal.
+    for (formula, says) in [
+        (&deep, "nests more than 200 levels"),
+        (&long, "more than 10000"),
+    ] {
+        let problems = c.validate(with(formula));
+        assert_eq!(problems.len(), 1, "{problems:?}");
+        assert_eq!(
+            problems[0].field, "defined_effects[0].formula",
+            "{problems:?}"
+        );
+        assert!(problems[0].message.contains(says), "{problems:?}");
+        let body = serde_json::to_vec(&pb::ValidateCampaignRequest {
+            campaign: Some(with(formula)),
+        })
+        .unwrap();
+        let http = c.server().http_address().unwrap();
+        let (code, body) = http_post(http, "/api/v1/ValidateCampaign", &body);
+        assert_eq!(code, 200, "{body}");
+        assert!(
+            body.contains("defined_effects[0].formula") && body.contains(says),
+            "{body}"
+        );
+        c.expect_refused(with(formula), &["defined_effects[0].formula", says]);
+    }
+
+    // `calib ui`'s route, on campaigns of its own process.
+    let ui_runtime = tokio::runtime::Runtime::new().unwrap();
+    let ui = ui_runtime
+        .block_on(calib_service::web::local::start_ui(
+            calib_service::web::local::UiConfig {
+                listen: "127.0.0.1:0".parse().unwrap(),
+                store: dir.path().join("ui-db"),
+                api: Some(dir.path().join("ui-api")),
+                allow_hosts: Vec::new(),
+            },
+        ))
+        .unwrap();
+    let csv = std::fs::read(repo().join("examples/data/furuta_clean.csv")).unwrap();
+    let upload = "/api/v1/UploadDataset?file_name=record.csv&time_column=time_s";
+    let (code, body) = http_post(ui.address(), upload, &csv);
+    assert!(code == 200 && body.contains(&dataset.id), "{body}");
+    let body = serde_json::to_vec(&pb::ValidateCampaignRequest {
+        campaign: Some(with(&deep)),
+    })
+    .unwrap();
+    let (code, body) = http_post(ui.address(), "/api/v1/ValidateCampaign", &body);
+    assert_eq!(code, 200, "{body}");
+    assert!(body.contains("defined_effects[0].formula"), "{body}");
+    ui_runtime.block_on(ui.shutdown());
+
+    // A worker's Simulate: refused naming the field; the worker serves on.
+    let runtime = tokio::runtime::Runtime::new().unwrap();
+    let worker = cluster.urls()[0].clone();
+    let simulate = |formula: &str| {
+        use calib_proto::v1::simulator_client::SimulatorClient;
+        let request = pb_worker_simulate(formula);
+        let worker = worker.clone();
+        runtime.block_on(async move {
+            let mut client = SimulatorClient::connect(worker).await.unwrap();
+            client
+                .simulate(request)
+                .await
+                .map(tonic::Response::into_inner)
+        })
+    };
+    for formula in [&deep, &long] {
+        let status = simulate(formula).unwrap_err();
+        assert_eq!(status.code(), tonic::Code::InvalidArgument, "{status:?}");
+        assert!(
+            status.message().contains("effects[0].formula"),
+            "{status:?}"
+        );
+    }
+    let served = simulate("-b * armJoint.w").unwrap();
+    assert_eq!(served.series.len(), 1);
+    assert!(served.failure.is_none());
+
+    // `calib calibrate`, at a depth its main thread's larger stack once accepted.
+    let out = dir.path().join("out");
+    let effect = format!(
+        "[[effects]]\nname = \"damping.arm\"\ntorque = \"armJoint\"\nformula = \"{}\"\n\
+         parameters = [ {{ name = \"b\", nominal = 0.001, min = 0.0, max = 1.0 }} ]\n[window]",
+        nested_formula(3_000)
+    );
+    let file = campaign_file(dir.path(), SEARCH, "[window]", &effect);
+    expect_bad_input(
+        &file,
+        &out,
+        &["c.toml", "effects[0].formula", "nests more than"],
+    );
+    assert!(c.listed().is_empty());
+    assert_eq!(c.upload(), dataset);
+}
+
+/// A Simulate request of the Furuta arm with a damping formula on it.
+fn pb_worker_simulate(formula: &str) -> calib_proto::v1::SimulateRequest {
+    use calib_proto::v1 as w;
+    w::SimulateRequest {
+        protocol_version: calib_proto::PROTOCOL_VERSION,
+        model: "furuta".into(),
+        parameters: vec![w::ParameterValue {
+            name: "damping.arm.b".into(),
+            value: 0.01,
+        }],
+        times: (0..=100).map(|i| i as f64 * 0.01).collect(),
+        outputs: vec!["armJoint.phi".into()],
+        effects: vec![w::UserEffect {
+            name: "damping.arm".into(),
+            torque: "armJoint".into(),
+            output: String::new(),
+            formula: formula.into(),
+            parameters: vec![w::UserEffectParameter {
+                name: "b".into(),
+                nominal: 0.0,
+                min: 0.0,
+                max: 1.0,
+            }],
+        }],
+        ..Default::default()
+    }
+}
+
+#[test]
+fn a_stored_campaign_with_a_formula_too_deep_is_closed_as_failed_at_restart() {
+    use calib_engine::store::{CampaignRecord, CampaignStatus, SledStore, Store};
+    let dir = tempfile::tempdir().unwrap();
+    // As a coordinator without the limit left it: running, with a 4 KB formula.
+    let effect = format!(
+        "[[effects]]\nname = \"damping.arm\"\ntorque = \"armJoint\"\nformula = \"{}\"\n\
+         parameters = [ {{ name = \"b\", nominal = 0.001, min = 0.0, max = 1.0 }} ]\n[window]",
+        nested_formula(2_000)
+    );
+    let text = clean_campaign(SEARCH).replacen("[window]", &effect, 1);
+    let source = write(dir.path(), "deep.toml", &text);
+    let id = [9u8; 32];
+    {
+        let store = SledStore::open(&dir.path().join("db")).unwrap();
+        let record = CampaignRecord {
+            name: "clean".into(),
+            spec: text,
+            source,
+            dataset: "00".repeat(32),
+            status: CampaignStatus::Running,
+            runs: Vec::new(),
+            result: None,
+            failure: None,
+            message: None,
+            free: Vec::new(),
+            history: Vec::new(),
+        };
+        store.put_campaign(&id, &record).unwrap();
+    }
+    let cluster = TestCluster::start(1, 1);
+    let c = Coordinator::start(dir.path(), &cluster.urls());
+    let hex = calib_engine::store::hex(&id);
+    await_condition("the campaign closed", Duration::from_secs(60), || {
+        c.state(&hex).phase() == pb::CampaignPhase::Failed
+    });
+    let failure = c.state(&hex).failure;
+    assert!(failure.contains("effects[0].formula"), "{failure}");
+    assert!(failure.contains("nests more than"), "{failure}");
+    assert_eq!(c.upload().columns.len(), 2, "still serving");
+}

@@ -18,6 +18,15 @@ pub const FUNCTIONS: [&str; 7] = ["sin", "cos", "exp", "abs", "sign", "sqrt", "t
 /// Most distinct names and numbers one formula may hold.
 pub const MAX_SLOTS: usize = 64;
 
+/// Longest formula accepted [characters], checked before anything reads it.
+pub const MAX_LENGTH: usize = 10_000;
+
+/// Deepest formula accepted: each parenthesis, call, sign and power nests one level, and so
+/// does each operator chained at one level (`a + b + c` is two). Parsing, compiling and
+/// dropping a formula recurse this deep, so it bounds their stack on any thread (a test
+/// parses the deepest on a 512 KiB stack, a quarter of a tokio worker's).
+pub const MAX_DEPTH: usize = 200;
+
 /// A mistake in a formula: what, and the character (from 1) where it is.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FormulaError {
@@ -50,9 +59,44 @@ struct Parser<'a> {
     text: &'a str,
     bytes: &'a [u8],
     pos: usize,
+    /// How many levels the parse is inside: every recursion enters one.
+    depth: usize,
+}
+
+/// A parsed part and how deep its tree is.
+struct Part {
+    node: Node,
+    depth: usize,
+}
+
+impl Part {
+    fn leaf(node: Node) -> Self {
+        Self { node, depth: 1 }
+    }
 }
 
 impl Parser<'_> {
+    /// Enter a level at the current character, refused beyond [`MAX_DEPTH`].
+    fn enter(&mut self) -> Result<(), FormulaError> {
+        self.depth += 1;
+        if self.depth > MAX_DEPTH {
+            return Err(FormulaError::at(self.pos, too_deep()));
+        }
+        Ok(())
+    }
+
+    /// `op` applied to `left` and `right`, refused when the tree grows beyond [`MAX_DEPTH`].
+    fn binary(&self, op: u8, left: Part, right: Part, at: usize) -> Result<Part, FormulaError> {
+        let depth = 1 + left.depth.max(right.depth);
+        if depth > MAX_DEPTH {
+            return Err(FormulaError::at(at, too_deep()));
+        }
+        Ok(Part {
+            node: Node::Binary(op as char, Box::new(left.node), Box::new(right.node)),
+            depth,
+        })
+    }
+
     fn skip(&mut self) {
         while self.pos < self.bytes.len() && self.bytes[self.pos].is_ascii_whitespace() {
             self.pos += 1;
@@ -64,49 +108,63 @@ impl Parser<'_> {
         self.bytes.get(self.pos).copied()
     }
 
-    fn expr(&mut self) -> Result<Node, FormulaError> {
+    fn expr(&mut self) -> Result<Part, FormulaError> {
+        self.enter()?;
         let mut left = self.term()?;
         while let Some(op @ (b'+' | b'-')) = self.peek() {
+            let at = self.pos;
             self.pos += 1;
-            left = Node::Binary(op as char, Box::new(left), Box::new(self.term()?));
+            let right = self.term()?;
+            left = self.binary(op, left, right, at)?;
         }
+        self.depth -= 1;
         Ok(left)
     }
 
-    fn term(&mut self) -> Result<Node, FormulaError> {
+    fn term(&mut self) -> Result<Part, FormulaError> {
         let mut left = self.unary()?;
         while let Some(op @ (b'*' | b'/')) = self.peek() {
+            let at = self.pos;
             self.pos += 1;
-            left = Node::Binary(op as char, Box::new(left), Box::new(self.unary()?));
+            let right = self.unary()?;
+            left = self.binary(op, left, right, at)?;
         }
         Ok(left)
     }
 
-    fn unary(&mut self) -> Result<Node, FormulaError> {
+    fn unary(&mut self) -> Result<Part, FormulaError> {
         match self.peek() {
-            Some(b'-') => {
+            Some(sign @ (b'-' | b'+')) => {
+                self.enter()?;
                 self.pos += 1;
-                Ok(Node::Neg(Box::new(self.unary()?)))
-            }
-            Some(b'+') => {
-                self.pos += 1;
-                self.unary()
+                let inner = self.unary()?;
+                self.depth -= 1;
+                if sign == b'+' {
+                    return Ok(inner);
+                }
+                Ok(Part {
+                    node: Node::Neg(Box::new(inner.node)),
+                    depth: inner.depth + 1,
+                })
             }
             _ => self.power(),
         }
     }
 
-    fn power(&mut self) -> Result<Node, FormulaError> {
+    fn power(&mut self) -> Result<Part, FormulaError> {
         let base = self.atom()?;
         if self.peek() == Some(b'^') {
+            let at = self.pos;
+            self.enter()?;
             self.pos += 1;
             let exponent = self.unary()?;
-            return Ok(Node::Binary('^', Box::new(base), Box::new(exponent)));
+            self.depth -= 1;
+            return self.binary(b'^', base, exponent, at);
         }
         Ok(base)
     }
 
-    fn atom(&mut self) -> Result<Node, FormulaError> {
+    fn atom(&mut self) -> Result<Part, FormulaError> {
         let start = match self.peek() {
             None => return Err(FormulaError::at(self.pos, "the formula ends too early")),
             Some(_) => self.pos,
@@ -119,14 +177,14 @@ impl Parser<'_> {
             return Ok(inner);
         }
         if c.is_ascii_digit() || c == b'.' {
-            return self.number();
+            return self.number().map(Part::leaf);
         }
         if c.is_ascii_alphabetic() || c == b'_' {
             let name = self.name();
             if self.peek() == Some(b'(') {
                 return self.call(name, start);
             }
-            return Ok(Node::Name(name, start));
+            return Ok(Part::leaf(Node::Name(name, start)));
         }
         let shown = self.text[start..].chars().next().unwrap_or(' ');
         Err(FormulaError::at(start, format!("unexpected `{shown}`")))
@@ -194,7 +252,7 @@ impl Parser<'_> {
         }
     }
 
-    fn call(&mut self, name: String, start: usize) -> Result<Node, FormulaError> {
+    fn call(&mut self, name: String, start: usize) -> Result<Part, FormulaError> {
         let arity = match name.as_str() {
             "pow" => 2,
             n if FUNCTIONS.contains(&n) => 1,
@@ -219,20 +277,45 @@ impl Parser<'_> {
                 format!("`{name}` takes {arity} argument(s), not {}", args.len()),
             ));
         }
-        Ok(Node::Call(name, args))
+        // `pow(a, b)` is emitted as `a ^ b` under its call: two levels above its arguments.
+        let levels = if name == "pow" { 2 } else { 1 };
+        let depth = levels + args.iter().map(|a| a.depth).max().unwrap_or(0);
+        if depth > MAX_DEPTH {
+            return Err(FormulaError::at(start, too_deep()));
+        }
+        Ok(Part {
+            node: Node::Call(name, args.into_iter().map(|a| a.node).collect()),
+            depth,
+        })
     }
 }
 
+fn too_deep() -> String {
+    format!(
+        "the formula nests more than {MAX_DEPTH} levels here (each parenthesis, call, sign \
+         and power is a level, and so is each operator chained at one level)"
+    )
+}
+
+/// The formula's tree: refused before reading when longer than [`MAX_LENGTH`], and as soon
+/// as it nests deeper than [`MAX_DEPTH`].
 fn parse(text: &str) -> Result<Node, FormulaError> {
+    if text.len() > MAX_LENGTH {
+        return Err(FormulaError::at(
+            0,
+            format!("{} characters, more than {MAX_LENGTH}", text.len()),
+        ));
+    }
     let mut p = Parser {
         text,
         bytes: text.as_bytes(),
         pos: 0,
+        depth: 0,
     };
     if p.peek().is_none() {
         return Err(FormulaError::at(0, "the formula is empty"));
     }
-    let node = p.expr()?;
+    let node = p.expr()?.node;
     match p.peek() {
         None => Ok(node),
         Some(b')') => Err(FormulaError::at(p.pos, "`)` closes nothing")),
@@ -446,5 +529,105 @@ mod tests {
         assert!(e.message.contains("unknown function `sinh`"));
         let e = Compiled::new("a )", &k).unwrap_err();
         assert_eq!(e.position, 3);
+    }
+
+    /// `text` compiled against `known` on a thread with a 512 KiB stack, a quarter of a
+    /// tokio worker's (or a rayon thread's): whatever the formula, an answer and never an
+    /// overflow.
+    fn on_a_small_stack(text: String, known: Vec<String>) -> Result<(), FormulaError> {
+        std::thread::Builder::new()
+            .stack_size(512 << 10)
+            .spawn(move || {
+                let compiled = Compiled::new(&text, &known);
+                let called = calls(&text, "sign");
+                compiled.map(|c| {
+                    // Evaluating is flat: any depth, a value.
+                    let _ = c.eval(&vec![0.5; known.len()]);
+                    assert!(called || !text.contains("sign("));
+                })
+            })
+            .expect("a thread")
+            .join()
+            .expect("parsing never overflows the stack")
+    }
+
+    fn repeat(open: &str, middle: &str, close: &str, n: usize) -> String {
+        format!("{}{middle}{}", open.repeat(n), close.repeat(n))
+    }
+
+    #[test]
+    fn the_deepest_formula_accepted_compiles_on_a_small_stack() {
+        let k = known(&["x"]);
+        let at_limit = [
+            repeat("(", "x", ")", MAX_DEPTH - 1),
+            repeat("-", "x", "", MAX_DEPTH - 1),
+            repeat("sin(", "x", ")", MAX_DEPTH - 1),
+            format!("x{}", "+x".repeat(MAX_DEPTH - 1)),
+            format!("x{}", "^x".repeat(MAX_DEPTH - 1)),
+            format!(
+                "{}x{}",
+                "pow(".repeat(MAX_DEPTH / 2 - 1),
+                ",x)".repeat(MAX_DEPTH / 2 - 1)
+            ),
+        ];
+        for text in at_limit {
+            let shown = text[..40.min(text.len())].to_string();
+            on_a_small_stack(text, k.clone()).unwrap_or_else(|e| panic!("{shown}…: {e:?}"));
+        }
+    }
+
+    #[test]
+    fn formulas_nested_beyond_the_limit_are_refused_where_they_go_too_deep() {
+        let k = known(&["x"]);
+        // The attacks: 2,000 nested parentheses (4 KB), 20,000 signs or powers, and a
+        // 35,000-term sum (70 KB) refused by its length before it is read.
+        let cases = [
+            (repeat("(", "x", ")", 2_000), "nests more than"),
+            (repeat("-", "x", "", 5_000), "nests more than"),
+            (repeat("+", "x", "", 5_000), "nests more than"),
+            (format!("x{}", "^x".repeat(4_000)), "nests more than"),
+            (repeat("sin(", "x", ")", 1_000), "nests more than"),
+            (format!("x{}", "+x".repeat(MAX_DEPTH)), "nests more than"),
+            (format!("x{}", "+x".repeat(35_000)), "more than 10000"),
+            (repeat("-", "x", "", 20_000), "more than 10000"),
+        ];
+        for (text, says) in cases {
+            let shown = text[..20].to_string();
+            let e = on_a_small_stack(text, k.clone()).unwrap_err();
+            assert!(e.message.contains(says), "{shown}…: {e:?}");
+            if says == "nests more than" {
+                assert!(e.position > MAX_DEPTH / 2, "{shown}…: {e:?}");
+            }
+        }
+        assert!(!calls(
+            &format!("sign({})", repeat("(", "x", ")", 5_000)),
+            "sign"
+        ));
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+        /// Any text, of any nesting and length, gets an answer: a formula or a mistake
+        /// placed inside the text (or just past its end).
+        #[test]
+        fn any_text_is_compiled_or_refused_with_its_place(
+            pieces in proptest::collection::vec(
+                proptest::sample::select(vec![
+                    "(", ")", "-", "+", "*", "/", "^", "x", "y", "1.5", "2e3", ",", "sin(",
+                    "pow(", "sign(", " ", "(((((", ")))))", "-----", "^-x", "é", "1e999",
+                ]),
+                0..3_000,
+            ),
+            repeat_by in 1usize..8,
+        ) {
+            let text = pieces.concat().repeat(repeat_by);
+            let len = text.chars().count();
+            match on_a_small_stack(text, known(&["x", "y"])) {
+                Ok(()) => {}
+                Err(e) => proptest::prop_assert!(e.position >= 1 && e.position <= len + 1,
+                    "{e:?} in {len} characters"),
+            }
+        }
     }
 }

@@ -1,7 +1,7 @@
 //! A model with user-defined effects: its parameters extended by theirs, their torques
 //! passed into the equations of motion, their output transformations applied after.
 
-use super::formula::Compiled;
+use super::formula::{Compiled, MAX_LENGTH};
 use super::{refuse, EffectError, Force, Forces, UserEffect};
 use crate::inputs::Inputs;
 use crate::model::{
@@ -128,17 +128,14 @@ fn add_parameters(
     Ok(())
 }
 
-/// Longest formula accepted [characters].
-pub const MAX_FORMULA: usize = 10_000;
-
 /// The formula of effect `i` compiled against its variables `known`; an unknown name gets
 /// the nearest known one.
 fn compile(i: usize, e: &UserEffect, known: &[String]) -> Result<Compiled, EffectError> {
     let field = format!("effects[{i}].formula");
-    if e.formula.len() > MAX_FORMULA {
+    if e.formula.len() > MAX_LENGTH {
         return refuse(
             field,
-            format!("{} characters, more than {MAX_FORMULA}", e.formula.len()),
+            format!("{} characters, more than {MAX_LENGTH}", e.formula.len()),
         );
     }
     Compiled::new(&e.formula, known).map_err(|f| {
