@@ -240,3 +240,47 @@ candidates = ["cogging.arm.a", "viscous_friction.arm"]
         .collect();
     assert_eq!(names, ["viscous_friction.arm", "cogging.arm.a"]);
 }
+
+#[test]
+fn a_formula_that_is_not_a_number_fails_the_campaign_naming_it_locally_and_on_workers() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(1, 2);
+    let search = "methods = [\"nelder-mead\"]\nmax_evaluations = 30";
+    for (place, formula, says) in [
+        (
+            "torque = \"armJoint\"",
+            "b * sqrt(-1)",
+            "the torque of effect `odd.arm` on `armJoint` is NaN (formula `b * sqrt(-1)`)",
+        ),
+        (
+            "output = \"pendulumJoint.phi\"",
+            "b / (time - 2)",
+            "at t = 2 s: the term of effect `odd.arm` on `pendulumJoint.phi` is inf",
+        ),
+    ] {
+        let effect = format!(
+            "[[effects]]\nname = \"odd.arm\"\n{place}\nformula = \"{formula}\"\n\
+             parameters = [ {{ name = \"b\", nominal = 0.001, min = 0.0, max = 1.0 }} ]\n[window]"
+        );
+        let text = clean_campaign(search).replacen("[window]", &effect, 1);
+        let file = write(dir.path(), "odd.toml", &text);
+        let file = file.to_str().unwrap();
+        let workers = cluster.urls().join(",");
+        for extra in [vec![], vec!["--workers", workers.as_str()]] {
+            let out = dir.path().join("out");
+            let db = dir.path().join(format!("db{}", extra.len()));
+            let mut args = vec!["calibrate", file, "--out", out.to_str().unwrap()];
+            args.extend(["--db", db.to_str().unwrap()]);
+            args.extend(&extra);
+            let run = calib(&args);
+            let stderr = String::from_utf8_lossy(&run.stderr);
+            assert_eq!(run.status.code(), Some(2), "{stderr}");
+            assert!(
+                stderr.contains("every simulation of the search failed"),
+                "{stderr}"
+            );
+            assert!(stderr.contains(says), "{stderr}");
+            assert!(!out.join("clean").exists(), "no result written");
+        }
+    }
+}

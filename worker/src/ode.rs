@@ -75,4 +75,12 @@ pub trait HybridSystem {
     fn step_completed(&mut self, _t: f64, _y: &[f64]) -> bool {
         false
     }
+
+    /// Checked at the end `t` (state `y`) of every accepted step that ends without an
+    /// event: an error ends the simulation there. A system whose right-hand side may stop
+    /// being a number (a user's formula) says so here, where a step that was kept reached
+    /// it, rather than at a trial stage the step-size control throws away.
+    fn check_step(&self, _t: f64, _y: &[f64]) -> Result<(), crate::model::SimulationError> {
+        Ok(())
+    }
 }

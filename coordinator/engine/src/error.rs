@@ -33,6 +33,10 @@ pub enum Error {
     },
     #[error("optimiser failed: {0}")]
     Optimiser(String),
+    /// No point of the search could be simulated: the model, an effect's formula or the
+    /// solver options fail everywhere the search looked. `why` is the best point's failure.
+    #[error("every simulation of the search failed; at the start point: {why}")]
+    EverySimulationFailed { why: String },
     /// The evaluation store failed (disk, corruption, in use by another process).
     #[error(transparent)]
     Store(#[from] StoreError),
@@ -51,7 +55,10 @@ impl Error {
     pub fn is_bad_input(&self) -> bool {
         matches!(
             self,
-            Error::Campaign(_) | Error::Measurement(_) | Error::InvalidRequest(_)
+            Error::Campaign(_)
+                | Error::Measurement(_)
+                | Error::InvalidRequest(_)
+                | Error::EverySimulationFailed { .. }
         )
     }
 }

@@ -366,7 +366,8 @@ impl Model for Furuta {
             for (series, &o) in values.iter_mut().zip(outputs) {
                 series[i] = y[o];
             }
-        })?;
+        })
+        .map_err(|e| system.blame(e))?;
         Ok(Trajectory {
             time: grid.to_vec(),
             values,
@@ -401,6 +402,9 @@ pub(crate) struct FurutaSystem {
     motor: Option<InputSignal>,
     /// Torques of user-defined effects, each on a joint.
     forces: Vec<(usize, Force)>,
+    /// The first torque of `forces` found not to be a number, at any stage a step tried:
+    /// its index, time and value. When the integration fails, it is the cause named.
+    fault: std::cell::Cell<Option<(usize, f64, f64)>>,
 }
 
 /// Accelerations and bearing friction torques in one mode configuration.
@@ -433,6 +437,7 @@ impl FurutaSystem {
             modes: [Mode::Forward; 2],
             motor: None,
             forces: Vec::new(),
+            fault: std::cell::Cell::new(None),
         };
         if system.friction.iter().any(|f| *f < 0.0) {
             return Err(SimulationError::InvalidInput(
@@ -447,6 +452,15 @@ impl FurutaSystem {
             ));
         }
         Ok(system)
+    }
+
+    /// `e`, or the torque of a user's effect that stopped being a number first (the step
+    /// size collapses on a torque that is NaN at every stage tried).
+    fn blame(&self, e: SimulationError) -> SimulationError {
+        match self.fault.get() {
+            Some((k, t, v)) => self.forces[k].1.not_finite(t, v),
+            None => e,
+        }
     }
 
     /// Right-hand side of the equations of motion at time `t` without bearing friction,
@@ -470,9 +484,13 @@ impl FurutaSystem {
         if let Some(motor) = &self.motor {
             r[0] += motor.at(t);
         }
-        for (joint, force) in &self.forces {
+        for (k, (joint, force)) in self.forces.iter().enumerate() {
             let motor = |_: usize| self.motor.as_ref().map_or(0.0, |m| m.at(t));
-            r[*joint] += force.value(t, y, motor);
+            let v = force.value(t, y, motor);
+            if !v.is_finite() && self.fault.get().is_none() {
+                self.fault.set(Some((k, t, v)));
+            }
+            r[*joint] += v;
         }
         (r, a, self.c * c)
     }
@@ -588,6 +606,20 @@ impl HybridSystem for FurutaSystem {
 
     fn event_name(&self, event: usize) -> String {
         format!("{} bearing stick-slip", JOINTS[event])
+    }
+
+    /// A user's torque that is not a number at a step kept ends the simulation there,
+    /// naming it: a stuck joint would otherwise hold it silently (its acceleration is 0
+    /// whatever the torque).
+    fn check_step(&self, t: f64, y: &[f64]) -> Result<(), SimulationError> {
+        let motor = |_: usize| self.motor.as_ref().map_or(0.0, |m| m.at(t));
+        for (_, force) in &self.forces {
+            let v = force.value(t, y, motor);
+            if !v.is_finite() {
+                return Err(force.not_finite(t, v));
+            }
+        }
+        Ok(())
     }
 
     // No `on_chattering`: each joint has its sticking mode already, entered at every stop it

@@ -161,6 +161,7 @@ where
                 t = t_new;
                 stepper.advance();
                 std::mem::swap(&mut run.g_old, &mut run.g_new);
+                system.check_step(t, stepper.state())?;
                 if run.done() {
                     return Ok(stats);
                 }

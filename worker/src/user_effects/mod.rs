@@ -126,6 +126,9 @@ pub struct Forces {
 pub struct Force {
     /// The torque place it acts on.
     pub place: String,
+    /// The effect's name and its formula as written, for messages.
+    effect: std::sync::Arc<str>,
+    text: std::sync::Arc<str>,
     formula: Compiled,
     /// How many state entries and inputs come before `time` among the formula's names.
     states: usize,
@@ -134,6 +137,39 @@ pub struct Force {
 }
 
 impl Force {
+    /// The term `formula` of effect `named` (its name and text) at `place`, reading
+    /// `counts` (states, inputs) before `time` and then `parameters`.
+    pub(crate) fn new(
+        place: String,
+        named: (std::sync::Arc<str>, std::sync::Arc<str>),
+        formula: Compiled,
+        counts: (usize, usize),
+        parameters: Vec<f64>,
+    ) -> Self {
+        Self {
+            place,
+            effect: named.0,
+            text: named.1,
+            formula,
+            states: counts.0,
+            inputs: counts.1,
+            parameters,
+        }
+    }
+
+    /// A failed simulation at `t`: this term's value `value` is not a number.
+    pub fn not_finite(&self, t: f64, value: f64) -> crate::model::SimulationError {
+        crate::model::SimulationError::Failed {
+            time: t,
+            reason: format!(
+                "the torque of effect `{}` on `{}` is {value} (formula `{}`)",
+                self.effect,
+                self.place,
+                shortened(&self.text)
+            ),
+        }
+    }
+
     /// Its value at time `t` and state `y`, with input `k` worth `input(k)`.
     #[inline]
     pub fn value(&self, t: f64, y: &[f64], input: impl Fn(usize) -> f64) -> f64 {
@@ -149,6 +185,14 @@ impl Force {
                 self.parameters[k - s - i - 1]
             }
         })
+    }
+}
+
+/// A formula as messages show it: whole up to 200 characters, else its start.
+pub(crate) fn shortened(text: &str) -> String {
+    match text.char_indices().nth(200) {
+        Some((end, _)) => format!("{}…", &text[..end]),
+        None => text.to_string(),
     }
 }
 

@@ -9,10 +9,14 @@ use crate::model::{
     SolverOptions, Trajectory,
 };
 use crate::validate::hint;
+use std::sync::Arc;
 
 /// One definition, compiled.
 struct Definition {
     formula: Compiled,
+    /// The effect's name and formula, shared by the forces of every simulation.
+    name: Arc<str>,
+    text: Arc<str>,
     /// Its first parameter's position among the user parameters.
     first: usize,
     count: usize,
@@ -208,6 +212,8 @@ impl WithUserEffects {
             let formula = compile(i, e, &known)?;
             compiled.push(Definition {
                 formula,
+                name: e.name.as_str().into(),
+                text: e.formula.as_str().into(),
                 first,
                 count: e.parameters.len(),
                 output: (e.kind == PlaceKind::Output)
@@ -231,7 +237,8 @@ impl WithUserEffects {
     }
 
     /// Apply the output transformations, in the order written, to `values` (every output
-    /// of the base model that `values` holds, at `slot[o]`).
+    /// of the base model that `values` holds, at `slot[o]`); a term that is not a number
+    /// fails the simulation at its time.
     fn transform(
         &self,
         user: &[f64],
@@ -239,7 +246,7 @@ impl WithUserEffects {
         inputs: &Inputs,
         values: &mut [Vec<f64>],
         slot: &[Option<usize>],
-    ) {
+    ) -> Result<(), SimulationError> {
         let outputs = self.info.outputs.len();
         let n_inputs = self.info.inputs.len();
         for c in &self.compiled {
@@ -260,9 +267,21 @@ impl WithUserEffects {
                         params[name - outputs - n_inputs - 2]
                     }
                 });
+                if !v.is_finite() {
+                    return Err(SimulationError::Failed {
+                        time: t,
+                        reason: format!(
+                            "the term of effect `{}` on `{}` is {v} (formula `{}`)",
+                            c.name,
+                            self.info.outputs[target].name,
+                            super::shortened(&c.text)
+                        ),
+                    });
+                }
                 values[k][i] += v;
             }
         }
+        Ok(())
     }
 }
 
@@ -322,12 +341,14 @@ impl Model for WithUserEffects {
                 .iter()
                 .zip(&self.definitions)
                 .filter(|(_, d)| d.kind == PlaceKind::Torque)
-                .map(|(c, d)| Force {
-                    place: d.place.clone(),
-                    formula: c.formula.clone(),
-                    states,
-                    inputs: self.info.inputs.len(),
-                    parameters: user[c.first..c.first + c.count].to_vec(),
+                .map(|(c, d)| {
+                    Force::new(
+                        d.place.clone(),
+                        (c.name.clone(), c.text.clone()),
+                        c.formula.clone(),
+                        (states, self.info.inputs.len()),
+                        user[c.first..c.first + c.count].to_vec(),
+                    )
                 })
                 .collect(),
         };
@@ -350,7 +371,7 @@ impl Model for WithUserEffects {
             for (k, &o) in wanted.iter().enumerate() {
                 slot[o].get_or_insert(k);
             }
-            self.transform(user, grid, inputs, &mut trajectory.values, &slot);
+            self.transform(user, grid, inputs, &mut trajectory.values, &slot)?;
             // Requested outputs listed twice read the same transformed series.
             let values = outputs
                 .iter()

@@ -1,5 +1,5 @@
 use super::*;
-use crate::model::SolverOptions;
+use crate::model::{SimulationError, SolverOptions};
 use crate::models;
 
 fn effect(name: &str, kind: PlaceKind, place: &str, formula: &str, params: &[&str]) -> UserEffect {
@@ -177,4 +177,52 @@ fn a_model_without_torques_refuses_one() {
     let e = attach(base, &defined).err().unwrap();
     assert_eq!(e.field, "effects[0].torque");
     assert!(e.message.contains("has no torque `armJoint`"), "{e}");
+}
+
+/// The failure of a Furuta swing with one user effect `formula` at `kind`/`place`.
+fn failure_with(kind: PlaceKind, place: &str, formula: &str) -> SimulationError {
+    let base = models::find("furuta").unwrap();
+    let with = attach(base, &[effect("odd", kind, place, formula, &["b"])]).unwrap();
+    let p = vector(with, &[("odd.b", 0.5)]);
+    match with.simulate(&p, &grid(5.0, 0.01), &[0, 1], &SolverOptions::default()) {
+        Ok(_) => panic!("{formula}: simulated"),
+        Err(e) => e,
+    }
+}
+
+#[test]
+fn a_torque_or_output_term_that_is_not_a_number_fails_the_simulation_naming_it() {
+    use PlaceKind::{Output, Torque};
+    // NaN and inf from the start, after a time, and once the arm (pushed by the torque)
+    // has swung past 0.1 rad: each fails where it is first not a number.
+    for (kind, place, formula, value, after) in [
+        (Torque, "armJoint", "b * sqrt(-1)", "NaN", 0.0),
+        (Torque, "pendulumJoint", "b / (time - time)", "inf", 0.0),
+        (Torque, "armJoint", "b * sqrt(0.5 - time)", "NaN", 0.5),
+        (
+            Torque,
+            "armJoint",
+            "b * sqrt(0.1 - abs(armJoint.phi))",
+            "NaN",
+            0.01,
+        ),
+        (Output, "armJoint.phi", "b * sqrt(-1)", "NaN", 0.0),
+        (Output, "pendulumJoint.phi", "b / (time - 2)", "inf", 2.0),
+    ] {
+        let e = failure_with(kind, place, formula);
+        let SimulationError::Failed { time, reason } = &e else {
+            panic!("{formula}: {e}");
+        };
+        let what = if kind == Torque { "torque" } else { "term" };
+        assert!(
+            reason.starts_with(&format!(
+                "the {what} of effect `odd` on `{place}` is {value}"
+            )) && reason.ends_with(&format!("(formula `{formula}`)")),
+            "{formula}: {reason}"
+        );
+        assert!(
+            *time >= after && *time <= after + 0.5,
+            "{formula}: at {time} s"
+        );
+    }
 }

@@ -256,6 +256,19 @@ fn calibrate_measured<E: Evaluator>(
         return Err(e.into());
     }
     let (nominal, screened, runs, clusters, best, best_evaluation) = match outcome {
+        // The best point failed, so every point did: no fit to report, only why.
+        Ok(found) if found.5.failure.is_some() => {
+            let e = Error::EverySimulationFailed {
+                why: found
+                    .0
+                    .failure
+                    .clone()
+                    .or(found.5.failure)
+                    .unwrap_or_default(),
+            };
+            mark_failed(store, &id, record, e.to_string())?;
+            return Err(e);
+        }
         Ok(found) => found,
         // No result exists for some points: the campaign stays marked running, so that a
         // rerun or a coordinator on this store resumes it once workers are back.

@@ -34,6 +34,9 @@ impl<S: HybridSystem> HybridSystem for Shifted<'_, S> {
     fn step_completed(&mut self, t: f64, y: &[f64]) -> bool {
         self.inner.step_completed(t + self.start, y)
     }
+    fn check_step(&self, t: f64, y: &[f64]) -> Result<(), SimulationError> {
+        self.inner.check_step(t + self.start, y)
+    }
 }
 
 /// Where the FMU's continuous-time variables stand: the time and states set last, and
