@@ -260,7 +260,14 @@ fn a_coordinator_with_a_token_serves_the_web_app_behind_its_login() {
         ("POST", "/ui/plot"),
         ("GET", "/ui/campaigns/x/campaign.toml"),
     ] {
-        for authorization in [None, Some("Bearer wrong"), Some(TOKEN.get(1..).unwrap())] {
+        // Wrong tokens on the first route only: each counts against this address.
+        let wrong = [Some("Bearer wrong"), Some(TOKEN.get(1..).unwrap())];
+        let tried = if path.contains("ListCampaigns") {
+            &wrong[..]
+        } else {
+            &[]
+        };
+        for authorization in std::iter::once(None).chain(tried.iter().copied()) {
             let headers: Vec<(&str, &str)> = authorization
                 .map(|a| ("Authorization", a))
                 .into_iter()
@@ -350,6 +357,102 @@ fn a_coordinator_with_a_token_serves_the_web_app_behind_its_login() {
         b"{}",
     );
     assert_eq!(refused.code, 401);
+}
+
+/// A login's session cookie (`name=value`).
+fn log_in(web: SocketAddr, headers: &[(&str, &str)]) -> String {
+    let right = format!("Bearer {TOKEN}");
+    let mut all = vec![("Authorization", right.as_str())];
+    all.extend_from_slice(headers);
+    let login = request(web, "POST", "/login", &all, b"");
+    assert_eq!(login.code, 204, "{}", login.body);
+    let cookie = login.header("set-cookie").expect("a session cookie");
+    cookie.split(';').next().unwrap().to_string()
+}
+
+#[test]
+fn each_login_is_a_session_that_logout_ends_and_wrong_tokens_are_throttled() {
+    let dir = tempfile::tempdir().unwrap();
+    let c = Coordinator::start(dir.path(), Some(TOKEN));
+    let web = c.http();
+    let list = |headers: &[(&str, &str)]| {
+        request(web, "POST", "/api/v1/ListCampaigns", headers, b"{}").code
+    };
+
+    // Two logins, two sessions: ending one leaves the other.
+    let (one, two) = (log_in(web, &[]), log_in(web, &[]));
+    assert_ne!(one, two);
+    assert_eq!(
+        (list(&[("Cookie", &one)]), list(&[("Cookie", &two)])),
+        (200, 200)
+    );
+    let out = request(web, "POST", "/logout", &[("Cookie", &one)], b"");
+    assert_eq!(out.code, 204);
+    assert!(out.header("set-cookie").unwrap().contains("Max-Age=0"));
+    assert_eq!(list(&[("Cookie", &one)]), 401, "the old cookie is revoked");
+    assert_eq!(list(&[("Cookie", &two)]), 200);
+
+    // The cookie lasts 12 hours; `Secure` when the page came over HTTPS through a proxy.
+    let right = format!("Bearer {TOKEN}");
+    let plain = request(web, "POST", "/login", &[("Authorization", &right)], b"");
+    let plain = plain.header("set-cookie").unwrap().to_string();
+    assert!(
+        plain.contains("Max-Age=43200") && !plain.contains("Secure"),
+        "{plain}"
+    );
+    let proxied = request(
+        web,
+        "POST",
+        "/login",
+        &[("Authorization", &right), ("X-Forwarded-Proto", "https")],
+        b"",
+    );
+    assert!(proxied.header("set-cookie").unwrap().contains("; Secure"));
+
+    // Wrong tokens: four cost nothing, the fifth closes this address for 1 s, during
+    // which even the right token is refused unread; the next wrong one closes it for 2 s.
+    let wrong = |path: &str| {
+        let headers = [("Authorization", "Bearer wrong-wrong-wrong")];
+        request(web, "POST", path, &headers, b"{}")
+    };
+    for path in [
+        "/login",
+        "/api/v1/ListCampaigns",
+        "/login",
+        "/login",
+        "/login",
+    ] {
+        assert_eq!(wrong(path).code, 401);
+    }
+    for path in ["/login", "/api/v1/ListCampaigns"] {
+        let closed = request(web, "POST", path, &[("Authorization", &right)], b"{}");
+        assert_eq!(closed.code, 429, "{}", closed.body);
+        assert_eq!(closed.header("retry-after"), Some("1"));
+        assert!(
+            closed.body.contains("too many wrong tokens"),
+            "{}",
+            closed.body
+        );
+    }
+    assert_eq!(
+        list(&[("Cookie", &two)]),
+        200,
+        "a session is not a token: it passes"
+    );
+    std::thread::sleep(std::time::Duration::from_millis(1100));
+    assert_eq!(wrong("/login").code, 401);
+    let closed = wrong("/login");
+    assert_eq!(
+        (closed.code, closed.header("retry-after")),
+        (429, Some("2"))
+    );
+    std::thread::sleep(std::time::Duration::from_millis(2100));
+    // The right token opens the address again.
+    let three = log_in(web, &[]);
+    for _ in 0..4 {
+        assert_eq!(wrong("/login").code, 401, "counted afresh");
+    }
+    assert_eq!(list(&[("Cookie", &three)]), 200);
 }
 
 #[test]

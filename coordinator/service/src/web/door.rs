@@ -11,19 +11,24 @@
 //!   (curl, the Python client) send neither header and pass.
 //! - **Login** (`/api/`, `/ui/`, on a server with a token): the cluster's bearer token in
 //!   `authorization: Bearer …`, or the session cookie `/login` sets after checking that
-//!   token. The cookie holds a key drawn at random when the server starts, never the token;
-//!   it is `HttpOnly` (no script reads it) and `SameSite=Strict`, and the same-origin check
-//!   above keeps other pages from using it. Without a token everything passes (`calib ui`
-//!   on its own machine). The page itself (`/`, `/js/…`, `/app.css`) needs no login.
+//!   token. The cookie holds a session key drawn for that login, never the token, kept on
+//!   the server until it expires or `/logout` revokes it ([`super::login`]); it is
+//!   `HttpOnly` (no script reads it), `SameSite=Strict`, `Secure` when the page came over
+//!   HTTPS (through a proxy), and the same-origin check above keeps other pages from using
+//!   it. Wrong tokens are throttled per client address ([`super::login::Throttle`]).
+//!   Without a token everything passes (`calib ui` on its own machine). The page itself
+//!   (`/`, `/js/…`, `/app.css`) needs no login.
 
+use super::login::{Sessions, Throttle, SESSION_LIFETIME};
 use super::ApiError;
-use axum::extract::{Request, State};
+use axum::extract::{ConnectInfo, Request, State};
 use axum::http::{header, HeaderMap, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use calib_security::Token;
-use std::net::{IpAddr, SocketAddr};
-use std::sync::Arc;
+use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 use tonic::Status;
 
 /// Who may come in: names besides the bound address, and the token when there is one.
@@ -58,10 +63,10 @@ pub struct Door {
     bound: SocketAddr,
     allow_hosts: Vec<String>,
     token: Option<Token>,
-    /// The session cookie's value, drawn when the server starts, and the same as a token
-    /// to compare in constant time.
-    session_key: String,
-    session: Token,
+    /// The sessions logins opened.
+    sessions: Mutex<Sessions>,
+    /// Wrong tokens per client address.
+    throttle: Mutex<Throttle>,
     cookie: String,
 }
 
@@ -70,29 +75,50 @@ struct Refusal(Status);
 
 impl IntoResponse for Refusal {
     fn into_response(self) -> Response {
-        let unauthenticated = self.0.code() == tonic::Code::Unauthenticated;
+        let code = self.0.code();
+        let retry = self
+            .0
+            .metadata()
+            .get("retry-after")
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| header::HeaderValue::from_str(v).ok());
         let mut response = ApiError::from(self.0).into_response();
-        if unauthenticated {
+        if code == tonic::Code::Unauthenticated {
             response.headers_mut().insert(
                 header::WWW_AUTHENTICATE,
                 header::HeaderValue::from_static("Bearer"),
             );
         }
+        if let Some(seconds) = retry {
+            response.headers_mut().insert(header::RETRY_AFTER, seconds);
+        }
         response
     }
 }
 
+/// The address a request came from (unspecified when the server was not told).
+fn client(request: &Request) -> IpAddr {
+    request
+        .extensions()
+        .get::<ConnectInfo<SocketAddr>>()
+        .map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |c| c.0.ip())
+}
+
+/// Whether a token was presented, and whether it was the server's.
+enum Presented {
+    Nothing,
+    Right,
+    Wrong,
+}
+
 impl Door {
     pub fn new(config: DoorConfig, bound: SocketAddr) -> Self {
-        let key: [u8; 32] = rand::random();
-        let session_key = calib_engine::store::hex(&key);
-        let session = Token::new(&session_key).expect("hex is visible ASCII");
         Self {
-            session_key,
             bound,
             allow_hosts: config.allow_hosts,
             token: config.token,
-            session,
+            sessions: Mutex::default(),
+            throttle: Mutex::default(),
             // One name per port: browsers share cookies between the ports of a host.
             cookie: format!("calib_session_{}", bound.port()),
         }
@@ -107,13 +133,40 @@ impl Door {
         if guarded || path == "/login" || path == "/logout" {
             same_origin(headers, &host)?;
         }
-        if guarded && !self.signed_in(headers) {
-            return Err(Refusal(Status::unauthenticated(
+        if !guarded || self.token.is_none() || self.has_session(headers) {
+            return Ok(());
+        }
+        match self.check_bearer(headers, client(request))? {
+            Presented::Right => Ok(()),
+            Presented::Nothing | Presented::Wrong => Err(Refusal(Status::unauthenticated(
                 "this server requires the cluster's token: sign in on the page, or send \
                  `authorization: Bearer <token>`",
-            )));
+            ))),
         }
-        Ok(())
+    }
+
+    /// The bearer token `headers` present, judged: refused unread while `address` is closed
+    /// for its wrong tokens, and counted for or against it.
+    fn check_bearer(&self, headers: &HeaderMap, address: IpAddr) -> Result<Presented, Refusal> {
+        let Some(token) = &self.token else {
+            return Ok(Presented::Right);
+        };
+        let Some(value) = headers.get(header::AUTHORIZATION) else {
+            return Ok(Presented::Nothing);
+        };
+        let now = Instant::now();
+        let mut throttle = self.throttle.lock().expect("throttle lock");
+        if let Some(wait) = throttle.closed(address, now) {
+            return Err(too_many(wait));
+        }
+        if token.matches(calib_security::token::bearer(value.as_bytes())) {
+            throttle.succeeded(address);
+            return Ok(Presented::Right);
+        }
+        let closed = throttle.failed(address, now);
+        drop(throttle);
+        tracing::warn!(%address, closed_for_s = closed.map_or(0, |d| d.as_secs()), "web request with a wrong token");
+        Ok(Presented::Wrong)
     }
 
     /// The request's `Host`, if it names this server.
@@ -164,33 +217,64 @@ impl Door {
         ip == self.bound.ip() || ip.is_loopback() || self.bound.ip().is_unspecified()
     }
 
-    /// True when the server has no token, or the request presents it or the session.
-    fn signed_in(&self, headers: &HeaderMap) -> bool {
-        let Some(token) = &self.token else {
-            return true;
-        };
-        let bearer = headers
-            .get(header::AUTHORIZATION)
-            .is_some_and(|value| token.matches(calib_security::token::bearer(value.as_bytes())));
-        bearer || self.has_session(headers)
-    }
-
-    fn has_session(&self, headers: &HeaderMap) -> bool {
+    /// The session keys the request's cookies hold under this server's cookie name.
+    fn session_keys<'h>(&self, headers: &'h HeaderMap) -> impl Iterator<Item = &'h str> + 'h {
+        let name = self.cookie.clone();
         headers
             .get_all(header::COOKIE)
             .iter()
             .filter_map(|value| value.to_str().ok())
             .flat_map(|value| value.split(';'))
             .filter_map(|pair| pair.trim().split_once('='))
-            .any(|(name, value)| name == self.cookie && self.session.matches(value.as_bytes()))
+            .filter(move |(n, _)| *n == name)
+            .map(|(_, value)| value)
     }
 
-    fn session_cookie(&self) -> String {
+    /// Whether the request holds a session this server keeps.
+    fn has_session(&self, headers: &HeaderMap) -> bool {
+        let now = Instant::now();
+        let sessions = self.sessions.lock().expect("sessions lock");
+        self.session_keys(headers).any(|k| sessions.valid(k, now))
+    }
+
+    /// A new session's cookie; `Secure` when the page that asked came over HTTPS.
+    fn session_cookie(&self, secure: bool) -> String {
+        let key = self
+            .sessions
+            .lock()
+            .expect("sessions lock")
+            .open(Instant::now());
         format!(
-            "{}={}; HttpOnly; SameSite=Strict; Path=/",
-            self.cookie, self.session_key
+            "{}={key}; HttpOnly; SameSite=Strict; Path=/; Max-Age={}{}",
+            self.cookie,
+            SESSION_LIFETIME.as_secs(),
+            if secure { "; Secure" } else { "" }
         )
     }
+}
+
+/// 429 for an address closed for `wait` more.
+fn too_many(wait: Duration) -> Refusal {
+    let seconds = wait.as_secs() + u64::from(wait.subsec_nanos() > 0);
+    let mut status = Status::resource_exhausted(format!(
+        "too many wrong tokens from this address: try again in {seconds} s"
+    ));
+    if let Ok(value) = seconds.to_string().parse() {
+        status.metadata_mut().insert("retry-after", value);
+    }
+    Refusal(status)
+}
+
+/// Whether the page asking came over HTTPS (a TLS proxy in front of the app): its `Origin`,
+/// or the proxy's `X-Forwarded-Proto`.
+fn over_https(headers: &HeaderMap) -> bool {
+    let says = |name: &str, https: &str| {
+        headers
+            .get(name)
+            .and_then(|v| v.to_str().ok())
+            .is_some_and(|v| v.to_ascii_lowercase().starts_with(https))
+    };
+    says("origin", "https://") || says("x-forwarded-proto", "https")
 }
 
 /// `name` and `port` of a Host header (`name`, `name:port`, `[v6]`, `[v6]:port`).
@@ -259,7 +343,7 @@ pub async fn guard(State(door): State<Arc<Door>>, request: Request, next: Next) 
 pub async fn login_state(State(door): State<Arc<Door>>, headers: HeaderMap) -> Response {
     let state = serde_json::json!({
         "required": door.token.is_some(),
-        "signed_in": door.signed_in(&headers),
+        "signed_in": door.token.is_none() || door.has_session(&headers),
     });
     (
         [(header::CONTENT_TYPE, "application/json")],
@@ -268,28 +352,35 @@ pub async fn login_state(State(door): State<Arc<Door>>, headers: HeaderMap) -> R
         .into_response()
 }
 
-/// `POST /login` with `authorization: Bearer <token>`: the session cookie when the token
-/// is the server's (compared in constant time), 401 otherwise.
-pub async fn login(State(door): State<Arc<Door>>, headers: HeaderMap) -> Response {
-    let Some(token) = &door.token else {
+/// `POST /login` with `authorization: Bearer <token>`: a new session's cookie when the
+/// token is the server's (compared in constant time), 401 otherwise, and 429 while the
+/// client's address is closed for its wrong tokens.
+pub async fn login(State(door): State<Arc<Door>>, request: Request) -> Response {
+    if door.token.is_none() {
         return StatusCode::NO_CONTENT.into_response();
-    };
-    let presented = headers
-        .get(header::AUTHORIZATION)
-        .map(|value| calib_security::token::bearer(value.as_bytes()));
-    if !presented.is_some_and(|p| token.matches(p)) {
-        tracing::warn!("web login refused: wrong token");
-        return Refusal(Status::unauthenticated("the token is not this server's")).into_response();
     }
-    (
-        StatusCode::NO_CONTENT,
-        [(header::SET_COOKIE, door.session_cookie())],
-    )
-        .into_response()
+    let headers = request.headers();
+    match door.check_bearer(headers, client(&request)) {
+        Err(refusal) => refusal.into_response(),
+        Ok(Presented::Right) => (
+            StatusCode::NO_CONTENT,
+            [(header::SET_COOKIE, door.session_cookie(over_https(headers)))],
+        )
+            .into_response(),
+        Ok(Presented::Nothing | Presented::Wrong) => {
+            Refusal(Status::unauthenticated("the token is not this server's")).into_response()
+        }
+    }
 }
 
-/// `POST /logout`: forget the session cookie in this browser.
-pub async fn logout(State(door): State<Arc<Door>>) -> Response {
+/// `POST /logout`: end the session the browser holds, on the server and in the browser.
+pub async fn logout(State(door): State<Arc<Door>>, headers: HeaderMap) -> Response {
+    {
+        let mut sessions = door.sessions.lock().expect("sessions lock");
+        for key in door.session_keys(&headers) {
+            sessions.revoke(key);
+        }
+    }
     (
         StatusCode::NO_CONTENT,
         [(

@@ -23,6 +23,7 @@ pub mod door;
 #[cfg(test)]
 mod fuzz;
 pub mod local;
+pub mod login;
 pub mod plots;
 #[cfg(test)]
 mod readable;
@@ -176,7 +177,9 @@ pub async fn serve(
     router: Router,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    axum::serve(listener, router)
+    // The client's address reaches the door, which throttles wrong tokens by it.
+    let service = router.into_make_service_with_connect_info::<std::net::SocketAddr>();
+    axum::serve(listener, service)
         .with_graceful_shutdown(shutdown)
         .await
 }
