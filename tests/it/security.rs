@@ -419,31 +419,6 @@ fn a_bad_certificate_or_key_file_is_named() {
     assert!(stderr.contains(garbage.to_str().unwrap()), "{stderr}");
 }
 
-/// A `calib` server process of `args` whose first line of standard output is
-/// `<prefix><address>`; the process and that address.
-fn spawn_server(args: &[&str], prefix: &str, stderr: &Path) -> (std::process::Child, String) {
-    use std::io::{BufRead, BufReader};
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_calib"))
-        .args(args)
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::fs::File::create(stderr).unwrap())
-        .spawn()
-        .unwrap();
-    let mut line = String::new();
-    BufReader::new(child.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let address = line
-        .trim()
-        .strip_prefix(prefix)
-        .unwrap_or_else(|| panic!("unexpected first line: {line}"))
-        .split_whitespace()
-        .next()
-        .unwrap()
-        .to_string();
-    (child, address)
-}
-
 /// Trials of [`a_tls_coordinator_outlives_its_workers`].
 const WORKER_EXITS: usize = 50;
 

@@ -932,3 +932,59 @@ fn reflection_describes_every_listed_service_in_both_versions() {
         coordinator.shutdown().await;
     });
 }
+
+#[test]
+fn answers_larger_than_one_message_are_refused_before_anything_is_simulated() {
+    let worker = TestWorker::start(1, 16);
+    runtime().block_on(async {
+        let mut c = client(&worker).await;
+        // 10,000 points with the residuals of 2,001 samples: 20 million numbers.
+        let mut evaluate = evaluate_request(10_000);
+        let times = grid(20.0, 0.01);
+        let column = proto::Column {
+            values: vec![0.0; times.len()],
+        };
+        evaluate.measurement = Some(proto::Measurement {
+            times,
+            columns: vec![column],
+            inputs: vec![],
+        });
+        evaluate.measurement_hash.clear();
+        evaluate.points = vec![proto::Point { values: vec![0.01] }; 10_000];
+        evaluate.residuals = true;
+        let status = c.evaluate(evaluate.clone()).await.unwrap_err();
+        assert_eq!(status.code(), Code::InvalidArgument, "{status:?}");
+        assert!(
+            status
+                .message()
+                .starts_with("points: the answer would carry 10000 × 2001")
+                && status.message().contains("ask for at most 3668 at once"),
+            "{}",
+            status.message()
+        );
+        // Without residuals the same request is a few numbers per point: answered.
+        evaluate.residuals = false;
+        evaluate.points.truncate(3);
+        assert_eq!(
+            c.evaluate(evaluate)
+                .await
+                .unwrap()
+                .into_inner()
+                .results
+                .len(),
+            3
+        );
+
+        let status = c
+            .status(proto::StatusRequest {
+                protocol_version: V,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(
+            status.simulations, 3,
+            "only the three points answered were simulated"
+        );
+    });
+}

@@ -6,6 +6,16 @@ use std::ops::RangeInclusive;
 
 /// Largest gRPC message accepted or sent [bytes].
 pub const MAX_MESSAGE_BYTES: usize = 64 << 20;
+/// Most numbers one answer carries (56 MiB of doubles, the rest of [`MAX_MESSAGE_BYTES`] for
+/// names, counts and failures): a `Simulate` answer's times and series, an `Evaluate`
+/// answer's residuals. A request whose answer would hold more is refused before anything
+/// is simulated.
+pub const MAX_ANSWER_VALUES: usize = 7 << 20;
+/// Most numbers of one record as a worker receives it (48 MiB of doubles): the times in
+/// the window, each compared column, and each driving input's times and values. A campaign
+/// whose record holds more is refused where it is checked (`calib calibrate`, submit), so
+/// that what runs locally also runs on workers.
+pub const MAX_RECORD_VALUES: usize = 6 << 20;
 /// Most times in one output grid.
 pub const MAX_TIMES: usize = 500_000;
 /// Most points in one Evaluate request.

@@ -81,6 +81,11 @@ pub trait Evaluator: Send + Sync {
     fn has_room(&self) -> bool {
         true
     }
+
+    /// The work on `objective` is over (its campaign ended): what the evaluator keeps to
+    /// evaluate it (its record in the form workers take it, say) may go. A hint: a later
+    /// batch of it is still answered.
+    fn release(&self, _objective: &Objective) {}
 }
 
 impl<E: Evaluator + ?Sized> Evaluator for &E {
@@ -94,6 +99,10 @@ impl<E: Evaluator + ?Sized> Evaluator for &E {
 
     fn has_room(&self) -> bool {
         (**self).has_room()
+    }
+
+    fn release(&self, objective: &Objective) {
+        (**self).release(objective)
     }
 }
 

@@ -13,7 +13,7 @@ use crate::campaign::{Campaign, CampaignError, Experiment, OutputScale};
 use crate::measurement::Measurement;
 use calib_worker::content_hash::ContentHasher;
 use calib_worker::inputs::{InputSignal, Inputs};
-use calib_worker::limits::MAX_TIMES;
+use calib_worker::limits::{MAX_RECORD_VALUES, MAX_TIMES};
 use calib_worker::scoring::{self, Target};
 use calib_worker::{Model, SimulationError, SolverOptions};
 
@@ -107,6 +107,7 @@ impl Objective {
             stop.max(experiment.stop_time),
             place,
         )?;
+        record_fits(campaign, place, &grid, measured.len(), &inputs)?;
         let mut objective = Self {
             model: campaign.model,
             name: experiment.name.clone(),
@@ -439,6 +440,45 @@ fn driving_inputs(
         });
     }
     Ok(Inputs { signals })
+}
+
+/// Refuses a record (its `grid` in the windows, `columns` compared columns and `inputs`)
+/// whose numbers are more than one request to a worker carries.
+fn record_fits(
+    campaign: &Campaign,
+    place: &str,
+    grid: &[f64],
+    columns: usize,
+    inputs: &Inputs,
+) -> Result<(), CampaignError> {
+    let compared = grid.len() * (1 + columns);
+    let driving: usize = inputs.signals.iter().map(|s| 2 * s.times.len()).sum();
+    if compared + driving <= MAX_RECORD_VALUES {
+        return Ok(());
+    }
+    let (field, what) = if driving > 0 {
+        (
+            "inputs",
+            format!(
+                "; the inputs' {driving} (their times and values): resample them (a set \
+                 point held between changes needs a sample per change, with \
+                 `interpolation = \"hold\"`)"
+            ),
+        )
+    } else {
+        ("window", "; narrow the window".to_string())
+    };
+    Err(field_error(
+        campaign,
+        place,
+        field,
+        format!(
+            "the record holds {} numbers, more than the {MAX_RECORD_VALUES} one request to \
+             a worker carries: {compared} compared (times and {columns} columns in the \
+             window){what}",
+            compared + driving
+        ),
+    ))
 }
 
 /// The rows of the measurement inside the experiment's windows: at least two, at most what

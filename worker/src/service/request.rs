@@ -201,7 +201,7 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
         let info = model.info();
         let params = parameter_vector(info, &r.parameters)?;
         check_times(&r.times, "times")?;
-        let outputs = if r.outputs.is_empty() {
+        let outputs: Vec<usize> = if r.outputs.is_empty() {
             (0..info.outputs.len()).collect()
         } else {
             r.outputs
@@ -210,6 +210,7 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
                 .map(|(i, name)| output_index(info, name, &format!("outputs[{i}]")))
                 .collect::<Result<_>>()?
         };
+        answer_fits("outputs", r.times.len(), 1 + outputs.len())?;
         let solver = solver_options(model, r.solver)?;
         let named = named_signals(r.inputs, "inputs")?;
         let stop = r.times[r.times.len() - 1];
@@ -223,6 +224,25 @@ impl TryFrom<proto::SimulateRequest> for Simulation {
             inputs,
         })
     }
+}
+
+/// Refuses a request whose answer would carry `count` × `each` numbers, more than
+/// [`limits::MAX_ANSWER_VALUES`]: `field` is what to ask less of.
+pub fn answer_fits(field: &str, count: usize, each: usize) -> Result<()> {
+    let total = count.saturating_mul(each);
+    if total <= limits::MAX_ANSWER_VALUES {
+        return Ok(());
+    }
+    let most = limits::MAX_ANSWER_VALUES / each.max(1);
+    Err(Error::invalid(
+        field,
+        format!(
+            "the answer would carry {count} × {each} = {total} numbers, more than the {} one \
+             answer holds ({} MiB); ask for at most {most} at once",
+            limits::MAX_ANSWER_VALUES,
+            (limits::MAX_ANSWER_VALUES * 8) >> 20
+        ),
+    ))
 }
 
 /// Measured series on their grid, as shipped by a client.
@@ -447,6 +467,22 @@ mod tests {
             inputs: vec![],
             effects: vec![],
         }
+    }
+
+    #[test]
+    fn an_answer_is_refused_beyond_the_numbers_one_message_holds() {
+        assert!(answer_fits("outputs", 500_000, 11).is_ok());
+        assert!(answer_fits("points", 3668, 2001).is_ok());
+        let e = answer_fits("points", 3669, 2001).unwrap_err().to_string();
+        assert!(
+            e.starts_with("points: the answer would carry 3669 × 2001 = 7341669 numbers")
+                && e.ends_with("ask for at most 3668 at once"),
+            "{e}"
+        );
+        assert!(
+            answer_fits("outputs", usize::MAX, 3).is_err(),
+            "no overflow"
+        );
     }
 
     #[test]

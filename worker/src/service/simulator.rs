@@ -175,6 +175,10 @@ impl SimulatorService {
             "measurement.inputs",
         )?);
         let count = evaluation.points.len();
+        if evaluation.residuals {
+            let each = measured.times.len() * evaluation.outputs.len();
+            super::request::answer_fits("points", count, each)?;
+        }
         let admission = self.pool.admit(count)?;
         let evaluation = Arc::new(evaluation);
         let outcomes = {

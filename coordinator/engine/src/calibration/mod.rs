@@ -250,6 +250,7 @@ fn calibrate_measured<E: Evaluator>(
     tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
     let (outcome, stats, error) = StoredEvaluator::with(evaluator, store, |evaluator| {
         let outcome = search(campaign, &objective, evaluator, progress);
+        evaluator.release(&objective);
         (outcome, evaluator.stats(), evaluator.error())
     });
     if let Some(e) = error {

@@ -65,6 +65,10 @@ impl<E: Evaluator + Simulator> Evaluator for StoredEngine<'_, E> {
     fn has_room(&self) -> bool {
         self.evaluator.has_room()
     }
+
+    fn release(&self, objective: &Objective) {
+        self.evaluator.release(objective)
+    }
 }
 
 impl<E: Evaluator + Simulator> Simulator for StoredEngine<'_, E> {

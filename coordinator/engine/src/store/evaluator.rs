@@ -193,6 +193,10 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
     fn has_room(&self) -> bool {
         self.inner.has_room()
     }
+
+    fn release(&self, objective: &Objective) {
+        self.inner.release(objective)
+    }
 }
 
 /// One caller's points and where to answer.

@@ -20,6 +20,7 @@
 
 mod batch_log;
 mod damage;
+mod dataset_files;
 mod dispatcher;
 pub mod encoding;
 pub mod engine;

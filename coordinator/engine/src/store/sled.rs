@@ -15,6 +15,7 @@
 
 use super::batch_log::BatchLog;
 use super::damage::{self, guarded};
+use super::dataset_files::DatasetFiles;
 use super::encoding::{self, LAYOUT_VERSION};
 use super::key_filter::KeyFilter;
 use super::{
@@ -40,7 +41,9 @@ pub struct SledStore {
     evaluations: sled::Tree,
     batches: BatchLog,
     campaigns: sled::Tree,
+    /// Datasets of stores written before they were files: read, never written.
     datasets: sled::Tree,
+    dataset_files: DatasetFiles,
     meta: sled::Tree,
     /// Which keys `evaluations` may hold: new points skip the lookup in sled.
     evaluation_keys: KeyFilter,
@@ -83,19 +86,23 @@ impl SledStore {
             path: path.to_path_buf(),
             message,
         };
-        let db = sled::Config::new().path(path).open().map_err(|e| match e {
-            sled::Error::Io(io)
-                if io.kind() == std::io::ErrorKind::WouldBlock
-                    || io.to_string().contains("acquire lock") =>
-            {
-                open_error(
-                    "it is in use by another process (one calib process per store at a time)"
-                        .into(),
-                )
-            }
-            e @ sled::Error::Corruption { .. } => damage::damaged(path, &e.to_string()),
-            e => open_error(e.to_string()),
-        })?;
+        let db = sled::Config::new()
+            .path(path)
+            .cache_capacity(64 << 20)
+            .open()
+            .map_err(|e| match e {
+                sled::Error::Io(io)
+                    if io.kind() == std::io::ErrorKind::WouldBlock
+                        || io.to_string().contains("acquire lock") =>
+                {
+                    open_error(
+                        "it is in use by another process (one calib process per store at a time)"
+                            .into(),
+                    )
+                }
+                e @ sled::Error::Corruption { .. } => damage::damaged(path, &e.to_string()),
+                e => open_error(e.to_string()),
+            })?;
         let tree = |name: &str| db.open_tree(name).map_err(|e| open_error(e.to_string()));
         let evaluations = tree(Collection::Evaluations.name())?;
         let evaluation_keys = KeyFilter::build(evaluations.clone());
@@ -105,6 +112,7 @@ impl SledStore {
             evaluation_keys,
             campaigns: tree(Collection::Campaigns.name())?,
             datasets: tree(Collection::Datasets.name())?,
+            dataset_files: DatasetFiles::open(path)?,
             meta: tree("meta")?,
             path: path.to_path_buf(),
             db,
@@ -141,6 +149,15 @@ impl SledStore {
 
     pub fn path(&self) -> &Path {
         &self.path
+    }
+
+    /// Dataset files whose dataset the `datasets` tree does not also hold.
+    fn file_only_datasets(&self) -> Result<u64, StoreError> {
+        let mut n = 0;
+        for hash in self.dataset_files.hashes()? {
+            n += u64::from(!self.datasets.contains_key(hash)?);
+        }
+        Ok(n)
     }
 
     /// Flushes (fsyncs) made so far by this process.
@@ -325,13 +342,16 @@ impl Store for SledStore {
     }
 
     fn put_dataset(&self, hash: &DatasetHash, bytes: &[u8]) -> Result<(), StoreError> {
-        self.guard(|| {
-            self.datasets.insert(&hash[..], bytes)?;
-            self.make_durable()
-        })
+        if self.guard(|| Ok(self.datasets.contains_key(hash)?))? {
+            return Ok(());
+        }
+        self.dataset_files.put(hash, bytes)
     }
 
     fn dataset(&self, hash: &DatasetHash) -> Result<Option<Vec<u8>>, StoreError> {
+        if let Some(bytes) = self.dataset_files.get(hash)? {
+            return Ok(Some(bytes));
+        }
         self.guard(|| Ok(self.datasets.get(hash)?.map(|v| v.to_vec())))
     }
 
@@ -357,11 +377,27 @@ impl Store for SledStore {
                 );
                 entries.sort_unstable_by(|a, b| a.0.cmp(&b.0));
             }
+            if collection == Collection::Datasets {
+                let kept: std::collections::HashSet<Vec<u8>> =
+                    entries.iter().map(|(k, _)| k.clone()).collect();
+                let files = self.dataset_files.entries()?.into_iter();
+                entries.extend(files.filter(|(k, _)| !kept.contains(k)));
+                entries.sort_unstable_by(|a, b| a.0.cmp(&b.0));
+            }
             Ok(entries)
         })
     }
 
     fn put_raw(&self, collection: Collection, entries: &[RawEntry]) -> Result<(), StoreError> {
+        if collection == Collection::Datasets {
+            for (k, v) in entries {
+                let hash: DatasetHash = k[..]
+                    .try_into()
+                    .map_err(|_| StoreError::Corrupt("dataset hash is not 32 bytes".into()))?;
+                self.put_dataset(&hash, v)?;
+            }
+            return Ok(());
+        }
         self.guard(|| {
             if collection == Collection::Evaluations {
                 self.evaluation_keys
@@ -381,7 +417,7 @@ impl Store for SledStore {
             Ok(StoreStats {
                 evaluations: self.evaluations.len() as u64 + self.batched_only()?,
                 campaigns: self.campaigns.len() as u64,
-                datasets: self.datasets.len() as u64,
+                datasets: self.datasets.len() as u64 + self.file_only_datasets()?,
                 bytes: self.db.size_on_disk()?,
                 hits: self.counter(HITS_KEY)? + self.pending_hits.load(Ordering::Relaxed),
                 misses: self.counter(MISSES_KEY)? + self.pending_misses.load(Ordering::Relaxed),

@@ -1026,3 +1026,50 @@ fn a_second_round_travels_only_where_there_is_room_and_never_a_third() {
         }
     }
 }
+
+/// Datasets are files beside sled's (not values sled would keep in its cache); those a
+/// store of an earlier calib keeps in its `datasets` tree are still read, listed once,
+/// exported and counted.
+#[test]
+fn datasets_are_files_beside_the_database_and_those_in_the_tree_are_still_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let (old, new) = ([4u8; 32], [5u8; 32]);
+    {
+        let db = ::sled::open(dir.path()).unwrap();
+        db.open_tree("datasets")
+            .unwrap()
+            .insert(old, &b"old"[..])
+            .unwrap();
+        db.flush().unwrap();
+    }
+    {
+        let store = SledStore::open(dir.path()).unwrap();
+        store.put_dataset(&new, b"new").unwrap();
+        store.put_dataset(&old, b"old").unwrap();
+    }
+    let file = dir.path().join("datasets").join(hex(&new));
+    assert_eq!(std::fs::read(&file).unwrap(), b"new");
+    assert!(
+        !dir.path().join("datasets").join(hex(&old)).exists(),
+        "kept in its tree"
+    );
+    let store = SledStore::open(dir.path()).unwrap();
+    assert_eq!(store.dataset(&new).unwrap().as_deref(), Some(&b"new"[..]));
+    assert_eq!(store.dataset(&old).unwrap().as_deref(), Some(&b"old"[..]));
+    assert_eq!(store.dataset(&[6u8; 32]).unwrap(), None);
+    assert_eq!(store.stats().unwrap().datasets, 2);
+    let listed = store.raw_entries(Collection::Datasets).unwrap();
+    assert_eq!(
+        listed,
+        [
+            (old.to_vec(), b"old".to_vec()),
+            (new.to_vec(), b"new".to_vec())
+        ]
+    );
+    // Imported into another store: files there too.
+    let other = tempfile::tempdir().unwrap();
+    let copy = SledStore::open(other.path()).unwrap();
+    copy.put_raw(Collection::Datasets, &listed).unwrap();
+    assert!(other.path().join("datasets").join(hex(&old)).exists());
+    assert_eq!(copy.stats().unwrap().datasets, 2);
+}

@@ -136,6 +136,29 @@ impl WireObjective {
         }
     }
 
+    /// Numbers of the record it carries to workers.
+    pub fn record_values(&self) -> usize {
+        let m = &self.measurement;
+        let columns: usize = m.columns.iter().map(|c| c.values.len()).sum();
+        let inputs: usize = m
+            .inputs
+            .iter()
+            .map(|i| i.times.len() + i.values.len())
+            .sum();
+        m.times.len() + columns + inputs
+    }
+
+    /// Most points one `Evaluate` request may carry: the worker's bound, and with residuals
+    /// as many as one answer holds.
+    pub fn points_per_request(&self) -> usize {
+        let most = calib_worker::limits::MAX_POINTS;
+        if !self.template.residuals {
+            return most;
+        }
+        let each = self.measurement.times.len() * self.outputs;
+        (calib_worker::limits::MAX_ANSWER_VALUES / each.max(1)).clamp(1, most)
+    }
+
     /// The values of `point` this experiment's free parameters take.
     pub fn project(&self, point: Vec<f64>) -> Vec<f64> {
         if self.uses.len() == point.len() {

@@ -36,7 +36,7 @@ pub struct GrpcEvaluator {
     pool: Arc<WorkerPool>,
     runtime: Handle,
     /// Objectives already put in wire form, by fingerprint.
-    wire: Mutex<HashMap<[u8; 32], Arc<WireObjective>>>,
+    wire: Mutex<WireCache>,
     /// The experiments of objectives of several, each as an objective of its own, by the
     /// whole objective's fingerprint (split once, not per batch).
     parts: Mutex<HashMap<[u8; 32], Arc<Vec<Objective>>>>,
@@ -48,7 +48,7 @@ impl GrpcEvaluator {
         Self {
             pool,
             runtime,
-            wire: Mutex::new(HashMap::new()),
+            wire: Mutex::new(WireCache::default()),
             parts: Mutex::new(HashMap::new()),
         }
     }
@@ -58,10 +58,58 @@ impl GrpcEvaluator {
     }
 
     fn wire(&self, objective: &Objective) -> Arc<WireObjective> {
-        let mut wire = self.wire.lock().expect("wire lock");
-        wire.entry(objective.fingerprint())
-            .or_insert_with(|| Arc::new(WireObjective::new(objective)))
-            .clone()
+        self.wire.lock().expect("wire lock").get(objective)
+    }
+}
+
+/// Objectives in wire form, most recently used kept: at most [`WIRE_CACHE_VALUES`] numbers
+/// of records and [`WIRE_CACHE_ENTRIES`] objectives, and an objective's entries dropped when
+/// its work ends ([`Evaluator::release`]).
+#[derive(Default)]
+struct WireCache {
+    entries: HashMap<[u8; 32], (Arc<WireObjective>, u64)>,
+    /// Numbers of the records held.
+    values: usize,
+    /// Uses so far: the last use of each entry orders them.
+    tick: u64,
+}
+
+/// Most numbers of records the wire cache holds (two of the largest records a campaign may
+/// have, about 100 MB).
+pub const WIRE_CACHE_VALUES: usize = 2 * calib_worker::limits::MAX_RECORD_VALUES;
+
+/// Most objectives the wire cache holds.
+pub const WIRE_CACHE_ENTRIES: usize = 64;
+
+impl WireCache {
+    fn get(&mut self, objective: &Objective) -> Arc<WireObjective> {
+        self.tick += 1;
+        let key = objective.fingerprint();
+        if let Some((wire, used)) = self.entries.get_mut(&key) {
+            *used = self.tick;
+            return wire.clone();
+        }
+        let wire = Arc::new(WireObjective::new(objective));
+        self.values += wire.record_values();
+        self.entries.insert(key, (wire.clone(), self.tick));
+        while self.entries.len() > 1
+            && (self.values > WIRE_CACHE_VALUES || self.entries.len() > WIRE_CACHE_ENTRIES)
+        {
+            let oldest = self
+                .entries
+                .iter()
+                .min_by_key(|(_, (_, used))| *used)
+                .map(|(k, _)| *k)
+                .expect("not empty");
+            self.remove(&oldest);
+        }
+        wire
+    }
+
+    fn remove(&mut self, key: &[u8; 32]) {
+        if let Some((wire, _)) = self.entries.remove(key) {
+            self.values -= wire.record_values();
+        }
     }
 }
 
@@ -123,6 +171,24 @@ impl Evaluator for GrpcEvaluator {
     fn has_room(&self) -> bool {
         self.pool.has_room()
     }
+
+    /// Drop the wire forms of `objective`, with residuals and without, and of its parts.
+    fn release(&self, objective: &Objective) {
+        let parts = self
+            .parts
+            .lock()
+            .expect("parts lock")
+            .remove(&objective.fingerprint());
+        let mut wire = self.wire.lock().expect("wire lock");
+        let mut forget = |o: &Objective| {
+            wire.remove(&o.fingerprint());
+            wire.remove(&o.with_residuals().fingerprint());
+        };
+        forget(objective);
+        for part in parts.iter().flat_map(|p| p.iter()) {
+            forget(part);
+        }
+    }
 }
 
 impl Simulator for GrpcEvaluator {
@@ -177,7 +243,17 @@ impl Work for WireObjective {
         points: Vec<Vec<f64>>,
         deadline: Duration,
     ) -> Result<Vec<Evaluation>, WorkerError> {
-        client.evaluate(&self, points, deadline).await
+        let most = self.points_per_request();
+        if points.len() <= most {
+            return client.evaluate(&self, points, deadline).await;
+        }
+        // Answers that would not fit one message (residuals of a long record) come in
+        // several, one after another.
+        let mut answers = Vec::with_capacity(points.len());
+        for part in points.chunks(most) {
+            answers.extend(client.evaluate(&self, part.to_vec(), deadline).await?);
+        }
+        Ok(answers)
     }
 }
 
