@@ -398,6 +398,53 @@ fn kill_descendants() {
     }
 }
 
+/// The FMU's process, after each simulation: kill every process the simulation left
+/// running below it (a child it forked, and every orphan of one, which comes back to this
+/// process, a subreaper since [`confine`]) and reap them. How many there were: an instance
+/// that had processes running may count on them, so it is not used again.
+pub fn reap_leftovers() -> usize {
+    let mut killed = 0;
+    // SAFETY: plain system calls on this process's own children.
+    unsafe {
+        for _ in 0..KILL_ROUNDS {
+            let children = own_children();
+            if children.is_empty() {
+                break;
+            }
+            for &pid in &children {
+                libc::kill(pid, libc::SIGKILL);
+            }
+            for &pid in &children {
+                libc::waitpid(pid, std::ptr::null_mut(), 0);
+            }
+            killed += children.len();
+        }
+        while libc::waitpid(-1, std::ptr::null_mut(), libc::WNOHANG) > 0 {}
+    }
+    killed
+}
+
+/// This process's children, from each of its threads' `children` lists (a few small
+/// files; every process's `stat` is read only where the kernel lists no children).
+fn own_children() -> Vec<libc::pid_t> {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else {
+        return children_of(std::process::id() as libc::pid_t);
+    };
+    let mut children = Vec::new();
+    for task in tasks.flatten() {
+        match std::fs::read_to_string(task.path().join("children")) {
+            Ok(list) => children.extend(
+                list.split_whitespace()
+                    .filter_map(|p| p.parse::<libc::pid_t>().ok()),
+            ),
+            Err(_) => return children_of(std::process::id() as libc::pid_t),
+        }
+    }
+    children.sort_unstable();
+    children.dedup();
+    children
+}
+
 /// The address space the FMU's process may have [bytes]: `CALIB_FMU_MEMORY_MIB`, or
 /// [`limits::FMU_HOST_MEMORY_BYTES`].
 pub fn memory_limit() -> u64 {
@@ -414,6 +461,10 @@ pub fn memory_limit() -> u64 {
 /// core dumps, and confine its files to `workdir` (writes) and `fmu` and the system's
 /// folders (reads) where the kernel has Landlock.
 pub fn confine(fmu: &Path, workdir: &Path) {
+    // Orphans of the processes the FMU starts come back here, to be reaped after each
+    // simulation ([`reap_leftovers`]).
+    // SAFETY: a plain system call on this process.
+    unsafe { libc::prctl(libc::PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0) };
     set_limit(libc::RLIMIT_AS, memory_limit());
     set_limit(libc::RLIMIT_CORE, 0);
     if let Err(e) = confine_files(fmu, workdir) {

@@ -341,6 +341,14 @@ impl FmuModel {
         Ok((median(fresh), median(reset)))
     }
 
+    /// Free the instances kept for the next simulations in this process (their helper
+    /// processes were killed with the simulation that started them).
+    pub fn forget_idle_instances(&self) {
+        if let Runner::Local(local) = &self.runner {
+            local.idle.lock().unwrap_or_else(|e| e.into_inner()).clear();
+        }
+    }
+
     /// Simulate in this process, whatever the runner (the child process's side).
     fn simulate_here(
         &self,

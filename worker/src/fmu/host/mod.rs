@@ -435,6 +435,11 @@ pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
                 let result = crate::Model::simulate_driven(
                     &model, &params, &grid, &outputs, &options, &inputs,
                 );
+                // Nothing the simulation started outlives it.
+                #[cfg(target_os = "linux")]
+                if super::contain::reap_leftovers() > 0 {
+                    model.forget_idle_instances();
+                }
                 encode_reply(&result)
             }
             None => encode_reply(&Err(SimulationError::InvalidInput(
