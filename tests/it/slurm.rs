@@ -52,46 +52,38 @@ fn is_root() -> bool {
         .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
 }
 
-/// Slurm and munge, installed with apt-get when missing (as root); why not, otherwise.
-fn install() -> Result<(), String> {
-    if PROGRAMS.iter().all(|p| found(p)) {
-        return Ok(());
+/// Why Slurm cannot run here, if it cannot: its programs (which `.ci/run` installs) or root.
+fn unavailable() -> Option<String> {
+    if let Some(missing) = PROGRAMS.iter().find(|p| !found(p)) {
+        return Some(format!(
+            "Slurm is not installed (no {missing}; apt-get install slurmctld slurmd \
+             slurm-client munge, as .ci/run does)"
+        ));
     }
-    if !is_root() || !found("apt-get") {
-        return Err(
-            "Slurm is not installed and cannot be here (apt-get as root: \
-                    slurmctld slurmd slurm-client munge)"
-                .into(),
-        );
-    }
-    eprintln!("installing slurmctld slurmd slurm-client munge with apt-get");
-    let apt = |args: &[&str]| {
-        Command::new("apt-get")
-            .args(args)
-            .env("DEBIAN_FRONTEND", "noninteractive")
-            .status()
-            .is_ok_and(|s| s.success())
-    };
-    let _ = apt(&["update", "-qq"]);
-    apt(&[
-        "install",
-        "-y",
-        "-qq",
-        "slurmctld",
-        "slurmd",
-        "slurm-client",
-        "munge",
-    ]);
-    match PROGRAMS.iter().find(|p| !found(p)) {
-        None => Ok(()),
-        Some(missing) => Err(format!("apt-get could not install Slurm: no {missing}")),
-    }
+    (!is_root()).then(|| "the one-machine Slurm cluster runs its daemons as root".into())
 }
 
 impl Slurm {
-    /// munged on its own socket and key, slurmctld, and slurmd nodes n1..n`nodes` of one
-    /// CPU each, all on loopback ports, their state, spool and logs under `dir`.
+    /// [`Slurm::start_once`], again on other ports (in a fresh folder) when the nodes do not
+    /// come up: a port found free may be taken before a daemon binds it.
     fn start(dir: &Path, nodes: usize) -> Slurm {
+        for attempt in 1..=3 {
+            let folder = dir.join(format!("attempt-{attempt}"));
+            match Slurm::start_once(&folder, nodes) {
+                Ok(slurm) => return slurm,
+                Err(why) => eprintln!("slurm: {why}; starting again on other ports"),
+            }
+        }
+        panic!(
+            "the Slurm cluster did not come up in three attempts (see {})",
+            dir.display()
+        );
+    }
+
+    /// munged on its own socket and key, slurmctld, and slurmd nodes n1..n`nodes` of one
+    /// CPU each, all on loopback ports, their state, spool and logs under `dir`; why not,
+    /// when the nodes are not up within a minute.
+    fn start_once(dir: &Path, nodes: usize) -> Result<Slurm, String> {
         let munge = dir.join("munge");
         for sub in ["munge", "state", "log"] {
             std::fs::create_dir_all(dir.join(sub)).unwrap();
@@ -179,11 +171,18 @@ impl Slurm {
                     .args(["-N", &format!("n{n}")]),
             );
         }
-        await_condition("every slurmd node idle", Duration::from_secs(60), || {
+        let until = Instant::now() + Duration::from_secs(60);
+        loop {
             let out = slurm.command("sinfo").args(["-h", "-o", "%D %t"]).output();
-            out.is_ok_and(|o| String::from_utf8_lossy(&o.stdout).trim() == format!("{nodes} idle"))
-        });
-        slurm
+            let state = out.map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
+            if state.as_deref().is_ok_and(|s| s == format!("{nodes} idle")) {
+                return Ok(slurm);
+            }
+            if Instant::now() >= until {
+                return Err(format!("the nodes are not idle after 60 s: {state:?}"));
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
     }
 
     fn spawn(&mut self, name: &str, command: &mut Command) {
@@ -386,12 +385,8 @@ fn stored(db: &Path) -> u64 {
 
 #[test]
 fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator_job() {
-    if let Err(why) = install() {
+    if let Some(why) = unavailable() {
         skip(&why);
-        return;
-    }
-    if !is_root() {
-        skip("the one-machine Slurm cluster runs its daemons as root");
         return;
     }
     let started = Instant::now();
@@ -405,7 +400,9 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
     // The campaign: differential evolution from two starts, a few seconds of work.
     let search =
         "methods = [\"differential-evolution\"]\nstarts = 2\nmax_evaluations = 4000\nseed = 5";
-    let submit_dir = tmp.path().join("submit");
+    // Folders whose paths hold spaces: the scripts', and the one sbatch runs in (where the
+    // deployment's files go).
+    let submit_dir = tmp.path().join("submit dir");
     std::fs::create_dir_all(&submit_dir).unwrap();
     let campaign = write(&submit_dir, "campaign.toml", &clean_campaign(search));
 
@@ -430,7 +427,12 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
         .to_string();
     let secrets = secrets(&home, &host);
     let calib_dir = submit_dir.join("calib");
-    let deploy = repo().join("deploy/slurm");
+    let deploy = tmp.path().join("deploy scripts");
+    std::fs::create_dir_all(&deploy).unwrap();
+    for script in ["calib.sbatch", "workers.sbatch", "worker.sh", "env.sh"] {
+        let to = deploy.join(script);
+        std::fs::copy(repo().join("deploy/slurm").join(script), &to).unwrap();
+    }
     let binary = PathBuf::from(env!("CARGO_BIN_EXE_calib"));
     let env: [(&str, &Path); 2] = [("CALIB", &binary), ("HOME", &home)];
     let script = |name: &str| deploy.join(name).to_str().unwrap().to_string();
@@ -471,6 +473,8 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
                     "job {job} ended early: {}",
                     read(&submit_dir.join(format!("calib-{job}.out")))
                 );
+                // `calib status` is a process and a TLS connection: a few per second.
+                std::thread::sleep(Duration::from_millis(250));
                 at = evaluations(&calib_dir, &secrets, "clean").unwrap_or(0);
                 at >= goal
             },
