@@ -91,8 +91,9 @@ impl Campaigns {
                 live.state.send_modify(|s| {
                     s.run_best = c.runs.iter().map(|r| r.objective).collect();
                     s.best_objective = c.best_run().objective;
-                    s.evaluations = c.evaluations() as u64;
-                    s.history.record(s.evaluations, &s.run_best);
+                    let evaluations = c.evaluations() as u64;
+                    s.evaluations = s.evaluations.max(evaluations);
+                    s.history.record(evaluations, &s.run_best);
                     s.runs = c.run_bests();
                     s.result = Some(c.outcome.clone());
                     s.plots = plots;
@@ -202,25 +203,39 @@ impl Campaigns {
 }
 
 /// Counts a live campaign's evaluations and each run's best into its state.
+///
+/// The count is added to under the state's lock, so the states clients see count up in the
+/// order they are sent; and what they see never goes back: a calibration started again
+/// (its workers were gone) replays the store from its start, and its count shows once it
+/// passes what was shown.
 struct LiveProgress<'a> {
     live: &'a Live,
+    /// Evaluations of this attempt of the calibration.
     evaluations: AtomicU64,
+}
+
+impl LiveProgress<'_> {
+    /// Add `count` to the attempt's evaluations, within the state's lock: the new total,
+    /// and the state's (never lower than before).
+    fn count(&self, s: &mut Snapshot, count: usize) -> u64 {
+        let total = self.evaluations.fetch_add(count as u64, Ordering::SeqCst) + count as u64;
+        s.evaluations = s.evaluations.max(total);
+        total
+    }
 }
 
 impl Progress for LiveProgress<'_> {
     fn evaluated(&self, count: usize, best_objective: f64) {
-        let total = self.evaluations.fetch_add(count as u64, Ordering::SeqCst) + count as u64;
         self.live.state.send_modify(|s| {
-            s.evaluations = total;
+            let total = self.count(s, count);
             s.best_objective = s.best_objective.min(best_objective);
             s.history.record(total, &s.run_best);
         });
     }
 
     fn run_evaluated(&self, run: usize, count: usize, run_best_objective: f64) {
-        let total = self.evaluations.fetch_add(count as u64, Ordering::SeqCst) + count as u64;
         self.live.state.send_modify(|s| {
-            s.evaluations = total;
+            let total = self.count(s, count);
             if s.run_best.len() <= run {
                 s.run_best.resize(run + 1, f64::INFINITY);
             }
