@@ -44,8 +44,15 @@ impl Token {
     pub fn configured(file: Option<&Path>) -> Result<Option<Self>, SecurityError> {
         let token = Self::configured_quietly(file)?;
         if let Some(token) = &token {
+            // A server reads the token for its own door and again to dial: each warning
+            // is said once per process.
+            static SAID: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+            let mut said = SAID.lock().unwrap_or_else(|e| e.into_inner());
             for weakness in weaknesses(token, file) {
-                tracing::warn!("{weakness}");
+                if !said.contains(&weakness) {
+                    tracing::warn!("{weakness}");
+                    said.push(weakness);
+                }
             }
         }
         Ok(token)
@@ -104,7 +111,8 @@ pub fn weaknesses(token: &Token, file: Option<&Path>) -> Vec<String> {
     };
     if token.0.len() < MIN_TOKEN_BYTES {
         found.push(format!(
-            "{source} is {} bytes, shorter than {MIN_TOKEN_BYTES}: it can be guessed; make              one with `openssl rand -hex 32`",
+            "{source} is {} bytes, shorter than {MIN_TOKEN_BYTES}: it can be guessed; make \
+             one with `openssl rand -hex 32`",
             token.0.len()
         ));
     }

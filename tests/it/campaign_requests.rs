@@ -1077,3 +1077,70 @@ fn a_coordinator_gives_back_the_memory_of_a_large_campaign_once_it_ends() {
     }
     assert!(held < record, "the coordinator holds {} MB", held >> 20);
 }
+
+/// A campaign the user cancels ends as cancelled, and the coordinator's log says so without
+/// an error (it logged the cancel as ERROR).
+#[test]
+fn a_cancel_is_logged_as_what_the_user_asked_not_as_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("coordinator.log");
+    let db = dir.path().join("db");
+    let (mut coordinator, address) = spawn_server(
+        &[
+            "coordinator",
+            "--listen",
+            "127.0.0.1:0",
+            "--db",
+            db.to_str().unwrap(),
+        ],
+        "coordinator listening on ",
+        &log,
+    );
+    let url = format!("http://{address}");
+    let (mut worker, _) = spawn_server(
+        &[
+            "worker",
+            "--listen",
+            "127.0.0.1:0",
+            "--slots",
+            "1",
+            "--register",
+            &url,
+        ],
+        "worker listening on ",
+        &dir.path().join("worker.log"),
+    );
+    let search = "methods = [\"differential-evolution\"]\nmax_evaluations = 100000";
+    let file = write(dir.path(), "long.toml", &clean_campaign(search));
+    let submitted = calib(&[
+        "submit",
+        file.to_str().unwrap(),
+        "--coordinator",
+        &url,
+        "--detach",
+    ]);
+    let id = String::from_utf8_lossy(&submitted.stdout)
+        .trim()
+        .to_string();
+    assert!(submitted.status.success() && id.len() == 64, "{id}");
+    let status = || {
+        std::thread::sleep(Duration::from_millis(200));
+        let out = calib(&["status", &id, "--coordinator", &url]);
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    await_condition("the campaign running", Duration::from_secs(60), || {
+        status().contains("running")
+    });
+    assert!(calib(&["cancel", &id, "--coordinator", &url])
+        .status
+        .success());
+    await_condition("the campaign cancelled", Duration::from_secs(60), || {
+        status().contains("cancelled")
+    });
+    for child in [&mut worker, &mut coordinator] {
+        child.kill().unwrap();
+        child.wait().unwrap();
+    }
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert!(!text.contains("ERROR"), "{text}");
+}

@@ -581,9 +581,33 @@ fn a_weak_token_or_a_token_file_others_can_read_is_warned_about() {
         stderr.contains("can be read by other users") && stderr.contains("chmod 600"),
         "{stderr}"
     );
+    assert!(
+        stderr.contains("it can be guessed; make one with"),
+        "{stderr}"
+    );
     let stderr = status(&token_file(dir.path(), &format!("{TOKEN}\n"), 0o600));
     assert!(
         !stderr.contains("shorter than") && !stderr.contains("other users"),
+        "{stderr}"
+    );
+    // A server reads its token twice (its door, and to dial): each warning once.
+    let weak = token_file(dir.path(), "x\n", 0o644);
+    let log = dir.path().join("coordinator.log");
+    let args = [
+        "coordinator",
+        "--listen",
+        "127.0.0.1:0",
+        "--token-file",
+        &weak,
+    ];
+    let (mut coordinator, _) = spawn_server(&args, "coordinator listening on ", &log);
+    coordinator.kill().unwrap();
+    coordinator.wait().unwrap();
+    let stderr = std::fs::read_to_string(&log).unwrap();
+    assert_eq!(stderr.matches("shorter than 16").count(), 1, "{stderr}");
+    assert_eq!(
+        stderr.matches("can be read by other users").count(),
+        1,
         "{stderr}"
     );
 }

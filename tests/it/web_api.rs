@@ -321,6 +321,16 @@ fn json_routes_fail_with_the_rpcs_status_and_message() {
         b"",
     );
     assert_eq!(code, 404, "{body}");
+
+    // A body over the route's limit: refused in JSON too.
+    let (code, body) = http(web, "POST", "/api/v1/ListCampaigns", &vec![b' '; 3 << 20]);
+    assert_eq!(code, 413, "{body}");
+    let error: serde_json::Value = serde_json::from_str(&body).unwrap();
+    assert_eq!(error["code"], "ResourceExhausted");
+    assert!(
+        error["message"].as_str().unwrap().contains("2 MiB"),
+        "{body}"
+    );
 }
 
 #[test]

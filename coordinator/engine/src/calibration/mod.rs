@@ -274,7 +274,12 @@ fn calibrate_measured<E: Evaluator>(
         // No result exists for some points: the campaign stays marked running, so that a
         // rerun or a coordinator on this store resumes it once workers are back.
         Err(Error::Fault(fault)) => {
-            tracing::error!(campaign = %campaign.name, error = %fault, "campaign interrupted");
+            // A cancellation is the user's decision, not the cluster's failure.
+            if fault.kind == FaultKind::Cancelled {
+                tracing::info!(campaign = %campaign.name, "campaign stopped: {fault}");
+            } else {
+                tracing::error!(campaign = %campaign.name, error = %fault, "campaign interrupted");
+            }
             return Err(Error::Fault(fault));
         }
         Err(e) => {

@@ -269,6 +269,61 @@ impl fmt::Debug for Campaign {
     }
 }
 
+/// The key of a campaign file a deserialiser's path names, as campaigns name fields
+/// (`search.screening`, `parameters[0].name`); the wrappers that keep positions are not keys.
+fn field_of(path: &serde_path_to_error::Path) -> String {
+    use serde_path_to_error::Segment;
+    let mut field = String::new();
+    for segment in path.iter() {
+        match segment {
+            Segment::Seq { index } => field.push_str(&format!("[{index}]")),
+            Segment::Map { key } | Segment::Enum { variant: key } => {
+                if key.starts_with("$__serde_spanned") {
+                    continue;
+                }
+                if !field.is_empty() {
+                    field.push('.');
+                }
+                field.push_str(key);
+            }
+            Segment::Unknown => {}
+        }
+    }
+    field
+}
+
+/// A deserialiser's message with any number it quotes shortened (`1e308`, not its 309
+/// digits) and Rust's integer type names said in words.
+fn readable_type_error(message: &str) -> String {
+    let mut out = message.to_string();
+    if let Some(start) = out.find("floating point `") {
+        let from = start + "floating point `".len();
+        if let Some(len) = out[from..].find('`') {
+            let number = &out[from..from + len];
+            if let Ok(v) = number.parse::<f64>() {
+                let short = if v.fract() == 0.0 && v.abs() < 1e6 {
+                    format!("{v}")
+                } else {
+                    format!("{v:e}")
+                };
+                out.replace_range(from..from + len, &short);
+            }
+        }
+    }
+    for (rust, words) in [
+        ("expected usize", "expected a whole number"),
+        ("expected u64", "expected a whole number"),
+        ("expected u32", "expected a whole number"),
+        ("expected u16", "expected a whole number"),
+        ("expected i64", "expected a whole number"),
+    ] {
+        if out.ends_with(rust) {
+            out.replace_range(out.len() - rust.len().., words);
+        }
+    }
+    out
+}
+
 impl Campaign {
     /// Read and resolve a campaign file.
     pub fn load(path: &Path) -> Result<Campaign, CampaignError> {
@@ -284,11 +339,16 @@ impl Campaign {
     /// Resolve campaign text; `path` locates errors and relative measurement files.
     pub fn parse(text: &str, path: &Path) -> Result<Campaign, CampaignError> {
         let locate = Locator { text, path };
-        let file: file::CampaignFile = toml::from_str(text).map_err(|e| CampaignError {
+        let error = |e: toml::de::Error, field: String| CampaignError {
             file: path.to_path_buf(),
             line: e.span().map(|s| locate.line(s.start)),
-            field: String::new(),
-            message: e.message().trim().to_string(),
+            field,
+            message: readable_type_error(e.message().trim()),
+        };
+        let document = toml::Deserializer::parse(text).map_err(|e| error(e, String::new()))?;
+        let file: file::CampaignFile = serde_path_to_error::deserialize(document).map_err(|e| {
+            let field = field_of(e.path());
+            error(e.into_inner(), field)
         })?;
         resolve(file, &locate)
     }

@@ -115,6 +115,26 @@ fn mistakes_are_located() {
 
     let e = error_for("start = 0.0\nstop = 40.0", "start = 10.0\nstop = 5.0");
     assert_eq!(e.field, "window");
+
+    // A value of the wrong type: its line and key, and a number as it was written.
+    let e = error_for("seed = 7", "seed = 7\nscreening = 1e12");
+    assert_eq!(
+        (e.line, e.field.as_str()),
+        (Some(33), "search.screening"),
+        "{e}"
+    );
+    assert_eq!(
+        e.message,
+        "invalid type: floating point `1e12`, expected a whole number"
+    );
+    let e = error_for("max_evaluations = 300", "max_evaluations = 1e308");
+    assert_eq!(e.field, "search.max_evaluations", "{e}");
+    assert!(
+        e.message.contains("`1e308`") && e.to_string().len() < 200,
+        "{e}"
+    );
+    let e = error_for("name = \"armFriction\"", "name = 3");
+    assert_eq!(e.field, "parameters[0].name", "{e}");
 }
 
 #[test]

@@ -168,7 +168,25 @@ impl WebApp {
             .with_state(self)
             .merge(login)
             .layer(axum::middleware::from_fn_with_state(gate, door::guard))
+            .layer(axum::middleware::map_response(json_rejections))
     }
+}
+
+/// The body limit's refusal (413, which axum answers in plain text) as every other error
+/// is answered: JSON naming the limits.
+async fn json_rejections(response: Response) -> Response {
+    if response.status() != StatusCode::PAYLOAD_TOO_LARGE {
+        return response;
+    }
+    let mut refused = ApiError(Status::resource_exhausted(format!(
+        "the request is larger than this route takes: {} MiB for a dataset, {} MiB for an \
+         FMU, 2 MiB for any other request",
+        MAX_DATASET_BYTES >> 20,
+        MAX_FMU_BYTES >> 20
+    )))
+    .into_response();
+    *refused.status_mut() = StatusCode::PAYLOAD_TOO_LARGE;
+    refused
 }
 
 /// Serve `router` on `listener` until `shutdown` resolves.
