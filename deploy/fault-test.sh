@@ -183,6 +183,9 @@ for _ in $(seq 150); do
     [ "$up" -ge 3 ] && break
     sleep 0.2
 done
+# The faults below stop two workers in turn: with fewer than three up, they would prove
+# nothing (or stop the campaign for want of workers, not for the fault).
+[ "$up" -ge 3 ] || fail "only $up of 3 workers came up within 30 s"
 say "cluster up on $where: coordinator at $url, $up workers up"
 
 # Submit, and follow it with `calib submit` itself, through every fault.
