@@ -51,11 +51,12 @@ fn relative(a: f64, b: f64) -> f64 {
 }
 
 /// Levenberg–Marquardt and Nelder–Mead from the nominal point of `name`: LM comes within 1%
-/// of the better of the two in at most 25 rounds and fewer evaluations, ends at an objective
+/// of the better of the two in at most `rounds` rounds (README's figures) and fewer
+/// evaluations, ends at an objective
 /// no higher than Nelder–Mead's (to 1e-9, relative) with each parameter within
 /// `parameter_tolerance` of Nelder–Mead's (relative), at a local minimum: moving any
 /// parameter by ±10⁻⁴ of itself raises the objective. Returns LM's objective.
-fn matches_nelder_mead(name: &str, parameter_tolerance: f64) -> f64 {
+fn matches_nelder_mead(name: &str, parameter_tolerance: f64, rounds: usize) -> f64 {
     let dir = tempfile::tempdir().unwrap();
     let (lm, batches) = calibrate_counting(&example(
         dir.path(),
@@ -95,7 +96,7 @@ fn matches_nelder_mead(name: &str, parameter_tolerance: f64) -> f64 {
         batches.iter().map(|&(n, _)| n).sum::<usize>(),
         a.evaluations
     );
-    assert!(within <= 25, "1% of the optimum after {within} rounds");
+    assert!(within <= rounds, "1% of the optimum after {within} rounds");
     assert!(a.termination.starts_with("converged"), "{}", a.termination);
     assert_eq!(a.stop, Stop::Minimum);
     assert!(
@@ -129,7 +130,7 @@ fn matches_nelder_mead(name: &str, parameter_tolerance: f64) -> f64 {
 
 #[test]
 fn levenberg_marquardt_finds_the_furuta_optimum_of_nelder_mead() {
-    matches_nelder_mead("furuta.toml", 1e-6);
+    matches_nelder_mead("furuta.toml", 1e-6, 7);
 }
 
 #[test]
@@ -137,7 +138,7 @@ fn levenberg_marquardt_finds_the_heat_exchanger_optimum_of_nelder_mead() {
     // The valley of CF_RefHT is flat: Nelder–Mead from the nominal point ends 5e-5 along it
     // (at an objective 4e-10 higher); the local-minimum check holds Levenberg–Marquardt's
     // point.
-    let lm = matches_nelder_mead("hx.toml", 1e-4);
+    let lm = matches_nelder_mead("hx.toml", 1e-4, 5);
     // The best of Nelder–Mead's multistart (the example's starts) is the same optimum: the
     // example's integrator tolerance (1e-10) leaves no noise in the objective for a start to
     // fall into below it (at 1e-6 the runs scattered by 2e-5 of it).
