@@ -670,15 +670,17 @@ def workbench(url, data, shot, out):
         submitted = form_state(driver)
 
         # Started, then reloaded while it runs: the same tab, form, dataset, and the
-        # progress kept by the server.
+        # progress kept by the server. The page is reloaded as soon as the server has a
+        # first point of progress (the nominal point's, a few milliseconds in), not once
+        # the page has drawn it: however fast the machine, thousands of evaluations remain.
         press(driver, "start")
-        wait(driver, LONG).until(lambda d: ("running" in by_id(d, "calibration-status").text
-                                            and d.find_elements(By.CSS_SELECTOR, "#progress-plot svg"))
-                                 or by_id(d, "result").is_displayed()
-                                 or by_id(d, "calibration-error").is_displayed())
+        wait(driver, LONG).until(lambda d: campaign_id(d) or by_id(d, "calibration-error").is_displayed())
         no_error(driver, "calibration-error")
         first = campaign_id(driver)
-        before_reload = json.loads(get_campaign(driver, first))
+        progressed = []
+        wait(driver, LONG).until(lambda d: progressed.append(json.loads(get_campaign(d, first)))
+                                 or progressed[-1]["history"])
+        before_reload = progressed[-1]
         mid = {"running_when_reloaded": before_reload["phase"] == 1,
                "history_before": len(before_reload["history"]),
                "evaluations_before": before_reload["evaluations"]}
