@@ -185,7 +185,8 @@ fn the_whole_workflow_in_a_browser_gives_the_values_of_calib_calibrate() {
         let value: f64 = shown["value"].as_str().unwrap().parse().unwrap();
         assert_eq!(
             value, expected,
-            "{name}: page {shown} vs calibrate {expected}"
+            "{name}: page {shown} vs calibrate {expected}; the campaign the page ran: {}",
+            page["spec"]
         );
         let text: f64 = shown["text"].as_str().unwrap().parse().unwrap();
         assert!(

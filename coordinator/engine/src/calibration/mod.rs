@@ -231,21 +231,7 @@ fn calibrate_measured<E: Evaluator>(
         store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
     }
     let id = campaign.identity(&dataset);
-    // What a client submitted it with stays with it, and its progress until this run's.
-    let earlier = store.campaign(&id)?;
-    let mut record = CampaignRecord {
-        name: campaign.name.clone(),
-        spec: campaign.spec.clone(),
-        source: campaign.source.clone().unwrap_or_default(),
-        dataset: hex(&dataset),
-        status: CampaignStatus::Running,
-        runs: Vec::new(),
-        result: None,
-        failure: None,
-        message: earlier.as_ref().and_then(|r| r.message.clone()),
-        free: campaign.free.iter().map(|p| p.name.clone()).collect(),
-        history: earlier.map(|r| r.history).unwrap_or_default(),
-    };
+    let mut record = running_record(campaign, &dataset, store, &id)?;
     store.put_campaign(&id, &record)?;
     tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
     let (outcome, stats, error) = StoredEvaluator::with(evaluator, store, |evaluator| {
@@ -256,37 +242,8 @@ fn calibrate_measured<E: Evaluator>(
     if let Some(e) = error {
         return Err(e.into());
     }
-    let (nominal, screened, runs, clusters, best, best_evaluation) = match outcome {
-        // The best point failed, so every point did: no fit to report, only why.
-        Ok(found) if found.5.failure.is_some() => {
-            let e = Error::EverySimulationFailed {
-                why: found
-                    .0
-                    .failure
-                    .clone()
-                    .or(found.5.failure)
-                    .unwrap_or_default(),
-            };
-            mark_failed(store, &id, record, e.to_string())?;
-            return Err(e);
-        }
-        Ok(found) => found,
-        // No result exists for some points: the campaign stays marked running, so that a
-        // rerun or a coordinator on this store resumes it once workers are back.
-        Err(Error::Fault(fault)) => {
-            // A cancellation is the user's decision, not the cluster's failure.
-            if fault.kind == FaultKind::Cancelled {
-                tracing::info!(campaign = %campaign.name, "campaign stopped: {fault}");
-            } else {
-                tracing::error!(campaign = %campaign.name, error = %fault, "campaign interrupted");
-            }
-            return Err(Error::Fault(fault));
-        }
-        Err(e) => {
-            mark_failed(store, &id, record, e.to_string())?;
-            return Err(e);
-        }
-    };
+    let (nominal, screened, runs, clusters, best, best_evaluation) =
+        found_or_failed(campaign, outcome, store, &id, &record)?;
     let mut calibration = Calibration {
         campaign: campaign.clone(),
         measurement,
@@ -307,6 +264,71 @@ fn calibrate_measured<E: Evaluator>(
     record.result = Some(calibration.outcome.clone());
     store.put_campaign(&id, &record)?;
     Ok(calibration)
+}
+
+/// The record of a campaign that starts running: what a client submitted it with stays with
+/// it, and its progress until this run's.
+fn running_record(
+    campaign: &Campaign,
+    dataset: &[u8; 32],
+    store: &dyn Store,
+    id: &CampaignId,
+) -> Result<CampaignRecord> {
+    let earlier = store.campaign(id)?;
+    Ok(CampaignRecord {
+        name: campaign.name.clone(),
+        spec: campaign.spec.clone(),
+        source: campaign.source.clone().unwrap_or_default(),
+        dataset: hex(dataset),
+        status: CampaignStatus::Running,
+        runs: Vec::new(),
+        result: None,
+        failure: None,
+        message: earlier.as_ref().and_then(|r| r.message.clone()),
+        free: campaign.free.iter().map(|p| p.name.clone()).collect(),
+        history: earlier.map(|r| r.history).unwrap_or_default(),
+    })
+}
+
+/// What the search found, or the campaign marked failed (every simulation failed, or the
+/// search could not run) and the error; a fault (no result for some points) leaves it
+/// running, so that a rerun or a coordinator on this store resumes it once workers are back.
+fn found_or_failed(
+    campaign: &Campaign,
+    outcome: Result<Found>,
+    store: &dyn Store,
+    id: &CampaignId,
+    record: &CampaignRecord,
+) -> Result<Found> {
+    match outcome {
+        // The best point failed, so every point did: no fit to report, only why.
+        Ok(found) if found.5.failure.is_some() => {
+            let e = Error::EverySimulationFailed {
+                why: found
+                    .0
+                    .failure
+                    .clone()
+                    .or(found.5.failure)
+                    .unwrap_or_default(),
+            };
+            mark_failed(store, id, record.clone(), e.to_string())?;
+            Err(e)
+        }
+        Ok(found) => Ok(found),
+        Err(Error::Fault(fault)) => {
+            // A cancellation is the user's decision, not the cluster's failure.
+            if fault.kind == FaultKind::Cancelled {
+                tracing::info!(campaign = %campaign.name, "campaign stopped: {fault}");
+            } else {
+                tracing::error!(campaign = %campaign.name, error = %fault, "campaign interrupted");
+            }
+            Err(Error::Fault(fault))
+        }
+        Err(e) => {
+            mark_failed(store, id, record.clone(), e.to_string())?;
+            Err(e)
+        }
+    }
 }
 
 type Found = (
