@@ -133,6 +133,43 @@ fn levenberg_marquardt_finds_the_furuta_optimum_of_nelder_mead() {
     matches_nelder_mead("furuta.toml", 1e-6, 7);
 }
 
+/// From far below both frictions (0.005 each, on their log10 scales: the arm's half its
+/// truth, the pendulum's four times), Levenberg–Marquardt ends in at most 25 rounds
+/// (docs/performance.md: 23) at the optimum of the nominal start: the objective within
+/// 1e-8 and the frictions within 1e-5 of it (relative).
+#[test]
+fn levenberg_marquardt_from_a_far_start_ends_within_25_rounds() {
+    let dir = tempfile::tempdir().unwrap();
+    let near = example(
+        dir.path(),
+        "furuta.toml",
+        &one_start("levenberg-marquardt", 400),
+    );
+    let text = std::fs::read_to_string(near.source.as_ref().unwrap()).unwrap();
+    let text = text
+        .replace("nominal = 0.012", "nominal = 0.005")
+        .replace("nominal = 0.002", "nominal = 0.005");
+    let far = Campaign::load(&write(dir.path(), "far.toml", &text)).unwrap();
+    let (far, batches) = calibrate_counting(&far);
+    let near = calibrate(&near, LocalEvaluator, &Silent).unwrap();
+    let (a, b) = (far.best_run(), near.best_run());
+    println!(
+        "far start: {} rounds, {} evaluations, objective {:.12e} ({:?}), `{}`; nominal start: {:.12e}",
+        batches.len(),
+        a.evaluations,
+        a.objective,
+        a.point,
+        a.termination,
+        b.objective
+    );
+    assert!(batches.len() <= 25, "{} rounds", batches.len());
+    assert!(a.termination.starts_with("converged"), "{}", a.termination);
+    assert!(relative(a.objective, b.objective) < 1e-8);
+    for (x, y) in a.point.iter().zip(&b.point) {
+        assert!(relative(*x, *y) < 1e-5, "{x} vs {y}");
+    }
+}
+
 #[test]
 fn levenberg_marquardt_finds_the_heat_exchanger_optimum_of_nelder_mead() {
     // The valley of CF_RefHT is flat: Nelder–Mead from the nominal point ends 5e-5 along it
