@@ -85,8 +85,15 @@ pub fn found_outside_the_library<E: Evaluator>(
     for (p, v) in fit.free.iter().zip(&fit.point) {
         params[p.index] = *v;
     }
-    let model = match joint_model(&d.campaign, params) {
-        Ok(model) => model,
+    // A model or a record discovery cannot read leaves the library's diagnosis whole: the
+    // report says why nothing was looked for.
+    let found = joint_model(&d.campaign, params).and_then(|model| {
+        let record = record_of(&d.campaign, &d.measurement, model.as_ref())?;
+        discover(model.as_ref(), &record, &DiscoveryOptions::default())
+            .map_err(|e| Error::InvalidRequest(format!("discovery: {e}")))
+    });
+    let found = match found {
+        Ok(found) => found,
         Err(e) => {
             return Ok(Found {
                 unavailable: Some(e.to_string()),
@@ -95,9 +102,6 @@ pub fn found_outside_the_library<E: Evaluator>(
             });
         }
     };
-    let record = record_of(&d.campaign, &d.measurement, model.as_ref())?;
-    let found = discover(model.as_ref(), &record, &DiscoveryOptions::default())
-        .map_err(|e| Error::InvalidRequest(format!("discovery: {e}")))?;
     let mut campaign = d.campaign.clone();
     campaign.free = fit.free.clone();
     let mut refits = Vec::new();

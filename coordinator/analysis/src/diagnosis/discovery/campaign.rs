@@ -2,6 +2,7 @@
 //! mapping, and a proposal as a user-defined effect of the campaign (never added to its
 //! file), with the terms that duplicate the campaign's own parameters folded into them.
 
+use super::residual::regrid;
 use super::{DiscoveredEffect, FurutaJoints, JointModel, Record};
 use calib_engine::campaign::Campaign;
 use calib_engine::error::{Error, Result};
@@ -65,10 +66,23 @@ pub fn record_of(
                 .and_then(|i| column(&i.measured))
                 .unwrap_or_else(|| vec![0.0; rows.len()])
         })
-        .collect();
+        .collect::<Vec<_>>();
+    // A real record's clock is never exactly uniform: on a grid of its own step.
+    let time: Vec<f64> = rows.iter().map(|&i| measurement.time[i]).collect();
+    let joints = angles.len();
+    let series: Vec<Vec<f64>> = angles.into_iter().chain(inputs).collect();
+    let (time, mut series, resampled) = regrid(&time, &series).map_err(|e| {
+        Error::InvalidRequest(format!("{e} (in the window of {})", source_of(campaign)))
+    })?;
+    if resampled {
+        tracing::info!(
+            "discovery: the record's samples are not evenly spaced; interpolated on a uniform grid"
+        );
+    }
+    let inputs = series.split_off(joints);
     Ok(Record {
-        time: rows.iter().map(|&i| measurement.time[i]).collect(),
-        angles,
+        time,
+        angles: series,
         inputs,
     })
 }

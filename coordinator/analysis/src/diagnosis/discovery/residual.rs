@@ -110,6 +110,57 @@ pub fn uniform_step(time: &[f64]) -> Result<f64, String> {
     Ok(dt)
 }
 
+/// The times on a uniform grid, the series on it, and whether they were interpolated.
+pub type Regridded = (Vec<f64>, Vec<Vec<f64>>, bool);
+
+/// Largest departure of a step from the mean step taken as the clock's jitter, as a share of
+/// the step: a time column written in single precision (0.0499992 to 0.0500031 s at 20 Hz)
+/// is a uniform grid; an irregular one (a lost sample: a step twice the others) is not.
+pub const GRID_JITTER: f64 = 0.01;
+
+/// `time` and each of `series` on a uniform time grid: the same samples, at the grid's times,
+/// when every step is within [`GRID_JITTER`] of the mean step (the shift is far below the
+/// smoothing window); otherwise interpolated linearly at the median step from the first
+/// time to the last. The third value says whether it interpolated. `Err` when the times do
+/// not increase.
+pub fn regrid(time: &[f64], series: &[Vec<f64>]) -> Result<Regridded, String> {
+    if time.len() < 3 {
+        return Err("discovery needs at least 3 samples".into());
+    }
+    let steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
+    if steps.iter().any(|s| s.is_nan() || *s <= 0.0) {
+        return Err("discovery needs times that increase from one sample to the next".into());
+    }
+    let n = time.len();
+    let mean = (time[n - 1] - time[0]) / (n - 1) as f64;
+    if steps.iter().all(|s| (s - mean).abs() <= GRID_JITTER * mean) {
+        let grid = (0..n).map(|i| time[0] + i as f64 * mean).collect();
+        return Ok((grid, series.to_vec(), false));
+    }
+    let mut sorted = steps.clone();
+    sorted.sort_by(f64::total_cmp);
+    let step = sorted[sorted.len() / 2];
+    // (a span that is a whole number of steps counts it, rounding aside)
+    let count = ((time[n - 1] - time[0]) / step * (1.0 + 1e-9)).floor() as usize + 1;
+    let grid: Vec<f64> = (0..count).map(|i| time[0] + i as f64 * step).collect();
+    let resampled = series
+        .iter()
+        .map(|values| {
+            let mut j = 0;
+            grid.iter()
+                .map(|&t| {
+                    while j + 2 < n && time[j + 1] < t {
+                        j += 1;
+                    }
+                    let share = ((t - time[j]) / (time[j + 1] - time[j])).clamp(0.0, 1.0);
+                    values[j] + share * (values[j + 1] - values[j])
+                })
+                .collect()
+        })
+        .collect();
+    Ok((grid, resampled, true))
+}
+
 /// The running trapezoidal integral of `y` with step `dt` (NaN propagates).
 pub fn running_integral(y: &[f64], dt: f64) -> Vec<f64> {
     let mut out = Vec::with_capacity(y.len());
@@ -272,4 +323,43 @@ pub fn filtered_column(residual: &TorqueResidual, g: &[f64]) -> Vec<f64> {
         column = residual.filter.derivative(&full, residual.dt);
     }
     column
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A clock written in single precision (the real rig's record: steps 0.0499992 to
+    /// 0.0500031 s) is a uniform grid: the samples kept, at the grid's times.
+    #[test]
+    fn a_single_precision_clock_is_a_uniform_grid() {
+        let time: Vec<f64> = (0..2000).map(|i| (i as f64 * 0.05) as f32 as f64).collect();
+        assert!(uniform_step(&time).is_err(), "the strict check refuses it");
+        let values: Vec<f64> = (0..2000).map(|i| (i as f64).sin()).collect();
+        let (grid, series, resampled) = regrid(&time, std::slice::from_ref(&values)).unwrap();
+        assert!(!resampled);
+        assert_eq!(series[0], values);
+        assert!((uniform_step(&grid).unwrap() - 0.05).abs() < 1e-7);
+    }
+
+    /// A lost sample (one step twice the others) is interpolated on the median step, and a
+    /// linear signal stays exact; times that go back are refused, saying so.
+    #[test]
+    fn an_irregular_grid_is_interpolated_and_a_clock_going_back_refused() {
+        let time: Vec<f64> = (0..101)
+            .filter(|&i| i != 40)
+            .map(|i| i as f64 * 0.01)
+            .collect();
+        let line: Vec<f64> = time.iter().map(|t| 3.0 * t - 1.0).collect();
+        let (grid, series, resampled) = regrid(&time, &[line]).unwrap();
+        assert!(resampled);
+        assert_eq!(grid.len(), 101);
+        assert!((uniform_step(&grid).unwrap() - 0.01).abs() < 1e-12);
+        for (t, v) in grid.iter().zip(&series[0]) {
+            assert!((v - (3.0 * t - 1.0)).abs() < 1e-12);
+        }
+        let back = [0.0, 0.01, 0.02, 0.015, 0.03];
+        let error = regrid(&back, &[vec![0.0; 5]]).unwrap_err();
+        assert!(error.contains("increase"), "{error}");
+    }
 }
