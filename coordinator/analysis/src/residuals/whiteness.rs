@@ -7,11 +7,15 @@
 //!   Biometrika 65 (1978) 297–303). The residual counts as white when `Q` is below the 99%
 //!   quantile (Wilson–Hilferty approximation of the χ² quantile).
 //! - **Noise level from the data alone**: the k-th differences of a smooth signal sampled
-//!   finely vanish as `h^k`, while those of white noise keep the variance `C(2k, k)·σ²`.
-//!   The estimate is the smallest over k = 2…6 of the robust scale (1.4826 × median absolute
-//!   value) of the k-th differences, divided by `√C(2k, k)`: low orders still carry signal,
-//!   high orders only noise (T. Gasser, L. Sroka, C. Jennen-Steinmetz, "Residual variance and
-//!   residual pattern in nonlinear regression", Biometrika 73 (1986) 625–633, for the idea).
+//!   finely vanish as `h^k`, while those of white noise keep the variance `C(2k, k)·σ²`
+//!   (T. Gasser, L. Sroka, C. Jennen-Steinmetz, "Residual variance and residual pattern in
+//!   nonlinear regression", Biometrika 73 (1986) 625–633). The estimate is the mean square of
+//!   the third differences, the largest [`TRIMMED`] left out (a kink of the signal, where a
+//!   joint sticks or breaks away, shows in a few of them), divided by `C(6, 3) = 20` and by
+//!   the share of a Gaussian's variance the trimming keeps. It is consistent: for white noise
+//!   its error falls as `1/√N`, and for a record quantised in steps `q` it is the noise the
+//!   record carries, `σ² + q²/12` (a median-based scale, or the least of several orders, is
+//!   biased low there: the clean records' objectives came out 1.2–1.5 times the floor).
 //! - **Effective sample size** `N·(1−ρ₁)/(1+ρ₁)` of an AR(1)-like residual, used to keep
 //!   information criteria and confidence intervals honest when the residual is correlated.
 
@@ -85,28 +89,81 @@ pub fn chi_square_quantile_99(k: f64) -> f64 {
     k * (1.0 - a + Z99 * a.sqrt()).powi(3)
 }
 
+/// Share of the largest third differences [`noise_level`] leaves out.
+pub const TRIMMED: f64 = 0.01;
+
 /// Standard deviation of the measurement noise of a finely sampled signal, from the signal
 /// alone (see the module documentation).
 pub fn noise_level(signal: &[f64]) -> f64 {
-    let mut best = f64::INFINITY;
-    let mut diff: Vec<f64> = signal.to_vec();
-    let mut binomial = 1.0; // C(2k, k)
-    for k in 1..=6usize {
-        diff = diff.windows(2).map(|w| w[1] - w[0]).collect();
-        binomial = binomial * ((2 * k) * (2 * k - 1)) as f64 / (k * k) as f64;
-        if k < 2 || diff.len() < 8 {
-            continue;
-        }
-        let mut abs: Vec<f64> = diff.iter().map(|d| d.abs()).collect();
-        let mid = abs.len() / 2;
-        let (_, median, _) = abs.select_nth_unstable_by(mid, f64::total_cmp);
-        let sigma = 1.4826 * *median / binomial.sqrt();
-        best = best.min(sigma);
+    let third: Vec<f64> = signal
+        .windows(4)
+        .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
+        .collect();
+    if third.len() < 8 {
+        return 0.0;
     }
-    if best.is_finite() {
-        best
+    let mut squares: Vec<f64> = third.iter().map(|d| d * d).collect();
+    let keep = ((1.0 - TRIMMED) * squares.len() as f64).round() as usize;
+    let keep = keep.clamp(1, squares.len());
+    if keep < squares.len() {
+        squares.select_nth_unstable_by(keep, f64::total_cmp);
+    }
+    let mean = squares[..keep].iter().sum::<f64>() / keep as f64;
+    (mean / (20.0 * trimmed_share(TRIMMED))).sqrt()
+}
+
+/// The share of a centred Gaussian's variance left when the largest share `p` of its squares
+/// is left out: `1 − 2cφ(c)/(1 − p)` with `c` its `1 − p/2` quantile.
+fn trimmed_share(p: f64) -> f64 {
+    let c = normal_quantile(1.0 - p / 2.0);
+    let density = (-0.5 * c * c).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    1.0 - 2.0 * c * density / (1.0 - p)
+}
+
+/// The standard normal quantile (Acklam's rational approximation, relative error < 1.2e-9).
+pub fn normal_quantile(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969_683_028_665_376e1,
+        2.209_460_984_245_205e2,
+        -2.759_285_104_469_687e2,
+        1.383_577_518_672_69e2,
+        -3.066_479_806_614_716e1,
+        2.506_628_277_459_239,
+    ];
+    const B: [f64; 5] = [
+        -5.447_609_879_822_406e1,
+        1.615_858_368_580_409e2,
+        -1.556_989_798_598_866e2,
+        6.680_131_188_771_972e1,
+        -1.328_068_155_288_572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784_894_002_430_293e-3,
+        -3.223_964_580_411_365e-1,
+        -2.400_758_277_161_838,
+        -2.549_732_539_343_734,
+        4.374_664_141_464_968,
+        2.938_163_982_698_783,
+    ];
+    const D: [f64; 4] = [
+        7.784_695_709_041_462e-3,
+        3.224_671_290_700_398e-1,
+        2.445_134_137_142_996,
+        3.754_408_661_907_416,
+    ];
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.02425 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.02425 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
     } else {
-        0.0
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
     }
 }
 
@@ -149,7 +206,59 @@ mod tests {
             })
             .collect();
         let sigma = noise_level(&signal);
-        assert!((sigma / 0.002 - 1.0).abs() < 0.15, "σ = {sigma}");
+        assert!((sigma / 0.002 - 1.0).abs() < 0.03, "σ = {sigma}");
+    }
+
+    /// A swing that sticks and breaks away (kinks), recorded with 1–4 mrad of noise and
+    /// quantised in 4096 steps per turn (1.53 mrad, coarser than the smaller noises): the
+    /// estimate is the error the record carries (the root mean square of record − signal,
+    /// what a perfect model leaves): unbiased (within 1.5% over 20 records) and within 5% for
+    /// each (its standard error is about 1.4% at 3,001 samples).
+    #[test]
+    fn noise_level_is_the_error_a_quantised_record_carries_under_kinks() {
+        let q = 2.0 * std::f64::consts::PI / 4096.0;
+        let mut ratios = Vec::new();
+        for seed in 0..20 {
+            let mut rng = ChaCha8Rng::seed_from_u64(100 + seed);
+            let sigma = 0.001 + 0.003 * (seed as f64 / 19.0);
+            let (mut signal, mut error) = (Vec::new(), 0.0);
+            for i in 0..3001 {
+                let t = i as f64 * 0.01;
+                // Stuck for 1 s of every 4 s, else a swing (a kink at each end).
+                let phase = t % 4.0;
+                let swing = std::f64::consts::PI * (phase - 1.0) / 3.0;
+                let clean = if phase < 1.0 {
+                    0.3
+                } else {
+                    0.3 + 0.6 * swing.sin()
+                };
+                let recorded = ((clean + gaussian(&mut rng, sigma)) / q).round() * q;
+                error += (recorded - clean) * (recorded - clean);
+                signal.push(recorded);
+            }
+            let carried = (error / signal.len() as f64).sqrt();
+            let estimate = noise_level(&signal);
+            assert!(
+                (estimate / carried - 1.0).abs() < 0.05,
+                "σ {sigma}: {estimate} vs {carried}"
+            );
+            ratios.push(estimate / carried);
+        }
+        let mean = ratios.iter().sum::<f64>() / ratios.len() as f64;
+        assert!((mean - 1.0).abs() < 0.015, "{ratios:?}");
+    }
+
+    #[test]
+    fn normal_quantiles_match_tables() {
+        for (p, z) in [
+            (0.5, 0.0),
+            (0.975, 1.959_964),
+            (0.995, 2.575_829),
+            (0.001, -3.090_232),
+        ] {
+            assert!((normal_quantile(p) - z).abs() < 1e-6, "{p}");
+        }
+        assert!((trimmed_share(0.01) - 0.9248).abs() < 1e-3);
     }
 
     #[test]
