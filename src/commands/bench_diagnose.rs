@@ -19,15 +19,39 @@ pub struct Args {
     /// Instead: the robustness matrix, records of every effect (from the independent
     /// simulator) diagnosed under every search setting (bounds, methods, starts), printed as
     /// a table of the effect selected and the objective over the noise floor per cell.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "random")]
     matrix: bool,
     #[command(flatten)]
     cells: super::bench_matrix::MatrixArgs,
+    /// Instead: N records drawn at random (effects, sizes, noise, start angle, search
+    /// settings; see docs/diagnosis.md), diagnosed, and the confusion matrix, the
+    /// false-positive rate on clean records and the cost printed (`--jobs` at a time).
+    #[arg(long, value_name = "N")]
+    random: Option<usize>,
+    /// The seed of the random records; keep one for tuning and others never tuned on.
+    #[arg(long, default_value_t = 1, requires = "random")]
+    seed: u64,
+    /// The first random record's index (to run part of a benchmark).
+    #[arg(long, default_value_t = 0, requires = "random")]
+    from: usize,
+    /// Also write each random record's outcome as JSON to this file.
+    #[arg(long, value_name = "FILE", requires = "random")]
+    json: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Outcome {
     if args.matrix {
         return super::bench_matrix::run(args.cells);
+    }
+    if let Some(count) = args.random {
+        return super::bench_random::run(super::bench_random::RandomArgs {
+            count,
+            seed: args.seed,
+            from: args.from,
+            jobs: args.cells.jobs,
+            json: args.json,
+            repo: PathBuf::from("."),
+        });
     }
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
     let mut samples: Vec<Duration> = Vec::new();

@@ -233,7 +233,7 @@ pub struct MatrixArgs {
     only: Vec<String>,
     /// Cells diagnosed at the same time.
     #[arg(long, default_value_t = 2)]
-    jobs: usize,
+    pub jobs: usize,
 }
 
 pub fn run(args: MatrixArgs) -> Outcome {

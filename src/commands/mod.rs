@@ -5,6 +5,7 @@ pub mod bench_cluster;
 pub mod bench_diagnose;
 pub mod bench_fmu;
 pub mod bench_matrix;
+pub mod bench_random;
 pub mod bench_search;
 pub mod bench_store;
 pub mod calibrate;

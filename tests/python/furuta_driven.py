@@ -17,8 +17,9 @@ the arm axis, ``theta = 0`` upright. With ``s = sin(theta)``, ``c = cos(theta)``
     [ A    -C c ] [phi'']     [ tau1 - A' theta' phi' - C s theta'^2 ]
     [ -C c  B   ] [theta''] = [ tau2 + A'/2 phi'^2 + m g l s          ]
 
-``tau1 = u(t) - d1 phi' - c1 phi' |phi'| - k1 phi + f1`` and
-``tau2 = -d2 theta' - c2 theta' |theta'| - k2 theta + f2``: ``u`` is the motor torque on the
+``tau1 = u(t) + b1 - d1 phi' - c1 phi' |phi'| - k1 phi + f1`` and
+``tau2 = b2 - d2 theta' - c2 theta' |theta'| - k2 theta + f2``: ``b1``, ``b2`` optional
+constant torques (``--<joint>-bias``), ``u`` is the motor torque on the
 arm joint (positive in the direction of ``phi``), ``d1``, ``d2`` optional viscous frictions,
 ``c1``, ``c2`` optional quadratic drags, ``k1``, ``k2`` optional torsional springs (the torque
 ``-k q`` about the joint's zero angle, acting on a stuck joint too, which its friction must
@@ -27,12 +28,15 @@ hold) and ``f1``, ``f2`` the Coulomb bearing frictions.
 Sensor effects
 --------------
 Each recorded angle may carry a dead time ``--<joint>-delay d`` (the angle at ``t - d``, the
-start value before ``d``), then a relative gain error and an offset (``(1 + g) y + o``,
-``--<joint>-gain``, ``--<joint>-offset``), before the noise and the quantisation below. These
-are the definitions of the worker's ``delay(...)``, ``gain(...)`` and ``offset(...)``
-effects (worker/src/effects.rs); the spring, drag and friction terms are those of its
-``stiffness.<joint>``, ``quadratic_drag.<joint>`` and ``viscous_friction.<joint>``
-(worker/src/models/furuta.rs).
+start value before ``d``), then a first-order sensor of time constant ``--<joint>-lag T``
+(``T y' + y = x``, settled at the start, ``x`` linear between the record's samples), then a
+relative gain error and an offset (``(1 + g) y + o``, ``--<joint>-gain``,
+``--<joint>-offset``), before the noise and the quantisation below. These are the
+definitions of the worker's ``delay(...)``, ``lag(...)``, ``gain(...)`` and ``offset(...)``
+effects (worker/src/effects.rs); the spring, drag, friction and constant torque terms are
+those of its ``stiffness.<joint>``, ``quadratic_drag.<joint>``,
+``viscous_friction.<joint>`` and ``torque_bias.<joint>`` (worker/src/models/furuta.rs; its
+bias is the opposite torque, ``-t0``).
 
 Stick-slip
 ----------
@@ -132,7 +136,7 @@ def torque_profile(t, amplitude):
 
 
 class Rig:
-    def __init__(self, geometry, friction, viscous, drag=(0.0, 0.0), stiffness=(0.0, 0.0)):
+    def __init__(self, geometry, friction, viscous, drag=(0.0, 0.0), stiffness=(0.0, 0.0), bias=(0.0, 0.0)):
         g = geometry
         m, l1, l = g["pend_mass"], g["arm_length"], g["pend_com"]
         self.a0 = g["arm_inertia"] + m * l1 * l1 + g["pend_Iyy"]
@@ -144,6 +148,7 @@ class Rig:
         self.viscous = list(viscous)
         self.drag = list(drag)
         self.stiffness = list(stiffness)
+        self.bias = list(bias)
 
     def forces(self, y, u):
         """Generalised forces without Coulomb friction, and the mass matrix (A, C c)."""
@@ -153,8 +158,8 @@ class Rig:
         da = 2.0 * self.a1 * s * c
         r1 = u - da * w2 * w1 - self.c * s * w2 * w2 - self.viscous[0] * w1
         r2 = 0.5 * da * w1 * w1 + self.mgl * s - self.viscous[1] * w2
-        r1 -= self.drag[0] * w1 * abs(w1) + self.stiffness[0] * y[0]
-        r2 -= self.drag[1] * w2 * abs(w2) + self.stiffness[1] * y[1]
+        r1 += self.bias[0] - self.drag[0] * w1 * abs(w1) - self.stiffness[0] * y[0]
+        r2 += self.bias[1] - self.drag[1] * w2 * abs(w2) - self.stiffness[1] * y[1]
         return r1, r2, a, self.c * c
 
     def dynamics(self, y, u, modes):
@@ -212,6 +217,22 @@ class Rig:
                 if best is None or key < best[0]:
                     best = (key, modes)
         return best[1]
+
+
+def first_order(times, x, tau):
+    """A first-order sensor ``tau y' + y = x`` of the sampled signal ``x`` (linear between
+    its samples), settled at the start (``y[0] = x[0]``), solved exactly step by step."""
+    if tau <= 0.0:
+        return np.asarray(x, dtype=float)
+    y = np.empty(len(x))
+    y[0] = x[0]
+    for k in range(1, len(x)):
+        h = times[k] - times[k - 1]
+        e = math.exp(-h / tau)
+        slope = (x[k] - x[k - 1]) / h
+        # The response to x(t) = x[k-1] + slope (t - t[k-1]) from y[k-1] over h.
+        y[k] = x[k] - slope * tau + (y[k - 1] - x[k - 1] + slope * tau) * e
+    return y
 
 
 def simulate(rig, y0, times, torque):
@@ -306,6 +327,8 @@ def main(argv=None):
     for joint in ("arm", "pendulum"):
         p.add_argument(f"--{joint}-drag", type=float, default=0.0, help=f"{joint} quadratic drag [N m s2/rad2]")
         p.add_argument(f"--{joint}-stiffness", type=float, default=0.0, help=f"{joint} torsional spring [N m/rad]")
+        p.add_argument(f"--{joint}-bias", type=float, default=0.0, help=f"constant torque on the {joint} joint [N m]")
+        p.add_argument(f"--{joint}-lag", type=float, default=0.0, help=f"time constant of a first-order {joint} sensor [s]")
         p.add_argument(f"--{joint}-offset", type=float, default=0.0, help=f"offset of the recorded {joint} angle [rad]")
         p.add_argument(f"--{joint}-gain", type=float, default=0.0, help=f"relative gain error of the recorded {joint} angle")
         p.add_argument(f"--{joint}-delay", type=float, default=0.0, help=f"dead time of the recorded {joint} angle [s]")
@@ -328,6 +351,7 @@ def main(argv=None):
         (args.arm_viscous, args.pendulum_viscous),
         (args.arm_drag, args.pendulum_drag),
         (args.arm_stiffness, args.pendulum_stiffness),
+        (args.arm_bias, args.pendulum_bias),
     )
     y0 = (START["phi0"], args.theta0, START["dphi0"], START["dtheta0"])
     delays = (args.arm_delay, args.pendulum_delay)
@@ -344,7 +368,8 @@ def main(argv=None):
         [(args.arm_delay, args.arm_gain, args.arm_offset), (args.pendulum_delay, args.pendulum_gain, args.pendulum_offset)]
     ):
         at = np.searchsorted(grid, np.round(np.maximum(times - d, 0.0), 9))
-        recorded[:, j] = (1.0 + g) * states_on_grid[at, j] + o
+        lag = getattr(args, ("arm" if j == 0 else "pendulum") + "_lag")
+        recorded[:, j] = (1.0 + g) * first_order(times, states_on_grid[at, j], lag) + o
 
     rng = np.random.default_rng(args.seed)
     step = 2.0 * math.pi / COUNTS_PER_REV
@@ -364,8 +389,14 @@ def main(argv=None):
         "viscous_friction": {"arm": args.arm_viscous, "pendulum": args.pendulum_viscous},
         "quadratic_drag": {"arm": args.arm_drag, "pendulum": args.pendulum_drag},
         "stiffness": {"arm": args.arm_stiffness, "pendulum": args.pendulum_stiffness},
+        "bias_torque": {"arm": args.arm_bias, "pendulum": args.pendulum_bias},
         "sensor": {
-            j: {"offset": getattr(args, f"{j}_offset"), "gain": getattr(args, f"{j}_gain"), "delay": getattr(args, f"{j}_delay")}
+            j: {
+                "offset": getattr(args, f"{j}_offset"),
+                "gain": getattr(args, f"{j}_gain"),
+                "delay": getattr(args, f"{j}_delay"),
+                "lag": getattr(args, f"{j}_lag"),
+            }
             for j in ("arm", "pendulum")
         },
         "motor_torque": {

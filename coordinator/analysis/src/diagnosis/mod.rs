@@ -35,6 +35,7 @@
 //!
 //! The windows come from [`window`]; every evaluation goes through the store ([`stored`]).
 
+pub mod benchmark;
 pub mod candidates;
 pub mod discovery;
 pub mod escalation;

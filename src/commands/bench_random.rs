@@ -1,0 +1,287 @@
+//! `calib bench diagnose --random N --seed S`: the diagnosis on records drawn at random (see
+//! [`calib_analysis::diagnosis::benchmark`]): a confusion matrix of the effect each record
+//! holds against what was selected, the false-positive rate on clean records, the rate at
+//! which both effects of two-effect records are named, discovery's right multiple on
+//! cogging records, the final objective over the noise floor and the cost.
+
+use super::{Failure, Outcome};
+use calib_analysis::diagnosis::benchmark::{draw, Category, Draw, KINDS};
+use calib_analysis::diagnosis::outside::found_outside_the_library;
+use calib_analysis::diagnosis::{diagnose, NOISE_FACTOR};
+use calib_engine::campaign::Campaign;
+use calib_engine::evaluator::LocalEvaluator;
+use calib_engine::optim::problem::Silent;
+use serde::Serialize;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::time::Instant;
+
+/// What to run: records `from..from + count` of `seed` (record i has category i mod 10:
+/// 2 clean, 5 one effect, 2 two effects, 1 cogging in every 10), `jobs` at a time, the
+/// simulator scripts in `repo`'s tests/python/.
+pub struct RandomArgs {
+    pub count: usize,
+    pub seed: u64,
+    pub from: usize,
+    pub jobs: usize,
+    pub json: Option<PathBuf>,
+    pub repo: PathBuf,
+}
+
+/// What one record's diagnosis gave.
+#[derive(Debug, Clone, Serialize)]
+pub struct Record {
+    pub index: usize,
+    pub category: &'static str,
+    pub holds: String,
+    pub expected: Vec<String>,
+    pub selected: Vec<String>,
+    /// For a cogging record: the multiples of `armJoint.phi` discovery proposed on the arm.
+    pub multiples: Vec<usize>,
+    pub ratio: f64,
+    pub simulations: u64,
+    pub seconds: f64,
+    pub settings: String,
+    pub pass: bool,
+    pub error: Option<String>,
+}
+
+fn make_record(d: &Draw, repo: &Path, csv: &Path) -> Result<(), String> {
+    let script = repo.join(d.script());
+    let run = std::process::Command::new("python3")
+        .arg(&script)
+        .arg("--out")
+        .arg(csv)
+        .args(d.simulator_args())
+        .output()
+        .map_err(|e| format!("python3 cannot run {}: {e}", script.display()))?;
+    if !run.status.success() {
+        return Err(format!(
+            "{} failed: {}",
+            script.display(),
+            String::from_utf8_lossy(&run.stderr)
+        ));
+    }
+    Ok(())
+}
+
+/// The multiples `k` of the terms `sin(k·armJoint.phi …)` discovery proposed on the arm.
+fn arm_multiples(found: &calib_analysis::diagnosis::outside::Found) -> Vec<usize> {
+    let mut ks: Vec<usize> = found
+        .proposals()
+        .iter()
+        .filter(|(p, _)| p.place == "armJoint")
+        .flat_map(|(p, _)| p.harmonics.iter())
+        .filter(|h| h.angle == "armJoint.phi")
+        .map(|h| h.multiple)
+        .collect();
+    ks.sort_unstable();
+    ks.dedup();
+    ks
+}
+
+fn run_record(d: &Draw, repo: &Path, dir: &Path) -> Record {
+    let started = Instant::now();
+    let mut record = Record {
+        index: d.index,
+        category: d.category.name(),
+        holds: d.describe(),
+        expected: d.expected(),
+        selected: Vec::new(),
+        multiples: Vec::new(),
+        ratio: f64::NAN,
+        simulations: 0,
+        seconds: 0.0,
+        settings: format!("{} {} ×{}", d.bounds, d.methods, d.starts),
+        pass: false,
+        error: None,
+    };
+    let csv = dir.join(format!("record{}.csv", d.index));
+    let outcome = (|| -> Result<(), String> {
+        make_record(d, repo, &csv)?;
+        let campaign = Campaign::parse(&d.campaign(&csv), Path::new("random.toml"))
+            .map_err(|e| e.to_string())?;
+        let diagnosis = diagnose(&campaign, &LocalEvaluator, &Silent).map_err(|e| e.to_string())?;
+        record.selected = diagnosis.selected.clone();
+        record.selected.sort();
+        record.simulations = diagnosis.stats.evaluations.simulated + diagnosis.stats.trajectories;
+        let mut ratio = diagnosis.final_fit.objective / diagnosis.noise_floor;
+        if let Some((k, _)) = d.cogging {
+            let found = found_outside_the_library(&diagnosis, &LocalEvaluator, &Silent)
+                .map_err(|e| e.to_string())?;
+            record.multiples = arm_multiples(&found);
+            if let Some(refit) = found
+                .refits
+                .iter()
+                .map(|r| r.ratio_after())
+                .reduce(f64::min)
+            {
+                ratio = ratio.min(refit);
+            }
+            record.pass = record.multiples.contains(&(k as usize)) && ratio <= NOISE_FACTOR;
+        } else {
+            record.pass = record.selected == record.expected && ratio <= NOISE_FACTOR;
+        }
+        record.ratio = ratio;
+        Ok(())
+    })();
+    let _ = std::fs::remove_file(&csv);
+    if let Err(e) = outcome {
+        record.error = Some(e);
+    }
+    record.seconds = started.elapsed().as_secs_f64();
+    record
+}
+
+pub fn run(args: RandomArgs) -> Outcome {
+    let dir = std::env::temp_dir().join(format!("calib-random-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| Failure::input(format!("{}: {e}", dir.display())))?;
+    let draws: Vec<Draw> = (args.from..args.from + args.count)
+        .map(|i| draw(args.seed, i))
+        .collect();
+    let next = Mutex::new(0usize);
+    let records: Mutex<Vec<Option<Record>>> = Mutex::new(vec![None; draws.len()]);
+    std::thread::scope(|scope| {
+        for _ in 0..args.jobs.max(1) {
+            scope.spawn(|| loop {
+                let i = {
+                    let mut n = next.lock().unwrap();
+                    *n += 1;
+                    *n - 1
+                };
+                let Some(d) = draws.get(i) else { break };
+                let r = run_record(d, &args.repo, &dir);
+                eprintln!(
+                    "{:>4} {:<20} {:<52} {:<26} -> {:<56} {:>8.3}x {:>7} sims {:>6.1} s {}",
+                    r.index,
+                    r.category,
+                    r.holds,
+                    r.settings,
+                    match &r.error {
+                        Some(e) => format!("error: {e}"),
+                        None if d.cogging.is_some() => format!("k {:?}", r.multiples),
+                        None if r.selected.is_empty() => "nothing".into(),
+                        None => r.selected.join(" + "),
+                    },
+                    r.ratio,
+                    r.simulations,
+                    r.seconds,
+                    if r.pass { "ok" } else { "MISS" }
+                );
+                records.lock().unwrap()[i] = Some(r);
+            });
+        }
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+    let records: Vec<Record> = records
+        .into_inner()
+        .unwrap()
+        .into_iter()
+        .map(|r| r.expect("every record ran"))
+        .collect();
+    if let Some(path) = &args.json {
+        let text = serde_json::to_string_pretty(&records).expect("plain data");
+        std::fs::write(path, text)
+            .map_err(|e| Failure::input(format!("{}: {e}", path.display())))?;
+    }
+    print_tables(&draws, &records, args.seed);
+    Ok(())
+}
+
+fn percent(n: usize, of: usize) -> String {
+    if of == 0 {
+        "–".into()
+    } else {
+        format!("{n} of {of} ({:.1}%)", 100.0 * n as f64 / of as f64)
+    }
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+/// The summary per category, the confusion matrix of one-effect records and the cost.
+fn print_tables(draws: &[Draw], records: &[Record], seed: u64) {
+    println!("seed {seed}, {} records\n", records.len());
+    println!("| records | pass | final / floor: median, 90%, most | simulations: median, most |");
+    println!("|---|---|---|---|");
+    for category in [
+        Category::Clean,
+        Category::Single,
+        Category::Double,
+        Category::Cogging,
+    ] {
+        let of: Vec<&Record> = draws
+            .iter()
+            .zip(records)
+            .filter(|(d, _)| d.category == category)
+            .map(|(_, r)| r)
+            .collect();
+        let mut ratios: Vec<f64> = of
+            .iter()
+            .map(|r| r.ratio)
+            .filter(|r| r.is_finite())
+            .collect();
+        ratios.sort_by(f64::total_cmp);
+        let mut sims: Vec<f64> = of.iter().map(|r| r.simulations as f64).collect();
+        sims.sort_by(f64::total_cmp);
+        println!(
+            "| {} | {} | {:.3}, {:.3}, {:.3} | {:.0}, {:.0} |",
+            category.name(),
+            percent(of.iter().filter(|r| r.pass).count(), of.len()),
+            quantile(&ratios, 0.5),
+            quantile(&ratios, 0.9),
+            quantile(&ratios, 1.0),
+            quantile(&sims, 0.5),
+            quantile(&sims, 1.0),
+        );
+    }
+    let clean: Vec<&Record> = draws
+        .iter()
+        .zip(records)
+        .filter(|(d, _)| d.category == Category::Clean)
+        .map(|(_, r)| r)
+        .collect();
+    println!(
+        "\nclean records given an effect: {}",
+        percent(
+            clean.iter().filter(|r| !r.selected.is_empty()).count(),
+            clean.len()
+        )
+    );
+    println!("\none effect: what was selected, per effect the record holds\n");
+    println!("| holds | right | what else was selected |");
+    println!("|---|---|---|");
+    for kind in KINDS.iter() {
+        let of: Vec<&Record> = draws
+            .iter()
+            .zip(records)
+            .filter(|(d, _)| {
+                d.category == Category::Single && KINDS[d.effects[0].0].name == kind.name
+            })
+            .map(|(_, r)| r)
+            .collect();
+        let right = of.iter().filter(|r| r.pass).count();
+        let mut others: Vec<String> = of
+            .iter()
+            .filter(|r| !r.pass)
+            .map(|r| match &r.error {
+                Some(_) => "error".into(),
+                None if r.selected.is_empty() => format!("nothing ({:.2}x)", r.ratio),
+                None => format!("{} ({:.2}x)", r.selected.join(" + "), r.ratio),
+            })
+            .collect();
+        others.sort();
+        println!(
+            "| {} | {} | {} |",
+            kind.effect,
+            percent(right, of.len()),
+            others.join("; ")
+        );
+    }
+    let total_seconds: f64 = records.iter().map(|r| r.seconds).sum();
+    println!("\n{:.0} s of diagnosis in all", total_seconds);
+}
