@@ -56,7 +56,7 @@ pub fn furuta_extra_torque_record(
 
 /// Run the independent simulator `tests/python/<script>` writing `csv`, and the truth it
 /// printed; `None` (with the reason) where python3 or scipy is missing.
-fn simulator_record(
+pub fn simulator_record(
     script: &str,
     csv: &Path,
     args: &[&str],

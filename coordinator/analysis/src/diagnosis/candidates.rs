@@ -43,6 +43,24 @@ pub fn candidate_effects(campaign: &Campaign) -> Vec<FreeParameter> {
         .collect()
 }
 
+/// `campaign` with the free parameters of `fit` but the effect `out` (held off, at 0), each
+/// starting where `fit` left it: the refit of backward elimination ([`super::prune`]).
+pub(super) fn refit_campaign_from(campaign: &Campaign, fit: &Fit, out: &str) -> Campaign {
+    let mut c = campaign.clone();
+    c.free = fit
+        .free
+        .iter()
+        .zip(&fit.point)
+        .filter(|(p, _)| p.name != out)
+        .map(|(p, v)| FreeParameter {
+            nominal: v.clamp(p.min, p.max),
+            ..p.clone()
+        })
+        .collect();
+    c.search.extra_starts.clear();
+    c
+}
+
 /// The campaign of a refit: the baseline's free parameters (starting at the baseline optimum)
 /// plus the effects of `set`, in bounds scaled to their estimated size.
 pub(super) fn refit_campaign(

@@ -26,7 +26,10 @@
 //!    independent samples of the residual (correlated residuals carry less information than
 //!    their count suggests), requiring a decrease of at least 10 (very strong evidence,
 //!    R. E. Kass, A. E. Raftery, JASA 90 (1995) 773–795) and a lower error on the held-out
-//!    window, which guards against over-fitting.
+//!    window, which guards against over-fitting. A selection of two effects or more is then
+//!    pruned ([`prune`], backward elimination): each effect taken out in turn and the rest
+//!    refitted from the selected fit's point; an effect whose loss the rule above does not
+//!    call decisive goes.
 //! 6. **Uncertainty** ([`uncertainty`], [`fit`]): confidence intervals from the Jacobian at the
 //!    optimum, widened for correlated residuals, and parameter correlations.
 //! 7. **Verdict**: the residual is explained when what is left is within
@@ -43,6 +46,7 @@ pub mod fair;
 pub mod fit;
 pub mod matrix;
 pub mod outside;
+pub mod prune;
 pub mod ranking;
 pub mod refit;
 pub mod report;
@@ -302,7 +306,23 @@ fn judge<E: Evaluator + Simulator>(
             setting.holdout,
             noise_floor,
         )?;
-        escalation::escalate(setting, first, calibration, candidates)?
+        let mut judged = escalation::escalate(setting, first, calibration, candidates)?;
+        if judged.selected.len() >= 2 {
+            let (fit, tried) = prune::prune(
+                setting.fit_campaign,
+                judged.final_fit.clone(),
+                setting.engine,
+                setting.progress,
+                setting.holdout,
+            )?;
+            let (verdict, explained_fraction) = verdict::judge(baseline, Some(&fit), noise_floor);
+            judged.refits.extend(tried);
+            judged.selected = fit.effects.clone();
+            judged.final_fit = fit;
+            judged.verdict = verdict;
+            judged.explained_fraction = explained_fraction;
+        }
+        judged
     })
 }
 
