@@ -13,6 +13,7 @@ use super::{hex, unhex32, DatasetHash, RawEntry, StoreError};
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// The folder of a store's dataset files.
 #[derive(Debug)]
@@ -38,9 +39,15 @@ impl DatasetFiles {
         if path.is_file() {
             return Ok(());
         }
-        let temporary = self
-            .folder
-            .join(format!(".{}.{}.partial", hex(hash), std::process::id()));
+        // A name of its own per write: two campaigns of one process may write the same
+        // dataset at once (with one name, one's rename took the other's file away).
+        static WRITES: AtomicU64 = AtomicU64::new(0);
+        let temporary = self.folder.join(format!(
+            ".{}.{}.{}.partial",
+            hex(hash),
+            std::process::id(),
+            WRITES.fetch_add(1, Ordering::Relaxed)
+        ));
         let written = (|| {
             let mut file = fs::File::create(&temporary)?;
             file.write_all(bytes)?;
@@ -99,6 +106,25 @@ fn io_error(path: &Path, e: std::io::Error) -> StoreError {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Campaigns of one process writing the same dataset at once all succeed, and the file
+    /// is whole.
+    #[test]
+    fn the_same_dataset_written_by_many_threads_at_once_is_written_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let files = DatasetFiles::open(dir.path()).unwrap();
+        let bytes = vec![7u8; 1 << 20];
+        for round in 0..20u8 {
+            let hash = [round; 32];
+            std::thread::scope(|scope| {
+                for _ in 0..8 {
+                    scope.spawn(|| files.put(&hash, &bytes).unwrap());
+                }
+            });
+            assert_eq!(files.get(&hash).unwrap().as_deref(), Some(&bytes[..]));
+        }
+        assert_eq!(files.hashes().unwrap().len(), 20);
+    }
 
     #[test]
     fn a_dataset_is_written_once_whole_and_read_back() {
