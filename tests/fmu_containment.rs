@@ -270,11 +270,12 @@ fn an_fmu_cannot_write_or_read_outside_its_folders_where_the_kernel_has_landlock
             assert!(!escape.outside.exists());
             assert_eq!(read, 0, "it could read {}", escape.secret.display());
         }
-        None => eprintln!(
+        // Under CI the claim must be reached: a kernel without Landlock fails the test there.
+        None => calib_worker::testing::skip(&format!(
             "this kernel has no Landlock: file confinement is not tested (it wrote outside: \
              {}, read outside: {read})",
             wrote & 1
-        ),
+        )),
     }
 }
 

@@ -127,16 +127,25 @@ mod tests {
         let cache = FmuCache::new(dir.clone(), 250).unwrap();
         let (a, b, c) = (vec![1u8; 100], vec![2u8; 100], vec![3u8; 100]);
         let hash = |x: &[u8]| crate::fmu::content_hash(x);
+        // Ages set on the files themselves, not waited for: the order holds on any clock
+        // and file system (a used archive is stamped now).
+        let aged = |x: &[u8], seconds: u64| {
+            let file = std::fs::File::options()
+                .append(true)
+                .open(cache.path(&hash(x)))
+                .unwrap();
+            file.set_modified(SystemTime::now() - std::time::Duration::from_secs(seconds))
+                .unwrap();
+        };
         cache.put(&hash(&a), &a).unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        aged(&a, 30);
         cache.put(&hash(&b), &b).unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(20));
+        aged(&b, 20);
         assert_eq!(
             cache.get(&hash(&a)),
             Some(a.clone()),
             "a used again, after b"
         );
-        std::thread::sleep(std::time::Duration::from_millis(20));
         cache.put(&hash(&c), &c).unwrap();
         assert_eq!(cache.len(), 2);
         assert_eq!(cache.get(&hash(&b)), None, "b was the least recently used");
