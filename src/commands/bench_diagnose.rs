@@ -37,6 +37,10 @@ pub struct Args {
     /// Also write each random record's outcome as JSON to this file.
     #[arg(long, value_name = "FILE", requires = "random")]
     json: Option<PathBuf>,
+    /// Keep each random record and its campaign in this folder (`record<i>.csv`,
+    /// `record<i>.toml`), to diagnose one again with `calib diagnose`.
+    #[arg(long, value_name = "DIR", requires = "random")]
+    keep: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> Outcome {
@@ -48,6 +52,7 @@ pub fn run(args: Args) -> Outcome {
             count,
             seed: args.seed,
             from: args.from,
+            keep: args.keep,
             jobs: args.cells.jobs,
             json: args.json,
             repo: PathBuf::from("."),

@@ -25,6 +25,8 @@ pub struct RandomArgs {
     pub from: usize,
     pub jobs: usize,
     pub json: Option<PathBuf>,
+    /// Where to keep the records and their campaigns (else a temporary folder, removed).
+    pub keep: Option<PathBuf>,
     pub repo: PathBuf,
 }
 
@@ -80,7 +82,7 @@ fn arm_multiples(found: &calib_analysis::diagnosis::outside::Found) -> Vec<usize
     ks
 }
 
-fn run_record(d: &Draw, repo: &Path, dir: &Path) -> Record {
+fn run_record(d: &Draw, repo: &Path, dir: &Path, keep: bool) -> Record {
     let started = Instant::now();
     let mut record = Record {
         index: d.index,
@@ -99,8 +101,12 @@ fn run_record(d: &Draw, repo: &Path, dir: &Path) -> Record {
     let csv = dir.join(format!("record{}.csv", d.index));
     let outcome = (|| -> Result<(), String> {
         make_record(d, repo, &csv)?;
-        let campaign = Campaign::parse(&d.campaign(&csv), Path::new("random.toml"))
-            .map_err(|e| e.to_string())?;
+        let text = d.campaign(&csv);
+        let toml = dir.join(format!("record{}.toml", d.index));
+        if keep {
+            std::fs::write(&toml, &text).map_err(|e| format!("{}: {e}", toml.display()))?;
+        }
+        let campaign = Campaign::parse(&text, &toml).map_err(|e| e.to_string())?;
         let diagnosis = diagnose(&campaign, &LocalEvaluator, &Silent).map_err(|e| e.to_string())?;
         record.selected = diagnosis.selected.clone();
         record.selected.sort();
@@ -125,7 +131,9 @@ fn run_record(d: &Draw, repo: &Path, dir: &Path) -> Record {
         record.ratio = ratio;
         Ok(())
     })();
-    let _ = std::fs::remove_file(&csv);
+    if !keep {
+        let _ = std::fs::remove_file(&csv);
+    }
     if let Err(e) = outcome {
         record.error = Some(e);
     }
@@ -134,7 +142,12 @@ fn run_record(d: &Draw, repo: &Path, dir: &Path) -> Record {
 }
 
 pub fn run(args: RandomArgs) -> Outcome {
-    let dir = std::env::temp_dir().join(format!("calib-random-{}", std::process::id()));
+    // Absolute: each campaign names its record by this path.
+    let dir = match &args.keep {
+        Some(keep) => std::path::absolute(keep)
+            .map_err(|e| Failure::input(format!("{}: {e}", keep.display())))?,
+        None => std::env::temp_dir().join(format!("calib-random-{}", std::process::id())),
+    };
     std::fs::create_dir_all(&dir).map_err(|e| Failure::input(format!("{}: {e}", dir.display())))?;
     let draws: Vec<Draw> = (args.from..args.from + args.count)
         .map(|i| draw(args.seed, i))
@@ -150,7 +163,7 @@ pub fn run(args: RandomArgs) -> Outcome {
                     *n - 1
                 };
                 let Some(d) = draws.get(i) else { break };
-                let r = run_record(d, &args.repo, &dir);
+                let r = run_record(d, &args.repo, &dir, args.keep.is_some());
                 eprintln!(
                     "{:>4} {:<20} {:<52} {:<26} -> {:<56} {:>8.3}x {:>7} sims {:>6.1} s {}",
                     r.index,
@@ -172,7 +185,9 @@ pub fn run(args: RandomArgs) -> Outcome {
             });
         }
     });
-    let _ = std::fs::remove_dir_all(&dir);
+    if args.keep.is_none() {
+        let _ = std::fs::remove_dir_all(&dir);
+    }
     let records: Vec<Record> = records
         .into_inner()
         .unwrap()
@@ -205,6 +220,15 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 
 /// The summary per category, the confusion matrix of one-effect records and the cost.
 fn print_tables(draws: &[Draw], records: &[Record], seed: u64) {
+    print_categories(draws, records, seed);
+    print_confusion(draws, records);
+    let total_seconds: f64 = records.iter().map(|r| r.seconds).sum();
+    println!("\n{:.0} s of diagnosis in all", total_seconds);
+}
+
+/// Per category: the share passed, the final objective over the floor and the cost; then the
+/// clean records' false-positive rate.
+fn print_categories(draws: &[Draw], records: &[Record], seed: u64) {
     println!("seed {seed}, {} records\n", records.len());
     println!("| records | pass | final / floor: median, 90%, most | simulations: median, most |");
     println!("|---|---|---|---|");
@@ -252,6 +276,10 @@ fn print_tables(draws: &[Draw], records: &[Record], seed: u64) {
             clean.len()
         )
     );
+}
+
+/// One-effect records: per effect held, how often it alone was selected, and what else was.
+fn print_confusion(draws: &[Draw], records: &[Record]) {
     println!("\none effect: what was selected, per effect the record holds\n");
     println!("| holds | right | what else was selected |");
     println!("|---|---|---|");
@@ -282,6 +310,4 @@ fn print_tables(draws: &[Draw], records: &[Record], seed: u64) {
             others.join("; ")
         );
     }
-    let total_seconds: f64 = records.iter().map(|r| r.seconds).sum();
-    println!("\n{:.0} s of diagnosis in all", total_seconds);
 }
