@@ -14,7 +14,7 @@ use calib_engine::optim::problem::Silent;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 /// What to run: records `from..from + count` of `seed` (record i has category i mod 10:
 /// 2 clean, 5 one effect, 2 two effects, 1 cogging in every 10), `jobs` at a time, the
@@ -48,21 +48,47 @@ pub struct Record {
     pub error: Option<String>,
 }
 
+/// Longest a record's simulation may take: the independent simulator resolves each stick and
+/// slip of a Coulomb friction as an event, and a friction that barely holds can make it
+/// chatter for ever.
+const SIMULATOR_DEADLINE: Duration = Duration::from_secs(300);
+
 fn make_record(d: &Draw, repo: &Path, csv: &Path) -> Result<(), String> {
     let script = repo.join(d.script());
-    let run = std::process::Command::new("python3")
+    let mut child = std::process::Command::new("python3")
         .arg(&script)
         .arg("--out")
         .arg(csv)
         .args(d.simulator_args())
-        .output()
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .map_err(|e| format!("python3 cannot run {}: {e}", script.display()))?;
-    if !run.status.success() {
-        return Err(format!(
-            "{} failed: {}",
-            script.display(),
-            String::from_utf8_lossy(&run.stderr)
-        ));
+    let started = Instant::now();
+    let status = loop {
+        match child.try_wait() {
+            Ok(Some(status)) => break status,
+            Ok(None) if started.elapsed() < SIMULATOR_DEADLINE => {
+                std::thread::sleep(Duration::from_millis(100))
+            }
+            Ok(None) => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(format!(
+                    "{} did not finish in {} s (its events chatter)",
+                    script.display(),
+                    SIMULATOR_DEADLINE.as_secs()
+                ));
+            }
+            Err(e) => return Err(format!("{}: {e}", script.display())),
+        }
+    };
+    if !status.success() {
+        let mut stderr = String::new();
+        if let Some(mut pipe) = child.stderr.take() {
+            let _ = std::io::Read::read_to_string(&mut pipe, &mut stderr);
+        }
+        return Err(format!("{} failed: {stderr}", script.display()));
     }
     Ok(())
 }
