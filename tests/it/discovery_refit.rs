@@ -152,7 +152,7 @@ fn cogging_is_proposed_and_its_refit_reaches_the_noise_floor() {
         refit.toml
     );
     // The objective falls from over 10⁴ times the noise floor to within 1.5 times it (the
-    // simulator's truth with the effect leaves 1.23 times).
+    // simulator's truth with the effect leaves 0.98 times).
     assert!(refit.ratio_before() > 1e4, "ratio {}", refit.ratio_before());
     assert!(refit.ratio_after() <= 1.5, "ratio {}", refit.ratio_after());
     // The arm's friction error, proposed as `sign(armJoint.w)`, went into the friction.
