@@ -96,7 +96,7 @@ fn calib_simulate_co_simulation_writes_the_reference_result() {
     }
 }
 
-/// A noisy record of `model` made by `calib simulate` itself.
+/// A noisy record of `model` made by FMPy, the independent simulator.
 fn record(
     fmu: &Path,
     dir: &Path,

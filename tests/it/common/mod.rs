@@ -353,10 +353,110 @@ pub fn watch_progress(
     (reported, reader)
 }
 
-/// A record of `fmu` made by `calib simulate`: `set` (each `name=value`), from 0 to `stop`
-/// every `step`, the `outputs`, Gaussian noise `noise` (each `output=sigma`, seed 7), written
-/// to `csv`.
+/// A record of the FMU `fmu` made by FMPy, the independent simulator (`tests/python/
+/// fmpy_simulate.py`, Model Exchange at rtol 1e-8): the parameters `set` (`NAME=VALUE`; an
+/// `offset(OUTPUT)=VALUE` is added to that output, as a sensor's offset), 0 to
+/// `stop` every `step`, the `outputs` (comma-separated) with Gaussian noise of the standard
+/// deviations `noise` (`NAME=SD`, seed 7) added, written to `csv`. Where FMPy is not
+/// installed the test says so (under CI it fails) and the record is `calib simulate`'s.
 pub fn fmu_record(
+    fmu: &Path,
+    csv: &Path,
+    set: &[&str],
+    stop: &str,
+    step: &str,
+    noise: &[&str],
+    outputs: &str,
+) -> PathBuf {
+    let fmpy = std::process::Command::new("python3")
+        .args(["-c", "import fmpy"])
+        .output();
+    if !fmpy.is_ok_and(|o| o.status.success()) {
+        skip(
+            "FMPy (`pip install fmpy==0.3.32`) makes the FMU records; calib simulate made this one",
+        );
+        return calib_simulate_record(fmu, csv, set, stop, step, noise, outputs);
+    }
+    let raw = csv.with_extension("fmpy.csv");
+    let mut command = std::process::Command::new("python3");
+    command
+        .arg(repo().join("tests/python/fmpy_simulate.py"))
+        .arg(fmu)
+        .args(["me", stop, step, "1e-8"])
+        .arg(&raw)
+        .args(outputs.split(','));
+    // A sensor offset on an output (`offset(NAME)=VALUE`) is added to the record; any other
+    // assignment is a parameter of the FMU.
+    let mut offsets: Vec<(&str, f64)> = Vec::new();
+    for s in set {
+        let (name, value) = s.split_once('=').unwrap();
+        match name
+            .strip_prefix("offset(")
+            .and_then(|n| n.strip_suffix(')'))
+        {
+            Some(output) => offsets.push((output, value.parse().unwrap())),
+            None => {
+                assert!(
+                    !name.contains('('),
+                    "{s}: only offsets are applied to FMPy's record"
+                );
+                command.args(["--set", s]);
+            }
+        }
+    }
+    let out = command.output().expect("python3 runs");
+    assert!(
+        out.status.success(),
+        "fmpy_simulate.py: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&raw).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let offset: Vec<f64> = header
+        .iter()
+        .map(|name| {
+            offsets
+                .iter()
+                .find(|(o, _)| o == name)
+                .map_or(0.0, |(_, v)| *v)
+        })
+        .collect();
+    let sd: Vec<f64> = header
+        .iter()
+        .map(|name| {
+            noise
+                .iter()
+                .find_map(|n| n.strip_prefix(&format!("{name}=")))
+                .map_or(0.0, |v| v.parse().unwrap())
+        })
+        .collect();
+    use rand::SeedableRng;
+    use rand_distr::Distribution;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let mut written = header.join(",") + "\n";
+    for line in lines.filter(|l| !l.is_empty()) {
+        let row: Vec<String> = line
+            .split(',')
+            .zip(sd.iter().zip(&offset))
+            .map(|(v, (&sd, &offset))| {
+                let v: f64 = v.parse::<f64>().unwrap() + offset;
+                let e = if sd > 0.0 {
+                    rand_distr::Normal::new(0.0, sd).unwrap().sample(&mut rng)
+                } else {
+                    0.0
+                };
+                format!("{:?}", v + e)
+            })
+            .collect();
+        written.push_str(&(row.join(",") + "\n"));
+    }
+    std::fs::write(csv, written).unwrap();
+    csv.to_path_buf()
+}
+
+/// The same record made by `calib simulate` (its own noise, seed 7).
+fn calib_simulate_record(
     fmu: &Path,
     csv: &Path,
     set: &[&str],
