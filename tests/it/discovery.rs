@@ -254,3 +254,28 @@ fn cogging_is_found_after_calibrating_the_frictions() {
         others[0]
     );
 }
+
+/// A record too short for the library (1.5 s: fewer usable samples than three per candidate
+/// function) gets no proposal, and the report says why each joint was not looked at.
+#[test]
+fn a_joint_with_too_few_samples_is_said_to_be_unseen() {
+    let dir = tempfile::tempdir().unwrap();
+    let Some((mut record, truth)) = record(dir.path(), "record.csv", &["--cogging", "0.006"])
+    else {
+        return;
+    };
+    record.time.truncate(150);
+    for series in record.angles.iter_mut().chain(record.inputs.iter_mut()) {
+        series.truncate(150);
+    }
+    let found = discover(&model(&truth), &record, &DiscoveryOptions::default()).unwrap();
+    assert!(found.proposals().is_empty());
+    for joint in &found.joints {
+        let why = joint.unseen.as_deref().unwrap_or_default();
+        assert!(
+            why.starts_with("too few usable samples"),
+            "{}: {why:?}",
+            joint.joint
+        );
+    }
+}

@@ -132,6 +132,11 @@ fn summary(found: &Discovery, refits: &[ProposalRefit]) -> String {
         s.push_str("  nothing: no function of the library explains the residual torque\n");
     }
     for joint in &found.joints {
+        if let Some(why) = &joint.unseen {
+            s.push_str(&format!("  {}: not looked at: {why}\n", joint.joint));
+        }
+    }
+    for joint in &found.joints {
         let Some(p) = &joint.proposal else { continue };
         s.push_str(&format!(
             "  torque on {}: {}\n  (residual torque RMS {:.3e} -> {:.3e} N m)\n",

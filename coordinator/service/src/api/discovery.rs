@@ -190,6 +190,7 @@ mod tests {
             terms: effect.terms.clone(),
             harmonics: vec![],
             proposal: Some(effect.clone()),
+            unseen: None,
         };
         let refit = ProposalRefit {
             effect: effect.name.clone(),

@@ -85,6 +85,9 @@ pub struct JointDiscovery {
     pub terms: Vec<FoundTerm>,
     pub harmonics: Vec<FoundHarmonic>,
     pub proposal: Option<DiscoveredEffect>,
+    /// Why no regression ran on this joint (too few usable samples), when none did.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unseen: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -249,8 +252,19 @@ fn discover_joint(
         terms: Vec::new(),
         harmonics: Vec::new(),
         proposal: None,
+        unseen: None,
     };
     if rows.len() < 3 * (kept.len() + 1) || rows.len() < 2 * options.folds {
+        // Said, not passed over: a joint that moves for a few seconds of the record (at rest
+        // or reversing, its torque is not known) leaves too few samples for the functions.
+        found.unseen = Some(format!(
+            "too few usable samples: {} where the joint moves (of {}), for {} candidate \
+             functions the record can show (at least 3 per function needed); a record where \
+             it moves longer, or a shorter library, would let discovery look",
+            rows.len(),
+            torque.len(),
+            kept.len()
+        ));
         return found;
     }
     let x = DMatrix::from_fn(rows.len(), kept.len(), |r, c| {
