@@ -44,6 +44,7 @@ fn calibrated(dir: &Path, args: &[&str]) -> Option<Calibrated> {
     let campaign = campaign(dir, &csv);
     let measurement = load_measurement(&campaign).unwrap();
     let (_, floor) = noise_floor(&Objective::new(&campaign, &measurement).unwrap());
+    let floor = floor.value;
     let c = calibrate(&campaign, LocalEvaluator, &Silent).unwrap();
     let best = c.best_run();
     let model = joint_model(&campaign, campaign.full_parameters(&best.point)).unwrap();

@@ -22,7 +22,7 @@
 use super::fair::fair_refits;
 use super::ranking;
 use super::refit::{refit_and_select, Judgement};
-use super::verdict;
+use super::verdict::{self, Floor};
 use super::{Candidate, Fit};
 use crate::residuals::jacobian::stack;
 use calib_engine::calibration::Calibration;
@@ -54,12 +54,12 @@ pub(super) struct Setting<'a, E> {
     pub baseline: &'a Fit,
     pub specs: &'a [FreeParameter],
     pub holdout: &'a Objective,
-    pub noise_floor: f64,
+    pub floor: Floor,
 }
 
 impl<E: Evaluator + Simulator> Setting<'_, E> {
     fn explains(&self, fit: &Fit) -> bool {
-        verdict::explains(fit, self.baseline, self.noise_floor)
+        verdict::explains(fit, self.baseline, &self.floor)
     }
 }
 
@@ -89,7 +89,7 @@ pub(super) fn escalate<E: Evaluator + Simulator>(
         }
     }
     let chosen = verdict::select(s.baseline, &refits);
-    let (verdict, explained_fraction) = verdict::judge(s.baseline, chosen, s.noise_floor);
+    let (verdict, explained_fraction) = verdict::judge(s.baseline, chosen, &s.floor);
     let (final_fit, selected) = match chosen {
         None => (s.baseline.clone(), Vec::new()),
         Some(fit) => (fit.clone(), fit.effects.clone()),
@@ -146,7 +146,7 @@ fn from_other_basins<E: Evaluator + Simulator>(
             candidates,
             s.specs,
             s.holdout,
-            s.noise_floor,
+            &s.floor,
         )?;
         merge(refits, again.refits);
     }

@@ -57,7 +57,7 @@ pub mod window;
 mod testing;
 
 pub use candidates::{candidate_effects, WELL_RANKED};
-pub use verdict::{Verdict, MIN_BIC_DECREASE, NEAR_EXACT, NOISE_FACTOR};
+pub use verdict::{Floor, Verdict, MIN_BIC_DECREASE, NEAR_EXACT, NOISE_FACTOR, NOISE_TEST_LEVEL};
 pub use window::{windows, HOLDOUT_FRACTION};
 
 use calib_engine::calibration::{calibrate, load_measurement, Calibration};
@@ -71,7 +71,7 @@ use calib_engine::optim::problem::Progress;
 use calib_engine::store::{MemoryStore, Store};
 
 use crate::residuals::uncertainty::Interval;
-use crate::residuals::whiteness::{noise_level, ResidualStats};
+use crate::residuals::whiteness::{holds_noise, noise_level, ResidualStats};
 use calib_engine::store::engine::{EngineStats, StoredEngine};
 use fit::fit_of;
 use refit::{refit_and_select, Judgement};
@@ -141,6 +141,8 @@ pub struct Diagnosis {
     /// Noise standard deviation per output, estimated from the measured data.
     pub noise: Vec<f64>,
     pub noise_floor: f64,
+    /// The floor with the ratio noise alone stays under ([`Floor::limit`]).
+    pub floor: Floor,
     pub baseline: Fit,
     pub candidates: Vec<Candidate>,
     pub refits: Vec<Fit>,
@@ -220,16 +222,11 @@ where
 
     // Noise level of each output from the measured data in the fitted window.
     let fit_objective = Objective::new(&fit_campaign, &measurement)?;
-    let (noise, noise_floor) = noise_floor(&fit_objective);
+    let (noise, floor) = noise_floor(&fit_objective);
 
     // 1. Baseline.
-    let (calibration, baseline, replaced) = baseline_fit(
-        &fit_campaign,
-        engine,
-        progress,
-        &holdout_objective,
-        noise_floor,
-    )?;
+    let (calibration, baseline, replaced) =
+        baseline_fit(&fit_campaign, engine, progress, &holdout_objective, &floor)?;
     // 2–3. Rank the candidates.
     let (mut candidates, candidate_specs) = ranked(
         &fit_campaign,
@@ -247,7 +244,7 @@ where
         baseline: &baseline,
         specs: &candidate_specs,
         holdout: &holdout_objective,
-        noise_floor,
+        floor,
     };
     let Judgement {
         refits,
@@ -262,7 +259,8 @@ where
         fit_window,
         holdout_window,
         noise,
-        noise_floor,
+        noise_floor: floor.value,
+        floor,
         baseline,
         candidates,
         refits,
@@ -285,8 +283,8 @@ fn judge<E: Evaluator + Simulator>(
     candidates: &mut [Candidate],
 ) -> Result<Judgement> {
     let baseline = setting.baseline;
-    let noise_floor = setting.noise_floor;
-    Ok(if baseline.objective <= NOISE_FACTOR * noise_floor {
+    let floor = setting.floor;
+    Ok(if floor.holds(baseline.objective) {
         Judgement {
             refits: Vec::new(),
             selected: Vec::new(),
@@ -304,7 +302,7 @@ fn judge<E: Evaluator + Simulator>(
             candidates,
             setting.specs,
             setting.holdout,
-            noise_floor,
+            &floor,
         )?;
         let mut judged = escalation::escalate(setting, first, calibration, candidates)?;
         if judged.selected.len() >= 2 {
@@ -315,7 +313,7 @@ fn judge<E: Evaluator + Simulator>(
                 setting.progress,
                 setting.holdout,
             )?;
-            let (verdict, explained_fraction) = verdict::judge(baseline, Some(&fit), noise_floor);
+            let (verdict, explained_fraction) = verdict::judge(baseline, Some(&fit), &floor);
             judged.refits.extend(tried);
             judged.selected = fit.effects.clone();
             judged.final_fit = fit;
@@ -336,7 +334,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
     engine: &E,
     progress: &dyn Progress,
     holdout_objective: &Objective,
-    noise_floor: f64,
+    floor: &Floor,
 ) -> Result<(Calibration, Fit, Option<Fit>)> {
     let calibration = calibrate(fit_campaign, engine, progress)?;
     let mut baseline = fit_of(&calibration, &[], engine, holdout_objective)?;
@@ -345,7 +343,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
     // Above the noise floor and not corroborated by the campaign's own runs, the baseline
     // too gets the diagnosis's own search, so that no effect is credited with what a better
     // fit of the campaign's own parameters removes.
-    if baseline.objective > NOISE_FACTOR * noise_floor
+    if !floor.holds(baseline.objective)
         && !fit_campaign.free.is_empty()
         && !fair::corroborated(&calibration)
     {
@@ -377,7 +375,7 @@ fn baseline_fit<E: Evaluator + Simulator>(
     tracing::info!(
         campaign = %fit_campaign.name,
         objective = baseline.objective,
-        noise_floor,
+        noise_floor = floor.value,
         "baseline fitted"
     );
 
@@ -415,15 +413,12 @@ fn ranked<E: Evaluator + Simulator>(
 }
 
 /// The noise level of each output, estimated from the measured data on `objective`'s grid,
-/// and the noise floor, what a perfect model would leave: `Σ_i k_i N σ_i²`.
-pub fn noise_floor(objective: &Objective) -> (Vec<f64>, f64) {
+/// and the noise floor, what a perfect model would leave: `Σ_i k_i N σ_i²`, with the ratio
+/// to it that noise alone stays under ([`Floor`]).
+pub fn noise_floor(objective: &Objective) -> (Vec<f64>, Floor) {
     let noise: Vec<f64> = objective.measured.iter().map(|m| noise_level(m)).collect();
-    let samples = objective.grid.len() as f64;
-    let floor = noise
-        .iter()
-        .zip(&objective.weights)
-        .map(|(s, k)| k * samples * s * s)
-        .sum();
+    let noisy = objective.measured.iter().all(|m| holds_noise(m));
+    let floor = Floor::new(&noise, &objective.weights, objective.grid.len(), noisy);
     (noise, floor)
 }
 

@@ -7,7 +7,7 @@
 use super::candidates::refit_campaign;
 use super::fair::fair_refits;
 use super::fit::fit_of;
-use super::verdict::{self, Verdict};
+use super::verdict::{self, Floor, Verdict};
 use super::{Candidate, Fit};
 use calib_engine::calibration::calibrate;
 use calib_engine::campaign::{Campaign, FreeParameter, Method};
@@ -108,7 +108,7 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
     candidates: &mut [Candidate],
     candidate_specs: &[FreeParameter],
     holdout_objective: &Objective,
-    noise_floor: f64,
+    floor: &Floor,
 ) -> Result<Judgement> {
     // 4. Refit the best candidates alone and in pairs.
     let top: Vec<&Candidate> = candidates
@@ -122,7 +122,7 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
         .iter()
         .map(|set| refit_campaign(fit_campaign, baseline, set, candidate_specs))
         .collect();
-    let explains = |f: &Fit| verdict::explains(f, baseline, noise_floor);
+    let explains = |f: &Fit| verdict::explains(f, baseline, floor);
     // First the local refits, all candidates at once.
     let local: Vec<Campaign> = refit_campaigns.iter().map(local_refit).collect();
     let mut refits = refit_all(&local, &singles, engine, progress, holdout_objective)?;
@@ -176,13 +176,13 @@ pub(super) fn refit_and_select<E: Evaluator + Simulator>(
             .find(|f| f.effects.len() == 1 && f.effects[0] == c.effect)
             .map(|f| f.objective);
     }
-    Ok(judged(baseline, refits, noise_floor))
+    Ok(judged(baseline, refits, floor))
 }
 
 /// Steps 5 and 7: select among the refits, and judge the selection against the noise floor.
-fn judged(baseline: &Fit, refits: Vec<Fit>, noise_floor: f64) -> Judgement {
+fn judged(baseline: &Fit, refits: Vec<Fit>, floor: &Floor) -> Judgement {
     let chosen = verdict::select(baseline, &refits);
-    let (verdict, explained_fraction) = verdict::judge(baseline, chosen, noise_floor);
+    let (verdict, explained_fraction) = verdict::judge(baseline, chosen, floor);
     let (final_fit, selected) = match chosen {
         None => (baseline.clone(), Vec::new()),
         Some(fit) => (fit.clone(), fit.effects.clone()),

@@ -96,6 +96,8 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "holdout_window": { "start": d.holdout_window.0, "stop": d.holdout_window.1 },
         "noise": per_output(d, &d.noise),
         "noise_floor": d.noise_floor,
+        "noise_limit": d.floor.limit,
+        "noise_test_level": verdict::NOISE_TEST_LEVEL,
         "baseline": fit_json(d, &d.baseline),
         "candidates": d.candidates.iter().map(|c| json!({
             "effect": c.effect,
@@ -131,6 +133,7 @@ pub fn verdict_text(d: &Diagnosis) -> String {
         baseline: &d.baseline,
         final_fit: &d.final_fit,
         noise_floor: d.noise_floor,
+        noise_limit: d.floor.limit,
         explained_fraction: d.explained_fraction,
     })
 }
@@ -203,7 +206,7 @@ fn write_heading(s: &mut String, d: &Diagnosis) {
     let _ = writeln!(s, "**Verdict:** {}\n", verdict_text(d));
     let _ = writeln!(
         s,
-        "Fitted window {:.3}–{:.3} s, held-out window {:.3}–{:.3} s. Noise floor {:.4e} (noise per output estimated from the data: {}).\n",
+        "Fitted window {:.3}–{:.3} s, held-out window {:.3}–{:.3} s. Noise floor {:.4e} (noise per output estimated from the data: {}); noise alone leaves more than {:.3}x the floor {:.0}% of the time.\n",
         d.fit_window.0,
         d.fit_window.1,
         d.holdout_window.0,
@@ -215,7 +218,9 @@ fn write_heading(s: &mut String, d: &Diagnosis) {
             .zip(&d.noise)
             .map(|(o, n)| format!("`{}` σ = {:.3e}", o.model, n))
             .collect::<Vec<_>>()
-            .join(", ")
+            .join(", "),
+        d.floor.limit,
+        100.0 * verdict::NOISE_TEST_LEVEL
     );
 }
 

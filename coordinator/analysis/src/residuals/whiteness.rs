@@ -112,6 +112,31 @@ pub fn noise_level(signal: &[f64]) -> f64 {
     (mean / (20.0 * trimmed_share(TRIMMED))).sqrt()
 }
 
+/// Lag-one autocorrelation of the third differences below which a signal's third
+/// differences are mostly noise: white noise gives −3/4 (the differences of neighbouring
+/// samples share three of their four terms), a smooth curve nearly +1, so −1/2 means noise
+/// makes up more than 6/7 of their variance.
+pub const NOISE_CORRELATION: f64 = -0.5;
+
+/// Whether `signal` holds measurable noise: its third differences (what
+/// [`noise_level`] reads) are mostly noise rather than the curve's own curvature
+/// ([`NOISE_CORRELATION`]). A noise-free simulated record does not.
+pub fn holds_noise(signal: &[f64]) -> bool {
+    let third: Vec<f64> = signal
+        .windows(4)
+        .map(|w| w[3] - 3.0 * w[2] + 3.0 * w[1] - w[0])
+        .collect();
+    if third.len() < 8 {
+        return false;
+    }
+    let energy: f64 = third.iter().map(|d| d * d).sum();
+    if energy <= 0.0 {
+        return false;
+    }
+    let lagged: f64 = third.windows(2).map(|w| w[0] * w[1]).sum();
+    lagged / energy <= NOISE_CORRELATION
+}
+
 /// The share of a centred Gaussian's variance left when the largest share `p` of its squares
 /// is left out: `1 − 2cφ(c)/(1 − p)` with `c` its `1 − p/2` quantile.
 fn trimmed_share(p: f64) -> f64 {
@@ -193,6 +218,26 @@ mod tests {
         assert!((s.rms - 0.002).abs() < 1e-4);
         let sine: Vec<f64> = (0..4000).map(|i| (i as f64 * 0.01).sin() * 0.01).collect();
         assert!(!ResidualStats::of(&sine).white);
+    }
+
+    #[test]
+    fn a_noisy_record_holds_noise_and_a_simulated_one_does_not() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let swing = |i: usize| {
+            let t = i as f64 * 0.01;
+            2.0 * (5.5 * t).sin() * (-0.05 * t).exp()
+        };
+        let clean: Vec<f64> = (0..4000).map(swing).collect();
+        assert!(!holds_noise(&clean));
+        // Noise a thousandth of the swing's size is still noise to the third differences.
+        let noisy: Vec<f64> = (0..4000)
+            .map(|i| swing(i) + gaussian(&mut rng, 0.001))
+            .collect();
+        assert!(holds_noise(&noisy));
+        // Quantisation alone is noise too.
+        let counts: Vec<f64> = clean.iter().map(|x| (x * 650.0).round() / 650.0).collect();
+        assert!(holds_noise(&counts));
+        assert!(!holds_noise(&[0.0; 100]));
     }
 
     #[test]
