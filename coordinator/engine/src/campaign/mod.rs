@@ -195,8 +195,10 @@ pub struct Search {
     /// for the default ([`crate::optim::screening::default_count`]), 0 for plain
     /// quasi-random starts.
     pub screening: Option<usize>,
-    /// Smallest population of CMA-ES (`cma_population`); its default `4 + ⌊3 ln n⌋` when
-    /// larger or unset.
+    /// Smallest population of CMA-ES (`cma_population`; `4 + ⌊3 ln n⌋` when larger). Unset:
+    /// differential evolution's, `max(15, 10 n)`, so that a generation is a round as full as
+    /// one of differential evolution: on workers, a round costs the same wall time whether it
+    /// holds 6 points or 20, and the larger population needs fewer of them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub cma_population: Option<usize>,
     /// Further start points (physical values of the free parameters), tried after the

@@ -93,6 +93,11 @@ enum Mutation {
 
 /// Differential evolution (rand/1/bin or best/1/bin) on the unit box `[0, 1]^n`.
 ///
+/// The population of `n` parameters by default, `max(15, 10 n)`: one round of points.
+pub fn default_population(n: usize) -> usize {
+    (10 * n).max(15)
+}
+
 /// See the [module documentation](self) for the algorithm. Defaults:
 ///
 /// * population size `max(15, 10 n)`, including the start point,
@@ -124,7 +129,7 @@ impl DifferentialEvolution {
     /// solver is initialised) becomes a member of the initial population and
     /// `seed` determines every random choice.
     pub fn new(start: Vec<f64>, seed: u64) -> Self {
-        let population_size = (10 * start.len()).max(15);
+        let population_size = default_population(start.len());
         DifferentialEvolution {
             start,
             seed,

@@ -214,8 +214,11 @@ pub fn run_one(context: &RunContext, spec: &RunSpec) -> Result<RunOutcome, argmi
             execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
         Method::CmaEs => {
-            let inner = cma_es::CmaEs::new(spec.start_unit.clone(), spec.seed)
-                .with_population(context.cma_population.unwrap_or(0));
+            let inner = cma_es::CmaEs::new(spec.start_unit.clone(), spec.seed).with_population(
+                context.cma_population.unwrap_or_else(|| {
+                    differential_evolution::default_population(spec.start_unit.len())
+                }),
+            );
             execute(problem, Budgeted::new(inner, budget, context.stall), |s| s)?
         }
     };
