@@ -34,6 +34,14 @@ pub struct Args {
     /// The first random record's index (to run part of a benchmark).
     #[arg(long, default_value_t = 0, requires = "random")]
     from: usize,
+    /// Only the random records of these kinds (comma-separated: clean, single, double,
+    /// cogging); each keeps its index, so its draw is the one the whole benchmark makes.
+    #[arg(long, value_delimiter = ',', value_parser = ["clean", "single", "double", "cogging"], requires = "random")]
+    kinds: Vec<String>,
+    /// Only list the random records (index, kind, what each holds, search settings),
+    /// diagnosing nothing.
+    #[arg(long, requires = "random")]
+    list: bool,
     /// Also write each random record's outcome as JSON to this file.
     #[arg(long, value_name = "FILE", requires = "random")]
     json: Option<PathBuf>,
@@ -52,6 +60,8 @@ pub fn run(args: Args) -> Outcome {
             count,
             seed: args.seed,
             from: args.from,
+            only: args.kinds,
+            list: args.list,
             keep: args.keep,
             jobs: args.cells.jobs,
             json: args.json,

@@ -23,6 +23,10 @@ pub struct RandomArgs {
     pub count: usize,
     pub seed: u64,
     pub from: usize,
+    /// Only records of these categories (clean, single, double, cogging); empty: all.
+    pub only: Vec<String>,
+    /// Only print the draws.
+    pub list: bool,
     pub jobs: usize,
     pub json: Option<PathBuf>,
     /// Where to keep the records and their campaigns (else a temporary folder, removed).
@@ -168,6 +172,22 @@ fn run_record(d: &Draw, repo: &Path, dir: &Path, keep: bool) -> Record {
 }
 
 pub fn run(args: RandomArgs) -> Outcome {
+    if args.list {
+        for d in (args.from..args.from + args.count).map(|i| draw(args.seed, i)) {
+            if args.only.is_empty() || args.only.iter().any(|c| c == category_key(d.category)) {
+                println!(
+                    "{:>4} {:<20} {:<52} {} {} ×{}",
+                    d.index,
+                    d.category.name(),
+                    d.describe(),
+                    d.bounds,
+                    d.methods,
+                    d.starts
+                );
+            }
+        }
+        return Ok(());
+    }
     // Absolute: each campaign names its record by this path.
     let dir = match &args.keep {
         Some(keep) => std::path::absolute(keep)
@@ -177,6 +197,7 @@ pub fn run(args: RandomArgs) -> Outcome {
     std::fs::create_dir_all(&dir).map_err(|e| Failure::input(format!("{}: {e}", dir.display())))?;
     let draws: Vec<Draw> = (args.from..args.from + args.count)
         .map(|i| draw(args.seed, i))
+        .filter(|d| args.only.is_empty() || args.only.iter().any(|c| c == category_key(d.category)))
         .collect();
     let next = Mutex::new(0usize);
     let records: Mutex<Vec<Option<Record>>> = Mutex::new(vec![None; draws.len()]);
@@ -227,6 +248,16 @@ pub fn run(args: RandomArgs) -> Outcome {
     }
     print_tables(&draws, &records, args.seed);
     Ok(())
+}
+
+/// The name `--only` gives a category.
+fn category_key(c: Category) -> &'static str {
+    match c {
+        Category::Clean => "clean",
+        Category::Single => "single",
+        Category::Double => "double",
+        Category::Cogging => "cogging",
+    }
 }
 
 fn percent(n: usize, of: usize) -> String {
