@@ -221,8 +221,16 @@ fn print_profiles_and_verdict(d: &diagnosis::Diagnosis, profile: bool, found: Op
         d.final_fit.held_out_objective
     );
     println!("\n{}", report::verdict_text(d));
-    if let Some(found) = found {
-        println!("\n{}", found.text());
+    match found {
+        Some(found) => println!("\n{}", found.text()),
+        // Said where it matters: the library is not all there is.
+        None if !d.explained() && d.campaign.model.info().name == "furuta" => println!(
+            "\nThe effect library leaves {:.2}x the noise floor. `calib diagnose --discover` looks \
+             outside it: the torque each joint still misses, from the record, and a harmonic \
+             torque of every period 2-40 per turn (docs/discovery.md).",
+            d.final_fit.objective / d.noise_floor
+        ),
+        None => {}
     }
 }
 

@@ -3,6 +3,7 @@
 //! proposal refitted, never written into the campaign: what the outputs call "found outside
 //! the library".
 
+use super::discovery::scan::{scan, HarmonicScan, ScanStart};
 use super::discovery::{
     discover, joint_model, record_of, refit_discovered, DiscoveredEffect, Discovery,
     DiscoveryOptions, ProposalRefit,
@@ -19,18 +20,21 @@ pub struct Found {
     /// Why nothing was looked for (a model discovery cannot invert); `None` when it looked.
     pub unavailable: Option<String>,
     pub discovery: Option<Discovery>,
-    /// The refit of each proposal, in the order of [`Discovery::proposals`].
+    /// The harmonic scan, run where the library's diagnosis leaves more than noise.
+    pub scan: Option<HarmonicScan>,
+    /// The refit of each proposal, in the order of [`Found::proposals`].
     pub refits: Vec<ProposalRefit>,
 }
 
 impl Found {
     /// Each proposal with its refit.
     pub fn proposals(&self) -> Vec<(&DiscoveredEffect, Option<&ProposalRefit>)> {
-        let proposals = self
+        let mut proposals = self
             .discovery
             .as_ref()
             .map(Discovery::proposals)
             .unwrap_or_default();
+        proposals.extend(self.scan.as_ref().and_then(|s| s.proposal.as_ref()));
         proposals
             .into_iter()
             .enumerate()
@@ -44,7 +48,8 @@ impl Found {
             Some(found) if self.unavailable.is_none() => json!({
                 "available": true,
                 "discovery": found,
-                "proposals": found.proposals().iter().map(|p| p.to_toml()).collect::<Vec<_>>(),
+                "proposals": self.proposals().iter().map(|(p, _)| p.to_toml()).collect::<Vec<_>>(),
+                "harmonic_scan": self.scan,
                 "refits": self.refits,
             }),
             _ => json!({
@@ -57,7 +62,7 @@ impl Found {
     /// The section of diagnosis.md, and the summary printed (the same text).
     pub fn text(&self) -> String {
         match (&self.unavailable, &self.discovery) {
-            (None, Some(found)) => summary(found, &self.refits),
+            (None, Some(found)) => summary(found, self.scan.as_ref(), &self.refits),
             (why, _) => format!(
                 "found outside the library: nothing looked for. {}\n",
                 why.as_deref().unwrap_or_default()
@@ -98,15 +103,15 @@ pub fn found_outside_the_library<E: Evaluator>(
             return Ok(Found {
                 unavailable: Some(e.to_string()),
                 discovery: None,
+                scan: None,
                 refits: Vec::new(),
             });
         }
     };
     let mut campaign = d.campaign.clone();
     campaign.free = fit.free.clone();
-    let mut refits = Vec::new();
-    for proposal in found.proposals() {
-        refits.push(refit_discovered(
+    let refit = |proposal: &DiscoveredEffect| {
+        refit_discovered(
             &campaign,
             &fit.point,
             fit.objective,
@@ -114,21 +119,59 @@ pub fn found_outside_the_library<E: Evaluator>(
             proposal,
             evaluator,
             progress,
-        )?);
+        )
+    };
+    let mut refits = found
+        .proposals()
+        .into_iter()
+        .map(refit)
+        .collect::<Result<Vec<_>>>()?;
+    let scanned = scan_if_unsettled(d, &found, &campaign, &refits, evaluator);
+    if let Some(proposal) = scanned.as_ref().and_then(|s| s.proposal.as_ref()) {
+        refits.push(refit(proposal)?);
     }
     Ok(Found {
         unavailable: None,
         discovery: Some(found),
+        scan: scanned,
         refits,
     })
 }
 
+/// Where neither the library nor the regression's proposals leave only noise, the harmonic
+/// scan from `d`'s final fit; one that cannot run (a simulation failed) is said in the log
+/// and leaves the rest whole.
+fn scan_if_unsettled<E: Evaluator>(
+    d: &Diagnosis,
+    found: &Discovery,
+    campaign: &calib_engine::campaign::Campaign,
+    refits: &[ProposalRefit],
+    evaluator: &E,
+) -> Option<HarmonicScan> {
+    if d.explained() || refits.iter().any(|r| d.floor.holds(r.objective_after)) {
+        return None;
+    }
+    let joints: Vec<String> = found.joints.iter().map(|j| j.joint.clone()).collect();
+    let holdout = super::window::with_window(campaign, d.holdout_window);
+    let from = ScanStart {
+        campaign,
+        holdout: &holdout,
+        measurement: &d.measurement,
+        point: &d.final_fit.point,
+        effective_samples: d.final_fit.effective_samples,
+    };
+    scan(&from, &joints, evaluator)
+        .inspect_err(|e| tracing::warn!(error = %e, "the harmonic scan could not run"))
+        .ok()
+}
+
 /// The proposal in symbols and words, each term with its interval, the block to paste, and
 /// its refit against the noise floor.
-fn summary(found: &Discovery, refits: &[ProposalRefit]) -> String {
+fn summary(found: &Discovery, scan: Option<&HarmonicScan>, refits: &[ProposalRefit]) -> String {
     let mut s =
         String::from("found outside the library (a proposal, not added to the campaign):\n");
-    if found.proposals().is_empty() {
+    let scanned = scan.and_then(|s| s.proposal.as_ref());
+    if found.proposals().is_empty() && scanned.is_none() {
         s.push_str("  nothing: no function of the library explains the residual torque\n");
     }
     for joint in &found.joints {
@@ -136,12 +179,32 @@ fn summary(found: &Discovery, refits: &[ProposalRefit]) -> String {
             s.push_str(&format!("  {}: not looked at: {why}\n", joint.joint));
         }
     }
-    for joint in &found.joints {
-        let Some(p) = &joint.proposal else { continue };
-        s.push_str(&format!(
-            "  torque on {}: {}\n  (residual torque RMS {:.3e} -> {:.3e} N m)\n",
-            p.place, p.formula, joint.residual_rms, joint.remaining_rms
-        ));
+    for (p, joint) in found
+        .joints
+        .iter()
+        .filter_map(|j| j.proposal.as_ref().map(|p| (p, Some(j))))
+        .chain(scanned.map(|p| (p, None)))
+    {
+        match joint {
+            Some(joint) => s.push_str(&format!(
+                "  torque on {}: {}\n  (residual torque RMS {:.3e} -> {:.3e} N m)\n",
+                p.place, p.formula, joint.residual_rms, joint.remaining_rms
+            )),
+            None => {
+                let scan = scan.expect("a scanned proposal comes from a scan");
+                let best = scan.best.as_ref().expect("a proposal has a best");
+                s.push_str(&format!(
+                    "  torque on {}: {}\n  (harmonic scan, k = 2..40 on every joint's angle, each refitted: the objective {:.4e} -> {:.4e}, the lowest of {}; held out {:.4e} -> {:.4e})\n",
+                    p.place,
+                    p.formula,
+                    scan.objective,
+                    best.objective,
+                    scan.scanned.len(),
+                    scan.held_out_objective,
+                    best.held_out_objective
+                ));
+            }
+        }
         for t in &p.terms {
             s.push_str(&format!(
                 "    {} = {:.4e}  95% [{:.4e}, {:.4e}]  times {}: {}\n",

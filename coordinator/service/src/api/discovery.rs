@@ -213,6 +213,7 @@ mod tests {
             discovery: Some(Discovery {
                 joints: vec![joint],
             }),
+            scan: None,
             refits: vec![refit],
         };
         let m = found_message(&found);
@@ -238,6 +239,7 @@ mod tests {
         let nothing = found_message(&Found {
             unavailable: Some("discovery is not available for model `hx_lowfi`".into()),
             discovery: None,
+            scan: None,
             refits: vec![],
         });
         assert!(!nothing.available && nothing.proposals.is_empty());

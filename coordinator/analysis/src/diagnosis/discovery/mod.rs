@@ -13,7 +13,10 @@
 //!    intervals. Nothing is added to a campaign: it is a proposal to refit;
 //! 5. on a campaign ([`campaign`]): the record from its measurement mapping, and [`refit`]:
 //!    the campaign recalibrated with the proposal (harmonics as amplitude and phase,
-//!    [`polar`]) on growing windows, then its parameters' profile intervals ([`profile`]).
+//!    [`polar`]) on growing windows, then its parameters' profile intervals ([`profile`]);
+//! 6. [`scan`]: where the library leaves more than noise, a harmonic torque of each multiple
+//!    of each joint's angle looked for in the outputs (a score test), which needs neither a
+//!    freely moving joint nor a baseline near the truth.
 
 pub mod campaign;
 pub mod furuta;
@@ -24,6 +27,7 @@ pub mod proposal;
 pub mod refit;
 pub mod residual;
 pub mod savgol;
+pub mod scan;
 pub mod stlsq;
 pub mod words;
 
