@@ -13,8 +13,8 @@
 //! is then refitted from its linear estimate (one local Nelder–Mead run of the free
 //! parameters and the harmonic's sine and cosine), and the `k` whose refit fits best (as
 //! many parameters each: the information criterion ranks them as the objective does) is
-//! proposed, when it also predicts the held-out window better than the fit without it. The proposal is refitted as any other
-//! ([`super::refit_discovered`]).
+//! proposed, when it also predicts the held-out window better than the fit without it. The
+//! proposal is refitted as any other ([`super::refit_discovered`]).
 
 use super::proposal::{DiscoveredEffect, EffectParameter, FoundHarmonic, FoundTerm};
 use super::with_discovered;
