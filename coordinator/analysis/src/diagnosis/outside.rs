@@ -126,9 +126,19 @@ pub fn found_outside_the_library<E: Evaluator>(
         .into_iter()
         .map(refit)
         .collect::<Result<Vec<_>>>()?;
-    let scanned = scan_if_unsettled(d, &found, &campaign, &refits, evaluator);
-    if let Some(proposal) = scanned.as_ref().and_then(|s| s.proposal.as_ref()) {
-        refits.push(refit(proposal)?);
+    let mut scanned = scan_if_unsettled(d, &found, &campaign, &refits, evaluator);
+    // The scan's best is proposed only when its refit leaves nothing but noise (the
+    // verdict's test): among 78 harmonics one fits a little better by chance.
+    if let Some(scan) = scanned.as_mut() {
+        if let Some(proposal) = scan.proposal.clone() {
+            let r = refit(&proposal)?;
+            if d.floor.holds(r.objective_after) {
+                refits.push(r);
+            } else {
+                scan.withheld = Some(r.ratio_after());
+                scan.proposal = None;
+            }
+        }
     }
     Ok(Found {
         unavailable: None,
@@ -171,6 +181,15 @@ fn summary(found: &Discovery, scan: Option<&HarmonicScan>, refits: &[ProposalRef
     let mut s =
         String::from("found outside the library (a proposal, not added to the campaign):\n");
     let scanned = scan.and_then(|s| s.proposal.as_ref());
+    if let (Some(ratio), Some(best)) = (
+        scan.and_then(|s| s.withheld),
+        scan.and_then(|s| s.best.as_ref()),
+    ) {
+        s.push_str(&format!(
+            "  harmonic scan: the best of k = 2..40, {} periods per turn of {}.phi, refits to {:.2}x the noise floor: not proposed (a harmonic is proposed only when its refit leaves nothing but noise)\n",
+            best.multiple, best.joint, ratio
+        ));
+    }
     if found.proposals().is_empty() && scanned.is_none() {
         s.push_str("  nothing: no function of the library explains the residual torque\n");
     }

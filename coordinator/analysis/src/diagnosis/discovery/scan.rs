@@ -63,9 +63,13 @@ pub struct HarmonicScan {
     /// The joint and multiple whose refit fits best.
     pub best: Option<Scanned>,
     /// The proposal, when the best fits the fitted window and predicts the held-out one
-    /// better than the fit scanned from.
+    /// better than the fit scanned from (and, once refitted, leaves nothing but noise).
     #[serde(skip)]
     pub proposal: Option<DiscoveredEffect>,
+    /// The best's refit over the noise floor, when that refit left more than noise and the
+    /// best was therefore not proposed: a search over 78 harmonics finds one that fits a
+    /// little better by chance, so only one that explains the record is proposed.
+    pub withheld: Option<f64>,
 }
 
 /// The formula of a harmonic of `k` times `joint`'s angle with parameters `a1`, `b1`.
@@ -327,6 +331,7 @@ pub fn scan<E: Evaluator>(
         scanned,
         best,
         proposal,
+        withheld: None,
     })
 }
 
