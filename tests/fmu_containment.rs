@@ -10,11 +10,12 @@
 #[allow(dead_code, unused_imports)]
 #[path = "it/common/mod.rs"]
 mod common;
-#[path = "../worker/tests/common/zips.rs"]
+#[path = "../model/tests/common/zips.rs"]
 mod zips;
 
-use calib_worker::fmu::{self, contain};
-use calib_worker::{Model, SimulationError};
+use calib_model::fmu::{self, contain};
+use calib_model::Run;
+use calib_model::{Model, SimulationError};
 use common::*;
 use std::path::PathBuf;
 use std::sync::OnceLock;
@@ -79,7 +80,12 @@ fn attempt(model: &fmu::FmuModel, mode: f64) -> Result<f64, SimulationError> {
         .iter()
         .position(|o| o.name == "y")
         .expect("output y");
-    let trajectory = model.simulate(&[mode], &[0.0, 1.0], &[y], &model.default_options())?;
+    let trajectory = model.simulate(&Run::new(
+        &[mode],
+        &[0.0, 1.0],
+        &[y],
+        &model.default_options(),
+    ))?;
     Ok(trajectory.values[0][1])
 }
 
@@ -271,7 +277,7 @@ fn an_fmu_cannot_write_or_read_outside_its_folders_where_the_kernel_has_landlock
             assert_eq!(read, 0, "it could read {}", escape.secret.display());
         }
         // Under CI the claim must be reached: a kernel without Landlock fails the test there.
-        None => calib_worker::testing::skip(&format!(
+        None => calib_model::testing::skip(&format!(
             "this kernel has no Landlock: file confinement is not tested (it wrote outside: \
              {}, read outside: {read})",
             wrote & 1
@@ -283,7 +289,7 @@ fn an_fmu_cannot_write_or_read_outside_its_folders_where_the_kernel_has_landlock
 fn an_fmu_cannot_take_more_memory_than_its_bound() {
     let _serial = serial();
     let Some(escape) = escape_fmu() else { return };
-    const { assert!(calib_worker::limits::FMU_HOST_MEMORY_BYTES < 6 << 30) };
+    const { assert!(calib_model::limits::FMU_HOST_MEMORY_BYTES < 6 << 30) };
     let model = open(escape);
     assert_eq!(attempt(&model, 5.0).unwrap(), 0.0, "6 GiB were allocated");
 }

@@ -10,7 +10,8 @@ use calib_engine::campaign::{Campaign, Method};
 use calib_engine::evaluator::{Evaluator, Fault, LocalEvaluator};
 use calib_engine::objective::{Evaluation, Objective};
 use calib_engine::optim::problem::Silent;
-use calib_worker::{models, SolverOptions};
+use calib_model::Run;
+use calib_model::{models, SolverOptions};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -156,7 +157,7 @@ fn furuta(repeat: usize, report: &mut Report) -> Outcome {
     let options = SolverOptions::default();
     let (sim, trajectory) = time(repeat * 10, || {
         model
-            .simulate(&params, &grid, &[0, 1], &options)
+            .simulate(&Run::new(&params, &grid, &[0, 1], &options))
             .map_err(|e| Failure::internal(format!("simulation failed: {e}")))
     });
     let stats = trajectory?.stats;
@@ -276,7 +277,7 @@ fn hx(repeat: usize, report: &mut Report) -> Outcome {
             .collect();
         let (sim, trajectory) = time(repeat, || {
             model
-                .simulate(&params, &grid, &outputs, &options)
+                .simulate(&Run::new(&params, &grid, &outputs, &options))
                 .map_err(|e| Failure::internal(format!("{name} failed: {e}")))
         });
         let stats = trajectory?.stats;

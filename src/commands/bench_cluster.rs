@@ -20,9 +20,10 @@ use calib_engine::campaign::Campaign;
 use calib_engine::evaluator::{Evaluator, LocalEvaluator};
 use calib_engine::objective::Objective;
 use calib_engine::store::{SledStore, StoredEvaluator};
+use calib_model::Run;
+use calib_model::{models, SolverOptions};
 use calib_sandbox::{NappingCluster, SandboxCluster};
 use calib_service::dispatch::RemoteWorkers;
-use calib_worker::{models, SolverOptions};
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -117,12 +118,12 @@ fn hx_objective() -> Result<Objective, Failure> {
     let info = model.info();
     let grid: Vec<f64> = (0..=300).map(f64::from).collect();
     let trajectory = model
-        .simulate(
+        .simulate(&Run::new(
             &info.default_vector(),
             &grid,
             &[0, 1],
             &SolverOptions::default(),
-        )
+        ))
         .map_err(|e| Failure::internal(format!("hx_highfi failed: {e}")))?;
     let dir = std::env::temp_dir().join(format!("calib-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| Failure::internal(e.to_string()))?;

@@ -4,12 +4,13 @@
 //! The model is the Reference FMUs' VanDerPol (`../shared/fmus/build.sh OUT 2` builds it);
 //! the built-in twin integrates the same right-hand side, written in Rust, with the same
 //! Dormand–Prince and tolerances, and gives the same trajectory bit for bit
-//! (`worker/tests/it/fmu_reference.rs`).
+//! (`model/tests/it/fmu_reference.rs`).
 
 use super::{Failure, Outcome};
-use calib_worker::fmu::{self, Interface};
-use calib_worker::ode::{self, HybridSystem};
-use calib_worker::{Model, SolverOptions};
+use calib_model::fmu::{self, Interface};
+use calib_model::ode::{self, HybridSystem};
+use calib_model::Run;
+use calib_model::{Model, SolverOptions};
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -91,7 +92,7 @@ pub fn run(args: Args) -> Outcome {
             let outputs = [info.output_index("x0").unwrap_or(0)];
             let mut error = None;
             let t = median(args.repeat, || {
-                if let Err(e) = model.simulate(&params, &grid, &outputs, &options) {
+                if let Err(e) = model.simulate(&Run::new(&params, &grid, &outputs, &options)) {
                     error = Some(e);
                 }
             });

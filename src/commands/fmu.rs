@@ -3,8 +3,8 @@
 //! process.
 
 use super::{Failure, Outcome};
-use calib_worker::fmu::{self, Interface};
-use calib_worker::Model;
+use calib_model::fmu::{self, Interface};
+use calib_model::Model;
 use std::path::{Path, PathBuf};
 
 /// How an FMU is run.
@@ -36,7 +36,7 @@ pub fn model(name: &str, interface: Option<InterfaceArg>) -> Result<&'static dyn
             "--interface: `{name}` is a hosted model, not an FMU"
         )));
     }
-    calib_worker::validate::model(name).map_err(|e| Failure::input(e.message))
+    calib_model::validate::model(name).map_err(|e| Failure::input(e.message))
 }
 
 /// Run FMU instances of later simulations in child processes of this binary.

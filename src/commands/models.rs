@@ -1,5 +1,5 @@
 use super::Outcome;
-use calib_worker::models;
+use calib_model::models;
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -16,7 +16,7 @@ pub struct Args {
 
 /// The solver settings a simulation of `model` gets unless told otherwise, and where its
 /// tolerance comes from.
-fn default_solver(model: &dyn calib_worker::Model) -> serde_json::Value {
+fn default_solver(model: &dyn calib_model::Model) -> serde_json::Value {
     let o = model.default_options();
     serde_json::json!({
         "rtol": o.rtol,
@@ -28,7 +28,7 @@ fn default_solver(model: &dyn calib_worker::Model) -> serde_json::Value {
 }
 
 pub fn run(args: Args) -> Outcome {
-    let selected: Vec<&dyn calib_worker::Model> = match &args.model {
+    let selected: Vec<&dyn calib_model::Model> = match &args.model {
         Some(name) => vec![super::fmu::model(name, args.interface)?],
         None => models::all().iter().map(|m| m.as_ref()).collect(),
     };

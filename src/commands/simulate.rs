@@ -1,8 +1,9 @@
 use super::{Failure, Outcome};
-use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
-use calib_worker::limits;
-use calib_worker::model::{Model, ModelInfo, SolverOptions};
-use calib_worker::validate::{self, SolverOverrides};
+use calib_model::inputs::{InputSignal, Inputs, Interpolation};
+use calib_model::limits;
+use calib_model::model::{Model, ModelInfo, SolverOptions};
+use calib_model::validate::{self, SolverOverrides};
+use calib_model::Run;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::Normal;
@@ -78,7 +79,7 @@ pub enum InterpolationArg {
 /// named after the model's inputs.
 fn read_inputs(
     path: &std::path::Path,
-    info: &calib_worker::ModelInfo,
+    info: &calib_model::ModelInfo,
     interpolation: Interpolation,
 ) -> Result<Inputs, Failure> {
     let shown = path.display();
@@ -164,7 +165,7 @@ pub fn run(args: Args) -> Outcome {
     let noise = noise_levels(info, &outputs, &inputs, &args.noise)?;
     let driving = driving_inputs(info, &inputs, file, &args, options.start_time)?;
     let mut trajectory = model
-        .simulate_driven(&params, &grid, &outputs, &options, &driving)
+        .simulate(&Run::new(&params, &grid, &outputs, &options).driven(&driving))
         .map_err(|e| Failure::internal(format!("simulation failed: {e}")))?;
     let mut columns: Vec<Vec<f64>> = inputs
         .signals
@@ -421,7 +422,7 @@ fn write_csv(
 /// The signal of `--input NAME=T:V,T:V,...`: the points, read linearly, extended to cover
 /// the simulation from 0 (hosted models) to `stop` by the first and the last value.
 fn profile(
-    info: &calib_worker::ModelInfo,
+    info: &calib_model::ModelInfo,
     assignment: &str,
     stop: f64,
 ) -> Result<InputSignal, Failure> {

@@ -94,10 +94,10 @@ fn rpc(status: tonic::Status) -> Failure {
 pub fn submit(args: SubmitArgs) -> Outcome {
     let campaign = Campaign::load(&args.campaign).map_err(|e| Failure::input(e.to_string()))?;
     // A campaign on an FMU: its archive, as read when the campaign was loaded.
-    let fmu = match calib_worker::fmu::hash_of(&campaign.model.info().name) {
+    let fmu = match calib_model::fmu::hash_of(&campaign.model.info().name) {
         None => None,
         Some(_) => Some(
-            calib_worker::fmu::archive_of(&campaign.model.info().name).ok_or_else(|| {
+            calib_model::fmu::archive_of(&campaign.model.info().name).ok_or_else(|| {
                 Failure::input(format!(
                     "{}: `model.fmu`: the FMU cannot be read again",
                     args.campaign.display()

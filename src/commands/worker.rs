@@ -105,7 +105,7 @@ fn fmu_warning(allow_fmu: bool, token: bool, listen: &SocketAddr) -> Option<Stri
         return None;
     }
     #[cfg(target_os = "linux")]
-    let contained = calib_worker::fmu::contain::containment().to_string();
+    let contained = calib_model::fmu::contain::containment().to_string();
     #[cfg(not(target_os = "linux"))]
     let contained = "each FMU runs in a child process with a deadline".to_string();
     if token {

@@ -248,6 +248,85 @@ fn only_the_service_crate_runs_async_code_or_serves() {
     assert!(service.contains("tokio") && service.contains("calib-analysis"));
 }
 
+/// The packages `package` builds on, directly or through others, with the features the
+/// workspace gives them (`cargo tree`, normal dependencies only), one name per entry.
+fn dependency_tree(package: &str) -> BTreeSet<String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let output = std::process::Command::new(cargo)
+        .current_dir(repo())
+        .args([
+            "tree",
+            "--offline",
+            "--locked",
+            "-e",
+            "normal",
+            "--prefix",
+            "none",
+        ])
+        .args(["--format", "{p}", "-p", package])
+        .output()
+        .expect("cargo tree runs");
+    assert!(
+        output.status.success(),
+        "cargo tree -p {package}: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    String::from_utf8(output.stdout)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn the_engine_the_analyses_and_the_models_build_on_no_runtime_network_or_protocol() {
+    for package in ["calib-model", "calib-engine", "calib-analysis"] {
+        let tree = dependency_tree(package);
+        // The tree is read: the package itself and its own dependencies are in it.
+        assert!(tree.contains(package), "{package}: {tree:?}");
+        assert!(tree.contains("serde"), "{package}: {tree:?}");
+        for banned in [
+            "tokio",
+            "tonic",
+            "prost",
+            "hyper",
+            "h2",
+            "axum",
+            "calib-proto",
+        ] {
+            assert!(
+                !tree.contains(banned),
+                "{package} builds on {banned}, through: {:?}",
+                path_to(package, banned)
+            );
+        }
+        assert!(!tree.contains("calib-worker") && !tree.contains("calib-service"));
+    }
+    // The check can fail: the worker serves over gRPC.
+    assert!(dependency_tree("calib-worker").contains("tonic"));
+}
+
+/// How `package` comes to build on `banned` (`cargo tree --invert`), for the message.
+fn path_to(package: &str, banned: &str) -> String {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let output = std::process::Command::new(cargo)
+        .current_dir(repo())
+        .args([
+            "tree",
+            "--offline",
+            "--locked",
+            "-e",
+            "normal",
+            "-p",
+            package,
+        ])
+        .args(["--invert", banned])
+        .output()
+        .expect("cargo tree runs");
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
 #[test]
 fn the_cycle_finder_finds_a_circle() {
     let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();

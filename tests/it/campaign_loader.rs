@@ -8,7 +8,7 @@ use calib_engine::limits::{
     campaign_name, MAX_EVALUATIONS, MAX_FREE_PARAMETERS, MAX_OUTPUTS, MAX_REFIT, MAX_SCREENING,
     MAX_STARTS,
 };
-use calib_worker::{limits, validate};
+use calib_model::{limits, validate};
 use proptest::prelude::*;
 use proptest::sample::select;
 use std::path::Path;

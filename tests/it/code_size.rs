@@ -15,15 +15,16 @@ const MOST_FILE_CODE_LINES: usize = 600;
 /// Functions that are tables, read best whole: (file, function).
 const TABLES: [(&str, &str); 1] = [
     // The Furuta pendulum's parameters: one entry per parameter with its unit and meaning.
-    ("worker/src/models/furuta.rs", "new"),
+    ("model/src/models/furuta.rs", "new"),
 ];
 
 /// The folders of the workspace's non-test code.
-const SOURCES: [&str; 8] = [
+const SOURCES: [&str; 9] = [
     "src",
     "proto/src",
     "security/src",
     "sandbox/src",
+    "model/src",
     "worker/src",
     "coordinator/engine/src",
     "coordinator/analysis/src",

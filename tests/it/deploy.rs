@@ -368,7 +368,7 @@ fn the_cluster_survives_a_killed_worker_a_cut_network_and_a_restarted_coordinato
     } else if answers("ip", &["netns", "list"]) && is_root() {
         "netns"
     } else {
-        calib_worker::testing::skip(
+        calib_model::testing::skip(
             "the fault test needs a Docker engine or network namespaces (root and iproute2)",
         );
         return;

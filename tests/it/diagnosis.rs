@@ -7,7 +7,8 @@ use calib_analysis::diagnosis::{diagnose, Diagnosis, Verdict};
 use calib_engine::campaign::Campaign;
 use calib_engine::evaluator::LocalEvaluator;
 use calib_engine::optim::problem::Silent;
-use calib_worker::{models, SolverOptions};
+use calib_model::Run;
+use calib_model::{models, SolverOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
@@ -185,7 +186,7 @@ fn record(dir: &Path, set: &[(&str, f64)], disturb: impl Fn(f64) -> f64) -> std:
     }
     let grid: Vec<f64> = (0..=4000).map(|i| i as f64 * 0.01).collect();
     let t = model
-        .simulate(&p, &grid, &[0, 1], &SolverOptions::default())
+        .simulate(&Run::new(&p, &grid, &[0, 1], &SolverOptions::default()))
         .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(7);
     let mut noise = || gaussian(&mut rng, 0.002);

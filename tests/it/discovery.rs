@@ -55,7 +55,7 @@ fn record(dir: &Path, name: &str, args: &[&str]) -> Option<(Record, serde_json::
 
 /// The furuta model at the simulator's truth.
 fn model(truth: &serde_json::Value) -> FurutaJoints {
-    let info = calib_worker::models::find("furuta").unwrap().info().clone();
+    let info = calib_model::models::find("furuta").unwrap().info().clone();
     let mut params = info.default_vector();
     for (name, value) in truth["true_friction"].as_object().unwrap() {
         params[info.parameter_index(name).unwrap()] = value.as_f64().unwrap();

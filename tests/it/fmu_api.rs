@@ -132,7 +132,7 @@ fn calib_submit_on_an_fmu_sends_it_once_and_gives_the_runs_of_calib_calibrate() 
     assert!((mu / 1.7 - 1.0).abs() < 0.005, "mu = {mu}");
     let kept = dir.path().join("api/fmus");
     let bytes = std::fs::read(&path).unwrap();
-    let id = hex(&calib_worker::fmu::content_hash(&bytes));
+    let id = hex(&calib_model::fmu::content_hash(&bytes));
     assert!(kept.join(format!("{id}.fmu")).is_file(), "kept by its hash");
 
     // A coordinator started again on the same folders still has it: submitted again, the
@@ -187,7 +187,7 @@ fn an_fmu_uploaded_in_chunks_is_named_by_its_hash_and_described() {
         .block_on(client.upload_fmu(tokio_stream::iter(chunks("BouncingBall.fmu", &bytes, 4096))))
         .unwrap()
         .into_inner();
-    let id = hex(&calib_worker::fmu::content_hash(&bytes));
+    let id = hex(&calib_model::fmu::content_hash(&bytes));
     assert_eq!(fmu.id, id, "the hash workers key their FMU cache by");
     assert_eq!(
         (fmu.file_name.as_str(), fmu.size),

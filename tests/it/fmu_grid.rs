@@ -463,20 +463,20 @@ fn describe_says_which_tolerance_a_model_gets_and_why() {
         return;
     };
     let pump =
-        calib_worker::fmu::open(&dir.join("aixcalibuha/PumpAndValve_linux.fmu"), None).unwrap();
+        calib_model::fmu::open(&dir.join("aixcalibuha/PumpAndValve_linux.fmu"), None).unwrap();
     let d = describe(pump);
     assert_eq!(d.tolerance_origin, "the FMU's default experiment");
     let solver = d.default_solver.unwrap();
     assert_eq!((solver.rtol, solver.start_time), (Some(1e-4), Some(0.0)));
-    let furuta = calib_worker::validate::model("furuta").unwrap();
+    let furuta = calib_model::validate::model("furuta").unwrap();
     let d = describe(furuta);
     assert_eq!(d.tolerance_origin, "the model's calibration tolerance");
     assert_eq!(d.default_solver.unwrap().rtol, Some(1e-8));
     if let Some(path) = reference(2, "VanDerPol") {
-        let vdp = calib_worker::fmu::open(&path, None).unwrap();
+        let vdp = calib_model::fmu::open(&path, None).unwrap();
         assert_eq!(describe(vdp).tolerance_origin, "calib's default");
-        let cs = calib_worker::fmu::open(&path, Some(calib_worker::fmu::Interface::CoSimulation))
-            .unwrap();
+        let cs =
+            calib_model::fmu::open(&path, Some(calib_model::fmu::Interface::CoSimulation)).unwrap();
         assert_eq!(
             describe(cs).default_solver.unwrap().communication_step,
             Some(0.01),

@@ -6,6 +6,7 @@
 //! its last lines; megabytes of output neither block it nor fill calib's memory or log.
 
 use crate::common::*;
+use calib_model::Run;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::sync::OnceLock;
@@ -160,8 +161,8 @@ fn a_chatty_fmu_that_crashes_is_explained_by_its_last_lines() {
 
 #[test]
 fn an_fmu_that_logs_an_error_is_reported_with_its_formatted_message_in_process_too() {
-    use calib_worker::fmu::{self, Interface};
-    use calib_worker::Model;
+    use calib_model::fmu::{self, Interface};
+    use calib_model::Model;
     let Some(fmu) = chatty_fmu() else { return };
     // In this process (no host): the message kept with the instance is formatted too.
     for interface in [Interface::CoSimulation, Interface::ModelExchange] {
@@ -172,7 +173,12 @@ fn an_fmu_that_logs_an_error_is_reported_with_its_formatted_message_in_process_t
         params[mode.unwrap()] = 3.0;
         let x = info.outputs.iter().position(|o| o.name == "x").unwrap();
         let error = model
-            .simulate(&params, &[0.0, 1.0], &[x], &model.default_options())
+            .simulate(&Run::new(
+                &params,
+                &[0.0, 1.0],
+                &[x],
+                &model.default_options(),
+            ))
             .unwrap_err()
             .to_string();
         assert!(

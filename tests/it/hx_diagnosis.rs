@@ -6,7 +6,8 @@ use calib_analysis::diagnosis::{diagnose, Verdict};
 use calib_engine::campaign::Campaign;
 use calib_engine::evaluator::LocalEvaluator;
 use calib_engine::optim::problem::Silent;
-use calib_worker::{models, SolverOptions};
+use calib_model::Run;
+use calib_model::{models, SolverOptions};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use std::path::Path;
@@ -25,7 +26,7 @@ fn record(dir: &Path, set: &[(&str, f64)]) -> std::path::PathBuf {
         info.output_index("Qdot_refTotal").unwrap(),
     ];
     let t = model
-        .simulate(&p, &grid, &outputs, &SolverOptions::default())
+        .simulate(&Run::new(&p, &grid, &outputs, &SolverOptions::default()))
         .unwrap();
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let mut noise = |sigma: f64| gaussian(&mut rng, sigma);

@@ -8,9 +8,9 @@
 //! is a program of its own beside this folder: `tests/fmu_containment.rs`.
 
 mod common;
-#[path = "../../worker/tests/common/real_tool_fmus.rs"]
+#[path = "../../model/tests/common/real_tool_fmus.rs"]
 mod real_tool_fmus;
-#[path = "../../worker/tests/common/reference_fmus.rs"]
+#[path = "../../model/tests/common/reference_fmus.rs"]
 mod reference_fmus;
 
 mod api;

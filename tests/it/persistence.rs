@@ -8,7 +8,8 @@ use calib_engine::evaluator::{Evaluator, Fault, LocalEvaluator};
 use calib_engine::objective::{Evaluation, Objective};
 use calib_engine::optim::problem::Silent;
 use calib_engine::store::{CampaignStatus, MemoryStore, SledStore, Store};
-use calib_worker::{Model, ModelInfo, SimulationError, SolverOptions, Trajectory};
+use calib_model::Run;
+use calib_model::{Model, ModelInfo, SimulationError, Trajectory};
 use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Stdio};
@@ -221,14 +222,8 @@ impl Model for NextVersion {
     fn info(&self) -> &ModelInfo {
         &self.info
     }
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.inner.simulate(params, grid, outputs, options)
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        self.inner.simulate(run)
     }
 }
 

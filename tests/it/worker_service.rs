@@ -50,7 +50,7 @@ fn simulate_request() -> proto::SimulateRequest {
 fn measurement() -> (proto::Measurement, Vec<u8>) {
     let times = grid(1.0, 0.1);
     let values = vec![0.0; times.len()];
-    let hash = calib_worker::scoring::measurement_hash(&times, std::slice::from_ref(&values), &[]);
+    let hash = calib_model::scoring::measurement_hash(&times, std::slice::from_ref(&values), &[]);
     (
         proto::Measurement {
             times,
@@ -393,7 +393,7 @@ fn a_failed_simulation_is_a_typed_answer() {
         });
         let answer = c.evaluate(request).await.unwrap().into_inner();
         for r in &answer.results {
-            assert_eq!(r.objective, calib_worker::scoring::FAILURE_PENALTY);
+            assert_eq!(r.objective, calib_model::scoring::FAILURE_PENALTY);
             assert_eq!(r.failure.as_ref().unwrap().kind, Kind::StepLimit as i32);
         }
         // The worker is still there.

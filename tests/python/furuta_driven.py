@@ -2,7 +2,7 @@
 """A record of the Furuta pendulum rig driven by a measured arm motor torque.
 
 An independent simulator of the rig of the worker's ``furuta`` model (same equations, see
-worker/src/models/furuta.rs), written with scipy and numpy only and sharing no code with the
+model/src/models/furuta.rs), written with scipy and numpy only and sharing no code with the
 worker, so that the worker's model and its inputs can be checked against it. It writes a CSV
 with columns ``time_s, arm_angle_rad, pendulum_angle_rad, motor_torque_Nm`` and prints the
 truth it used as JSON on stdout (and, with ``--truth FILE``, into that file).
@@ -33,9 +33,9 @@ start value before ``d``), then a first-order sensor of time constant ``--<joint
 relative gain error and an offset (``(1 + g) y + o``, ``--<joint>-gain``,
 ``--<joint>-offset``), before the noise and the quantisation below. These are the
 definitions of the worker's ``delay(...)``, ``lag(...)``, ``gain(...)`` and ``offset(...)``
-effects (worker/src/effects.rs); the spring, drag, friction and constant torque terms are
+effects (model/src/effects.rs); the spring, drag, friction and constant torque terms are
 those of its ``stiffness.<joint>``, ``quadratic_drag.<joint>``,
-``viscous_friction.<joint>`` and ``torque_bias.<joint>`` (worker/src/models/furuta.rs; its
+``viscous_friction.<joint>`` and ``torque_bias.<joint>`` (model/src/models/furuta.rs; its
 bias is the opposite torque, ``-t0``).
 
 Stick-slip

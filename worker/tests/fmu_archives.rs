@@ -3,13 +3,13 @@
 //! leaves no staging folder behind and does not keep uploads in memory. Every allocation of
 //! this test program is counted, so that "bounded memory" is measured, not assumed.
 
-#[path = "common/zips.rs"]
+#[path = "../../model/tests/common/zips.rs"]
 mod zips;
 
+use calib_model::fmu::archive::{self, Limits};
+use calib_model::fmu::{Description, FmuError};
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
-use calib_worker::fmu::archive::{self, Limits};
-use calib_worker::fmu::{Description, FmuError};
 use calib_worker::service::{serve_worker, WorkerConfig};
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};

@@ -1,7 +1,7 @@
 //! Bounds on what one campaign, analysis or request may ask of a coordinator: every number a
 //! campaign (a campaign file, a `SubmitCampaign` message, the web app's JSON) gives that
 //! sizes memory or a loop is held to one of these, where the campaign is checked and before
-//! anything is allocated. The worker's twin ([`calib_worker::limits`]) bounds one
+//! anything is allocated. The worker's twin ([`calib_model::limits`]) bounds one
 //! simulation; a campaign is held to both.
 //!
 //! Each bound is generous for real calibrations (tens of parameters, tens of starts) and
@@ -35,7 +35,7 @@ pub const MAX_EVALUATIONS: usize = 1_000_000;
 pub const MAX_FREE_PARAMETERS: usize = 64;
 
 /// Most model outputs compared with measured columns (`outputs`). The objective keeps each
-/// mapped column over the window, at most [`calib_worker::limits::MAX_TIMES`] samples: 32
+/// mapped column over the window, at most [`calib_model::limits::MAX_TIMES`] samples: 32
 /// outputs of 500,000 samples are 128 MB.
 pub const MAX_OUTPUTS: usize = 32;
 
@@ -71,11 +71,11 @@ pub const MAX_IDEMPOTENCY_KEY_BYTES: usize = 256;
 pub const MAX_CHUNK_BYTES: usize = 1 << 20;
 
 /// Largest FMU archive `UploadFmu` (and the web app's upload) accepts [bytes]: the most a
-/// worker's `UploadFmu` message carries ([`calib_worker::limits::MAX_MESSAGE_BYTES`], less
+/// worker's `UploadFmu` message carries ([`calib_model::limits::MAX_MESSAGE_BYTES`], less
 /// room for the message's other fields), since every campaign on it sends it to workers.
 /// Its entries and what they inflate to are held to the workers' own limits
-/// ([`calib_worker::fmu::archive::Limits`]).
-pub const MAX_FMU_BYTES: usize = calib_worker::limits::MAX_MESSAGE_BYTES - 16;
+/// ([`calib_model::fmu::archive::Limits`]).
+pub const MAX_FMU_BYTES: usize = calib_model::limits::MAX_MESSAGE_BYTES - 16;
 
 /// Largest page of `ListCampaigns`.
 pub const MAX_PAGE: usize = 100;
@@ -92,7 +92,7 @@ pub const MAX_MAT_INFLATED_BYTES: usize = 256 << 20;
 
 /// Most values (rows × columns, or the product of all dimensions) of one numeric MAT
 /// variable, v4 or v5: 2^24 = 16,777,216 samples, 128 MiB as `f64`, 33 times what a
-/// simulation's output grid may hold (`calib_worker::limits::MAX_TIMES`).
+/// simulation's output grid may hold (`calib_model::limits::MAX_TIMES`).
 pub const MAX_MAT_VALUES: usize = 1 << 24;
 
 // Sobol's sequences (screening, starts, sensitivity designs) take indices below 2^16 and at

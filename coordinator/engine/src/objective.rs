@@ -11,13 +11,14 @@
 
 use crate::campaign::{Campaign, CampaignError, Experiment, OutputScale};
 use crate::measurement::Measurement;
-use calib_worker::content_hash::ContentHasher;
-use calib_worker::inputs::{InputSignal, Inputs};
-use calib_worker::limits::{MAX_RECORD_VALUES, MAX_TIMES};
-use calib_worker::scoring::{self, Target};
-use calib_worker::{Model, SimulationError, SolverOptions};
+use calib_model::content_hash::ContentHasher;
+use calib_model::inputs::{InputSignal, Inputs};
+use calib_model::limits::{MAX_RECORD_VALUES, MAX_TIMES};
+use calib_model::scoring::{self, Target};
+use calib_model::Run;
+use calib_model::{Model, SimulationError, SolverOptions};
 
-pub use calib_worker::scoring::{Evaluation, FAILURE_PENALTY};
+pub use calib_model::scoring::{Evaluation, FAILURE_PENALTY};
 
 /// Everything needed to score a parameter vector: the model, the fixed parameters, the
 /// measured series on the window's grid and the weights. A campaign that fits several
@@ -213,10 +214,10 @@ impl Objective {
         }
         // Inputs and further experiments likewise: an objective without them keeps its
         // fingerprint.
-        calib_worker::inputs::hash_into(&mut h, &self.named_inputs());
+        calib_model::inputs::hash_into(&mut h, &self.named_inputs());
         // User-defined effects, as written: another formula is another objective (nothing
         // replayed); an objective without them keeps its fingerprint.
-        calib_worker::user_effects::hash_into(&mut h, self.model.user_effects());
+        calib_model::user_effects::hash_into(&mut h, self.model.user_effects());
         if !self.more.is_empty() || !self.name.is_empty() {
             h.text("experiments")
                 .text(&self.name)
@@ -234,7 +235,7 @@ impl Objective {
     }
 
     /// The driving signals under their inputs' names, as the wire carries them.
-    pub fn named_inputs(&self) -> Vec<calib_worker::inputs::NamedSignal> {
+    pub fn named_inputs(&self) -> Vec<calib_model::inputs::NamedSignal> {
         self.inputs.named(self.model.info())
     }
 
@@ -333,12 +334,8 @@ impl Objective {
         let mut series = Vec::with_capacity(self.series_count());
         for part in self.experiments() {
             let params = part.full_parameters(free_values);
-            let t = self.model.simulate_driven(
-                &params,
-                &part.grid,
-                &part.outputs,
-                &part.solver,
-                &part.inputs,
+            let t = self.model.simulate(
+                &Run::new(&params, &part.grid, &part.outputs, &part.solver).driven(&part.inputs),
             )?;
             series.extend(t.values);
         }
@@ -681,7 +678,7 @@ stop = 3.0
             "2c9b2ae261a0decfe9b0918be827b43efcfc5d8eddf4f581d25a92c19073576f"
         );
         assert_eq!(
-            hex(&calib_worker::scoring::measurement_hash(
+            hex(&calib_model::scoring::measurement_hash(
                 &o.grid,
                 &o.measured,
                 &[]

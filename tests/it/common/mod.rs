@@ -4,6 +4,7 @@ pub mod cluster;
 pub mod coordinator;
 pub mod pki;
 
+use calib_model::Run;
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -20,11 +21,11 @@ pub fn shared_data() -> PathBuf {
 }
 
 /// Skip a test that cannot run here, saying why; under continuous integration (`CI` set, see
-/// [`calib_worker::testing`]) nothing required may skip, so there the same call fails the
+/// [`calib_model::testing`]) nothing required may skip, so there the same call fails the
 /// test.
 #[track_caller]
 pub fn skip(reason: &str) {
-    calib_worker::testing::skip(reason);
+    calib_model::testing::skip(reason);
 }
 
 /// A record of the Furuta rig from the independent simulator `tests/python/furuta_driven.py`
@@ -577,9 +578,9 @@ pub fn furuta_record(
     seed: u64,
     torque: Option<&dyn Fn(f64) -> f64>,
 ) -> PathBuf {
-    use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
+    use calib_model::inputs::{InputSignal, Inputs, Interpolation};
     use rand::SeedableRng;
-    let model = calib_worker::models::find("furuta").expect("the furuta model");
+    let model = calib_model::models::find("furuta").expect("the furuta model");
     let info = model.info();
     let mut p = info.default_vector();
     let (arm, pendulum) = true_frictions();
@@ -609,7 +610,7 @@ pub fn furuta_record(
         info.output_index("pendulumJoint.phi").expect("pendulum"),
     ];
     let trajectory = model
-        .simulate_driven(&p, &times, &outputs, &model.default_options(), &inputs)
+        .simulate(&Run::new(&p, &times, &outputs, &model.default_options()).driven(&inputs))
         .expect("the synthetic record simulates");
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
     let mut text = String::from("time_s,arm_angle_rad,pendulum_angle_rad");

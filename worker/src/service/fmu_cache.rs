@@ -1,7 +1,7 @@
 //! FMUs a worker keeps for later requests: `<hash>.fmu` files in one folder, bounded in
 //! total size; the least recently used go first.
 
-use crate::fmu::archive;
+use calib_model::fmu::archive;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::time::SystemTime;
@@ -50,7 +50,7 @@ impl FmuCache {
         let path = self.path(hash);
         let bytes = std::fs::read(&path).ok()?;
         // A file whose content no longer matches its name is not served.
-        if crate::fmu::content_hash(&bytes) != *hash {
+        if calib_model::fmu::content_hash(&bytes) != *hash {
             let _ = std::fs::remove_file(&path);
             return None;
         }
@@ -126,7 +126,7 @@ mod tests {
         let _ = std::fs::remove_dir_all(&dir);
         let cache = FmuCache::new(dir.clone(), 250).unwrap();
         let (a, b, c) = (vec![1u8; 100], vec![2u8; 100], vec![3u8; 100]);
-        let hash = |x: &[u8]| crate::fmu::content_hash(x);
+        let hash = |x: &[u8]| calib_model::fmu::content_hash(x);
         // Ages set on the files themselves, not waited for: the order holds on any clock
         // and file system (a used archive is stamped now).
         let aged = |x: &[u8], seconds: u64| {

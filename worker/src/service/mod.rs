@@ -29,7 +29,7 @@ use tokio::sync::oneshot;
 use tokio::task::JoinHandle;
 use tonic::transport::server::TcpIncoming;
 
-pub use crate::limits;
+pub use calib_model::limits;
 
 /// The services a worker answers, as reflection lists them.
 pub const SERVED: &[&str] = &[

@@ -4,7 +4,7 @@
 //! wait for a slot. A request arriving while the queue is full is refused whole
 //! (`RESOURCE_EXHAUSTED`) before anything runs, so a flood costs the worker nothing and the
 //! client learns at once to go elsewhere. A request arriving while there is room is admitted
-//! whole, however many points it holds (up to [`crate::limits::MAX_POINTS`]): a batch larger
+//! whole, however many points it holds (up to [`calib_model::limits::MAX_POINTS`]): a batch larger
 //! than the queue is never refused by an idle worker, it fills the queue past its bound
 //! and the requests after it are refused until it drains.
 //!

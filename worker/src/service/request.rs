@@ -5,8 +5,8 @@
 //! learns exactly what to fix.
 
 use super::error::{Error, Result};
-use crate::inputs::{Inputs, Interpolation, NamedSignal};
-use crate::{limits, user_effects, validate, Model, ModelInfo, SolverOptions};
+use calib_model::inputs::{Inputs, Interpolation, NamedSignal};
+use calib_model::{limits, user_effects, validate, Model, ModelInfo, SolverOptions};
 use calib_proto::v1 as proto;
 
 /// Reject any protocol version but ours: the check of requests that simulate.
@@ -40,7 +40,7 @@ pub fn hosted_model(name: &str) -> Result<&'static dyn Model> {
 pub fn model_with_effects(name: &str, effects: &[proto::UserEffect]) -> Result<&'static dyn Model> {
     let model = hosted_model(name)?;
     let refused = |e: user_effects::EffectError| Error::invalid(e.field, e.message);
-    let definitions = user_effects::wire::all_from_proto(effects).map_err(refused)?;
+    let definitions = crate::wire::all_from_proto(effects).map_err(refused)?;
     user_effects::attach(model, &definitions).map_err(refused)
 }
 
@@ -262,7 +262,7 @@ impl MeasuredData {
     }
 
     pub fn hash(&self) -> [u8; 32] {
-        crate::scoring::measurement_hash(&self.times, &self.columns, &self.inputs)
+        calib_model::scoring::measurement_hash(&self.times, &self.columns, &self.inputs)
     }
 }
 

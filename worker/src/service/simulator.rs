@@ -6,9 +6,10 @@ use super::error::{Error, Result};
 use super::fmu_cache::FmuCache;
 use super::pool::{PoolLoad, SimulationPool};
 use super::request::{self, driving_inputs, Evaluation, MeasuredData, Simulation};
-use crate::fmu::{self, archive};
-use crate::scoring::{self, Target, FAILURE_PENALTY};
-use crate::{models, Model, SimulationError};
+use calib_model::fmu::{self, archive};
+use calib_model::scoring::{self, Target, FAILURE_PENALTY};
+use calib_model::Run;
+use calib_model::{models, Model, SimulationError};
 use calib_proto::v1 as proto;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -127,7 +128,7 @@ impl SimulatorService {
         let outcome = self
             .pool
             .run(&admission, 1, move |_| {
-                model.simulate_driven(&params, &grid, &wanted, &solver, &inputs)
+                model.simulate(&Run::new(&params, &grid, &wanted, &solver).driven(&inputs))
             })
             .await?
             .pop()
@@ -441,7 +442,7 @@ impl proto::simulator_server::Simulator for SimulatorService {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::limits::{MAX_MESSAGE_BYTES, MAX_POINTS, MAX_TIMES};
+    use calib_model::limits::{MAX_MESSAGE_BYTES, MAX_POINTS, MAX_TIMES};
     use prost::Message;
 
     /// The answer to a Simulate request of the longest grid and every output of `model`.

@@ -3,10 +3,10 @@
 //! request is accepted, and a valid request with one mistake is refused as an invalid
 //! argument naming the mistaken field.
 
+use calib_model::{limits, models, validate, Model};
 use calib_proto::v1 as proto;
 use calib_worker::service::request::{Evaluation, Simulation};
 use calib_worker::service::Error;
-use calib_worker::{limits, models, validate, Model};
 use proptest::prelude::*;
 use proptest::sample::select;
 

@@ -19,7 +19,7 @@ use calib_engine::error::{Error, Result};
 use calib_engine::evaluator::{Evaluator, Simulator};
 use calib_engine::measurement::Measurement;
 use calib_engine::objective::Objective;
-use calib_worker::effects::OutputEffect;
+use calib_model::effects::OutputEffect;
 
 /// Most Gauss–Newton steps per candidate.
 pub const GAUSS_NEWTON_STEPS: usize = 6;

@@ -9,7 +9,8 @@ use calib_engine::campaign::Experiment;
 use calib_engine::error::{Error, Result};
 use calib_engine::measurement::Measurement;
 use calib_engine::objective::Objective;
-use calib_worker::ModelInfo;
+use calib_model::ModelInfo;
+use calib_model::Run;
 use std::path::{Path, PathBuf};
 
 pub use super::chart::{Dash, Series};
@@ -303,12 +304,14 @@ impl ExperimentPlots<'_> {
         self.c
             .campaign
             .model
-            .simulate_driven(
-                &part.full_parameters(free),
-                grid,
-                &part.outputs,
-                &part.solver,
-                &part.inputs,
+            .simulate(
+                &Run::new(
+                    &part.full_parameters(free),
+                    grid,
+                    &part.outputs,
+                    &part.solver,
+                )
+                .driven(&part.inputs),
             )
             .map(|t| t.values)
             .unwrap_or_else(|_| vec![vec![f64::NAN; grid.len()]; part.outputs.len()])

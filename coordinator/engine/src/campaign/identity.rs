@@ -2,7 +2,7 @@
 //! key under which the store keeps its evaluations and results.
 
 use super::{Campaign, InputMapping, OutputMapping};
-use calib_worker::content_hash::ContentHasher;
+use calib_model::content_hash::ContentHasher;
 
 impl Campaign {
     /// A hash of the resolved campaign run on the measurement with content hash
@@ -28,7 +28,7 @@ impl Campaign {
         // identity it always had. So do several windows, experiments and parameters free in
         // one experiment alone.
         hash_inputs(&mut h, &self.inputs);
-        calib_worker::user_effects::hash_into(&mut h, self.model.user_effects());
+        calib_model::user_effects::hash_into(&mut h, self.model.user_effects());
         if self.windows.len() > 1 {
             h.text("windows").count(self.windows.len());
             for w in &self.windows {

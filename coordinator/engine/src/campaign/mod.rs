@@ -11,8 +11,8 @@ mod resolve;
 mod tests;
 mod user_effects;
 
-pub use calib_worker::inputs::Interpolation;
-use calib_worker::{Model, SolverOptions};
+pub use calib_model::inputs::Interpolation;
+use calib_model::{Model, SolverOptions};
 pub use file::default_methods;
 pub use resolve::MAX_EXPERIMENTS;
 use resolve::{resolve, Locator};

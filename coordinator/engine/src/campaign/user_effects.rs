@@ -5,8 +5,8 @@
 use super::file::{EffectEntry, ParameterEntry};
 use super::resolve::Locator;
 use super::{CampaignError, FreeParameter, Scale};
-use calib_worker::user_effects::{self, place_of, UserEffect, UserParameter};
-use calib_worker::{Model, ModelInfo};
+use calib_model::user_effects::{self, place_of, UserEffect, UserParameter};
+use calib_model::{Model, ModelInfo};
 use toml::Spanned;
 
 /// The entries split: built-in effects made free (with their index in the list), and the

@@ -42,7 +42,7 @@ mod testdata;
 
 use std::path::{Path, PathBuf};
 
-use calib_worker::content_hash::ContentHasher;
+use calib_model::content_hash::ContentHasher;
 
 pub use error::{Location, MeasurementError};
 
@@ -427,14 +427,14 @@ mod tests {
     );
 
     /// The real record lives outside the repository; tests that need it skip, saying why,
-    /// where it is absent, except under continuous integration (`calib_worker::testing`),
+    /// where it is absent, except under continuous integration (`calib_model::testing`),
     /// where nothing required may skip.
     fn shared_file(path: &str) -> Option<&Path> {
         let path = Path::new(path);
         if path.exists() {
             Some(path)
         } else {
-            calib_worker::testing::skip(&format!("{} not present", path.display()));
+            calib_model::testing::skip(&format!("{} not present", path.display()));
             None
         }
     }

@@ -35,7 +35,7 @@ pub use self::memory::MemoryStore;
 pub use self::sled::SledStore;
 
 use crate::objective::{Evaluation, Objective};
-use calib_worker::content_hash::ContentHasher;
+use calib_model::content_hash::ContentHasher;
 use std::fmt;
 use std::path::PathBuf;
 

@@ -9,8 +9,8 @@ use super::validation::{
 use super::{defined_effects, spec, CalibrationApi};
 use crate::hosting::datasets::DatasetInfo;
 use calib_engine::campaign::MAX_EXPERIMENTS;
+use calib_model::fmu;
 use calib_proto::v1 as pb;
-use calib_worker::fmu;
 use tonic::Status;
 
 impl CalibrationApi {

@@ -3,11 +3,11 @@
 use super::error::WorkerError;
 use calib_engine::evaluator::Outputs;
 use calib_engine::objective::{Evaluation, Objective};
+use calib_model::inputs::Interpolation;
+use calib_model::scoring;
 use calib_proto::v1 as proto;
 use calib_proto::v1::simulator_client::SimulatorClient;
 use calib_security::{ClientSecurity, SecureChannel};
-use calib_worker::inputs::Interpolation;
-use calib_worker::scoring;
 use calib_worker::service::limits::MAX_MESSAGE_BYTES;
 use std::sync::Arc;
 use std::time::Duration;
@@ -36,7 +36,7 @@ pub struct WireObjective {
 
 /// The content hash and archive of `model` when it is an FMU.
 fn fmu_of(model: &str) -> (Vec<u8>, Option<Arc<Vec<u8>>>) {
-    match calib_worker::fmu::archive_of(model) {
+    match calib_model::fmu::archive_of(model) {
         Some((hash, archive)) => (hash.to_vec(), Some(archive)),
         None => (Vec::new(), None),
     }
@@ -63,10 +63,7 @@ pub fn wire_inputs(objective: &Objective) -> Vec<proto::InputSeries> {
 /// The user-defined effects of the objective's model, sent as text with every request.
 fn wire_effects(objective: &Objective) -> Vec<proto::UserEffect> {
     let effects = objective.model.user_effects();
-    effects
-        .iter()
-        .map(calib_worker::user_effects::wire::to_proto)
-        .collect()
+    effects.iter().map(calib_worker::wire::to_proto).collect()
 }
 
 impl WireObjective {
@@ -151,12 +148,12 @@ impl WireObjective {
     /// Most points one `Evaluate` request may carry: the worker's bound, and with residuals
     /// as many as one answer holds.
     pub fn points_per_request(&self) -> usize {
-        let most = calib_worker::limits::MAX_POINTS;
+        let most = calib_model::limits::MAX_POINTS;
         if !self.template.residuals {
             return most;
         }
         let each = self.measurement.times.len() * self.outputs;
-        (calib_worker::limits::MAX_ANSWER_VALUES / each.max(1)).clamp(1, most)
+        (calib_model::limits::MAX_ANSWER_VALUES / each.max(1)).clamp(1, most)
     }
 
     /// The values of `point` this experiment's free parameters take.
@@ -169,7 +166,7 @@ impl WireObjective {
 }
 
 /// The objective's solver options as a request carries them: every field set.
-fn wire_solver(solver: &calib_worker::SolverOptions) -> proto::SolverOptions {
+fn wire_solver(solver: &calib_model::SolverOptions) -> proto::SolverOptions {
     proto::SolverOptions {
         rtol: Some(solver.rtol),
         atol: Some(solver.atol),

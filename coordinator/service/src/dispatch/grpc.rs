@@ -76,7 +76,7 @@ struct WireCache {
 
 /// Most numbers of records the wire cache holds (two of the largest records a campaign may
 /// have, about 100 MB).
-pub const WIRE_CACHE_VALUES: usize = 2 * calib_worker::limits::MAX_RECORD_VALUES;
+pub const WIRE_CACHE_VALUES: usize = 2 * calib_model::limits::MAX_RECORD_VALUES;
 
 /// Most objectives the wire cache holds.
 pub const WIRE_CACHE_ENTRIES: usize = 64;

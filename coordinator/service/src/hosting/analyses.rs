@@ -16,7 +16,7 @@ use calib_engine::calibration;
 use calib_engine::campaign::Campaign;
 use calib_engine::error::{Error, Result};
 use calib_engine::store::{hex, unhex32};
-use calib_worker::content_hash::ContentHasher;
+use calib_model::content_hash::ContentHasher;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use tokio::sync::watch;

@@ -6,7 +6,7 @@
 
 use calib_engine::error::{Error, Result};
 use calib_engine::measurement::Measurement;
-use calib_worker::content_hash::ContentHasher;
+use calib_model::content_hash::ContentHasher;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

@@ -9,9 +9,9 @@
 
 use calib_engine::error::{Error, Result};
 use calib_engine::limits::MAX_FMU_BYTES;
-use calib_worker::fmu::{self, archive};
+use calib_model::fmu::{self, archive};
+use calib_model::Model;
 use calib_worker::service::fmu_cache::FmuCache;
-use calib_worker::Model;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 

@@ -14,6 +14,7 @@ use calib_analysis::report::plot::{
 use calib_engine::campaign::Campaign;
 use calib_engine::measurement::Measurement;
 use calib_engine::outcome::CalibrationOutcome;
+use calib_model::Run;
 use serde::Deserialize;
 use tonic::Status;
 
@@ -437,12 +438,14 @@ impl Curve {
         let grid = uniform_grid(campaign.solver.start_time, campaign.stop_time, CURVE_POINTS);
         let values = campaign
             .model
-            .simulate_driven(
-                &objective.full_parameters(&point),
-                &grid,
-                &objective.outputs,
-                &objective.solver,
-                &objective.inputs,
+            .simulate(
+                &Run::new(
+                    &objective.full_parameters(&point),
+                    &grid,
+                    &objective.outputs,
+                    &objective.solver,
+                )
+                .driven(&objective.inputs),
             )
             .map(|t| t.values.into_iter().nth(j).unwrap_or_default())
             .map_err(|e| {

@@ -2,7 +2,7 @@
 //! `pendulumJoint` (θ), the names its outputs and input carry.
 
 use super::residual::{JointForces, JointModel};
-use calib_worker::models::furuta::joint_dynamics;
+use calib_model::models::furuta::joint_dynamics;
 
 /// The furuta model at one full parameter vector (as simulated: base parameters, effects).
 #[derive(Debug, Clone)]

@@ -4,8 +4,8 @@ use super::super::file::DiagnosisSection;
 use super::super::{CampaignError, DiagnosisSettings};
 use super::Locator;
 use crate::limits;
-use calib_worker::validate;
-use calib_worker::ModelInfo;
+use calib_model::validate;
+use calib_model::ModelInfo;
 use toml::Spanned;
 
 pub(super) fn resolve_diagnosis(

@@ -11,8 +11,8 @@ use super::parameters::resolve_free;
 use super::windows::{resolve_stop_time, resolve_windows};
 use super::{hull, relative_to, Locator};
 use crate::limits;
-use calib_worker::validate;
-use calib_worker::ModelInfo;
+use calib_model::validate;
+use calib_model::ModelInfo;
 use toml::Spanned;
 
 /// Most experiments one campaign fits together.

@@ -5,8 +5,8 @@ use super::super::file::{InputEntry, OutputEntry};
 use super::super::{CampaignError, InputMapping, Interpolation, OutputMapping, OutputScale};
 use super::Locator;
 use crate::limits;
-use calib_worker::validate;
-use calib_worker::ModelInfo;
+use calib_model::validate;
+use calib_model::ModelInfo;
 use toml::Spanned;
 
 pub(super) fn resolve_outputs(

@@ -13,7 +13,7 @@ use super::file::{CampaignFile, ParameterEntry};
 use super::user_effects;
 use super::{Campaign, CampaignError, FreeParameter};
 use crate::limits;
-use calib_worker::ModelInfo;
+use calib_model::ModelInfo;
 use diagnosis::resolve_diagnosis;
 pub use experiments::MAX_EXPERIMENTS;
 use experiments::{Record, Shared};

@@ -4,9 +4,9 @@
 use super::super::file::{ModelSection, SolverSection};
 use super::super::CampaignError;
 use super::Locator;
-use calib_worker::fmu::{self, Interface};
-use calib_worker::validate::{self, SolverOverrides};
-use calib_worker::{Model, ModelInfo, SolverOptions};
+use calib_model::fmu::{self, Interface};
+use calib_model::validate::{self, SolverOverrides};
+use calib_model::{Model, ModelInfo, SolverOptions};
 use std::path::Path;
 use toml::Spanned;
 

@@ -4,8 +4,8 @@
 use super::super::file::ParameterEntry;
 use super::super::{CampaignError, FreeParameter, Scale};
 use super::Locator;
-use calib_worker::validate;
-use calib_worker::ModelInfo;
+use calib_model::validate;
+use calib_model::ModelInfo;
 use toml::Spanned;
 
 /// Free parameters, then free effects (`effects`: each with its place in the file's

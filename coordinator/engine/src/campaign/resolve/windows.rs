@@ -4,7 +4,7 @@ use super::super::file::WindowSection;
 use super::super::CampaignError;
 use super::Locator;
 use crate::limits;
-use calib_worker::validate;
+use calib_model::validate;
 use toml::Spanned;
 
 /// The fitted intervals: one `window` table or a `windows` list of disjoint `[start, stop]`

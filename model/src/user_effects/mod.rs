@@ -17,7 +17,6 @@
 
 mod formula;
 mod model;
-pub mod wire;
 
 pub use formula::{calls, Compiled, FormulaError, FUNCTIONS};
 pub use model::WithUserEffects;
@@ -119,6 +118,14 @@ pub fn hash_into(h: &mut ContentHasher, effects: &[UserEffect]) {
 #[derive(Debug, Clone, Default)]
 pub struct Forces {
     pub terms: Vec<Force>,
+}
+
+impl Forces {
+    /// No term added.
+    pub fn none() -> &'static Forces {
+        static NONE: Forces = Forces { terms: Vec::new() };
+        &NONE
+    }
 }
 
 /// One term: a compiled formula with its parameters' values of this simulation.

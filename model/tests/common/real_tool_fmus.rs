@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 /// Folder holding `gemseo-fmu/`, `modestpy/` and `aixcalibuha/` (see the script), or why
-/// there is none. Under continuous integration (`calib_worker::testing`) a missing Python or
+/// there is none. Under continuous integration (`calib_model::testing`) a missing Python or
 /// an unreachable package index is a failure.
 pub fn real_tool_fmus() -> Option<&'static Path> {
     static GATHERED: OnceLock<Result<PathBuf, String>> = OnceLock::new();
@@ -47,7 +47,7 @@ pub fn real_tool_fmus() -> Option<&'static Path> {
     match gathered {
         Ok(dir) => Some(dir.as_path()),
         Err(why) => {
-            calib_worker::testing::skip(&format!("FMUs from real tools: {why}"));
+            calib_model::testing::skip(&format!("FMUs from real tools: {why}"));
             None
         }
     }

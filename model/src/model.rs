@@ -12,6 +12,7 @@
 //! models slot in without touching them.
 
 use crate::inputs::Inputs;
+use crate::user_effects::Forces;
 use serde::Serialize;
 
 /// A scalar the model takes as input.
@@ -309,59 +310,84 @@ pub trait Model: Send + Sync {
         &[]
     }
 
-    /// [`Model::simulate_driven`] with the terms of `forces` added at their places. A
-    /// model with no place of that kind refuses them.
-    fn simulate_forced(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-        forces: &crate::user_effects::Forces,
-    ) -> Result<Trajectory, SimulationError> {
-        if let Some(f) = forces.terms.first() {
-            return Err(SimulationError::InvalidInput(format!(
-                "model `{}` has no torque `{}`",
-                self.info().name,
-                f.place
-            )));
+    /// Simulate `run`: from t = 0 (an FMU: from [`SolverOptions::start_time`]) with the
+    /// full parameter vector (base parameters then effects, see [`ModelInfo::full_len`]),
+    /// driven by its inputs and with its forces added at their places, and return its
+    /// outputs at the times of its grid. A model that takes no input refuses a signal
+    /// ([`Run::refuse_inputs`]), and one with no torque place refuses forces
+    /// ([`Run::refuse_forces`]).
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError>;
+}
+
+/// One simulation a model is asked for.
+#[derive(Debug, Clone, Copy)]
+pub struct Run<'a> {
+    /// The full parameter vector: base parameters then effects ([`ModelInfo::full_len`]).
+    pub params: &'a [f64],
+    /// The times of the answer: finite, non-negative, non-decreasing.
+    pub grid: &'a [f64],
+    /// The outputs answered, as indices into [`ModelInfo::outputs`].
+    pub outputs: &'a [usize],
+    pub options: &'a SolverOptions,
+    /// Signals of [`ModelInfo::inputs`]; inputs without one keep the model's own values.
+    pub inputs: &'a Inputs,
+    /// Terms of user-defined effects added at torque places.
+    pub forces: &'a Forces,
+}
+
+impl<'a> Run<'a> {
+    /// A free simulation: no input driven, no force added.
+    pub fn new(
+        params: &'a [f64],
+        grid: &'a [f64],
+        outputs: &'a [usize],
+        options: &'a SolverOptions,
+    ) -> Self {
+        Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs: Inputs::none(),
+            forces: Forces::none(),
         }
-        self.simulate_driven(params, grid, outputs, options, inputs)
     }
 
-    /// Simulate with the full parameter vector `params` (base parameters then effects,
-    /// see [`ModelInfo::full_len`]) from t = 0 (an FMU: from
-    /// [`SolverOptions::start_time`]) and return the outputs listed in
-    /// `outputs` (indices into [`ModelInfo::outputs`]) at the times of `grid`
-    /// (non-decreasing, all ≥ 0).
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError>;
+    /// The same run driven by `inputs`.
+    pub fn driven(self, inputs: &'a Inputs) -> Self {
+        Run { inputs, ..self }
+    }
 
-    /// [`Model::simulate`] driven by `inputs` (signals of [`ModelInfo::inputs`]); inputs
-    /// without a signal keep the model's own values. Models that take inputs override it;
-    /// the default refuses any signal.
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-    ) -> Result<Trajectory, SimulationError> {
-        if let Some(s) = inputs.signals.first() {
-            return Err(SimulationError::InvalidInput(format!(
+    /// The same run with `forces` added.
+    pub fn forced(self, forces: &'a Forces) -> Self {
+        Run { forces, ..self }
+    }
+
+    /// The same run with other parameters.
+    pub fn with_params(self, params: &'a [f64]) -> Self {
+        Run { params, ..self }
+    }
+
+    /// Refuses the run if it drives an input: for a model that takes none.
+    pub fn refuse_inputs(&self, info: &ModelInfo) -> Result<(), SimulationError> {
+        match self.inputs.signals.first() {
+            Some(s) => Err(SimulationError::InvalidInput(format!(
                 "model `{}` takes no input (input #{} was given)",
-                self.info().name,
-                s.input
-            )));
+                info.name, s.input
+            ))),
+            None => Ok(()),
         }
-        self.simulate(params, grid, outputs, options)
+    }
+
+    /// Refuses the run if it adds forces: for a model with no torque place.
+    pub fn refuse_forces(&self, info: &ModelInfo) -> Result<(), SimulationError> {
+        match self.forces.terms.first() {
+            Some(f) => Err(SimulationError::InvalidInput(format!(
+                "model `{}` has no torque `{}`",
+                info.name, f.place
+            ))),
+            None => Ok(()),
+        }
     }
 }
 

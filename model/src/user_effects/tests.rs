@@ -1,6 +1,7 @@
 use super::*;
 use crate::model::{SimulationError, SolverOptions};
 use crate::models;
+use crate::Run;
 
 fn effect(name: &str, kind: PlaceKind, place: &str, formula: &str, params: &[&str]) -> UserEffect {
     UserEffect {
@@ -49,16 +50,21 @@ fn a_constant_formula_on_an_hx_output_is_its_offset() {
     let options = base.default_options();
     let all: Vec<usize> = (0..base.info().outputs.len()).collect();
     let formula = with
-        .simulate(&vector(with, &[("shift.c", 0.37)]), &t, &all, &options)
+        .simulate(&Run::new(
+            &vector(with, &[("shift.c", 0.37)]),
+            &t,
+            &all,
+            &options,
+        ))
         .unwrap();
     let offset = format!("offset({output})");
     let built_in = base
-        .simulate(
+        .simulate(&Run::new(
             &vector(base, &[(offset.as_str(), 0.37)]),
             &t,
             &all,
             &options,
-        )
+        ))
         .unwrap();
     let worst = formula.values[0]
         .iter()
@@ -70,11 +76,21 @@ fn a_constant_formula_on_an_hx_output_is_its_offset() {
     assert_eq!(formula.values[1..], built_in.values[1..]);
     // `y` is the output's own value: g * y is a gain error.
     let gained = with
-        .simulate(&vector(with, &[("scale.g", 0.1)]), &t, &[0], &options)
+        .simulate(&Run::new(
+            &vector(with, &[("scale.g", 0.1)]),
+            &t,
+            &[0],
+            &options,
+        ))
         .unwrap();
     let gain = format!("gain({output})");
     let built_in = base
-        .simulate(&vector(base, &[(gain.as_str(), 0.1)]), &t, &[0], &options)
+        .simulate(&Run::new(
+            &vector(base, &[(gain.as_str(), 0.1)]),
+            &t,
+            &[0],
+            &options,
+        ))
         .unwrap();
     for (a, b) in gained.values[0].iter().zip(&built_in.values[0]) {
         assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{a} vs {b}");
@@ -95,24 +111,24 @@ fn a_formula_torque_is_the_built_in_viscous_friction_bit_for_bit() {
     let t = grid(20.0, 0.01);
     let options = SolverOptions::default();
     let formula = with
-        .simulate(
+        .simulate(&Run::new(
             &vector(with, &[("damping.arm.b", 0.003)]),
             &t,
             &[0, 1],
             &options,
-        )
+        ))
         .unwrap();
     let built_in = base
-        .simulate(
+        .simulate(&Run::new(
             &vector(base, &[("viscous_friction.arm", 0.003)]),
             &t,
             &[0, 1],
             &options,
-        )
+        ))
         .unwrap();
     assert_eq!(formula.values, built_in.values);
     let free = base
-        .simulate(&vector(base, &[]), &t, &[0, 1], &options)
+        .simulate(&Run::new(&vector(base, &[]), &t, &[0, 1], &options))
         .unwrap();
     assert_ne!(formula.values, free.values, "the torque acts");
 }
@@ -132,10 +148,15 @@ fn an_output_formula_reads_other_outputs_and_time() {
     let options = SolverOptions::default();
     // Only the transformed output is asked for: the one it reads is simulated too.
     let mixed = with
-        .simulate(&vector(with, &[("mix.a", 0.5)]), &t, &[0], &options)
+        .simulate(&Run::new(
+            &vector(with, &[("mix.a", 0.5)]),
+            &t,
+            &[0],
+            &options,
+        ))
         .unwrap();
     let plain = base
-        .simulate(&vector(base, &[]), &t, &[0, 3], &options)
+        .simulate(&Run::new(&vector(base, &[]), &t, &[0, 3], &options))
         .unwrap();
     assert_eq!(mixed.values.len(), 1);
     for (i, &time) in t.iter().enumerate() {
@@ -184,7 +205,12 @@ fn failure_with(kind: PlaceKind, place: &str, formula: &str) -> SimulationError 
     let base = models::find("furuta").unwrap();
     let with = attach(base, &[effect("odd", kind, place, formula, &["b"])]).unwrap();
     let p = vector(with, &[("odd.b", 0.5)]);
-    match with.simulate(&p, &grid(5.0, 0.01), &[0, 1], &SolverOptions::default()) {
+    match with.simulate(&Run::new(
+        &p,
+        &grid(5.0, 0.01),
+        &[0, 1],
+        &SolverOptions::default(),
+    )) {
         Ok(_) => panic!("{formula}: simulated"),
         Err(e) => e,
     }

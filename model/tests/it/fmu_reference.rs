@@ -2,8 +2,9 @@
 //! versions, against their reference results and against closed forms.
 
 use crate::reference_fmus::{read_reference, reference_fmus};
-use calib_worker::fmu::{self, Interface};
-use calib_worker::SolverOptions;
+use calib_model::fmu::{self, Interface};
+use calib_model::Run;
+use calib_model::SolverOptions;
 
 fn options() -> SolverOptions {
     SolverOptions {
@@ -33,7 +34,9 @@ fn against_reference(version: u32, model: &str, interface: Interface) -> Option<
         })
         .collect();
     let params = info.default_vector();
-    let t = m.simulate(&params, &grid, &outputs, &options()).unwrap();
+    let t = m
+        .simulate(&Run::new(&params, &grid, &outputs, &options()))
+        .unwrap();
     let worst = header[1..]
         .iter()
         .enumerate()
@@ -158,7 +161,7 @@ struct VanDerPol {
     mu: f64,
 }
 
-impl calib_worker::ode::HybridSystem for VanDerPol {
+impl calib_model::ode::HybridSystem for VanDerPol {
     fn dim(&self) -> usize {
         2
     }
@@ -183,9 +186,11 @@ fn model_exchange_van_der_pol_matches_the_equations_solved_natively() {
         let grid: Vec<f64> = (0..=2000).map(|i| i as f64 * 0.01).collect();
         let mut params = info.default_vector();
         params[mu] = 1.7;
-        let first = m.simulate(&params, &grid, &outputs, &options()).unwrap();
+        let first = m
+            .simulate(&Run::new(&params, &grid, &outputs, &options()))
+            .unwrap();
         let mut native = vec![vec![0.0; grid.len()]; 2];
-        calib_worker::ode::integrate(
+        calib_model::ode::integrate(
             &mut VanDerPol { mu: 1.7 },
             &[2.0, 0.0],
             &grid,
@@ -202,10 +207,14 @@ fn model_exchange_van_der_pol_matches_the_equations_solved_natively() {
         );
         // A reused (reset) instance gives what a fresh one gave.
         params[mu] = 0.5;
-        let other = m.simulate(&params, &grid, &outputs, &options()).unwrap();
+        let other = m
+            .simulate(&Run::new(&params, &grid, &outputs, &options()))
+            .unwrap();
         assert_ne!(other.values, first.values);
         params[mu] = 1.7;
-        let again = m.simulate(&params, &grid, &outputs, &options()).unwrap();
+        let again = m
+            .simulate(&Run::new(&params, &grid, &outputs, &options()))
+            .unwrap();
         assert_eq!(again.values, first.values, "FMI {version}");
     }
 }
@@ -239,7 +248,7 @@ fn the_description_gives_parameters_with_start_values_units_and_bounds() {
         .unwrap();
         assert!(cs.info().name.starts_with("BouncingBall.cs@"));
         assert_eq!(
-            calib_worker::models::find(&info.name).unwrap().info().name,
+            calib_model::models::find(&info.name).unwrap().info().name,
             info.name
         );
     }

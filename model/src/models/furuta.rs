@@ -41,13 +41,14 @@
 //! k·q, `torque_bias.<joint>` t0. Viscous friction and drag vanish while a joint is stuck;
 //! stiffness and bias act as driving torques the friction must hold.
 
-use crate::inputs::{InputSignal, Inputs};
+use crate::inputs::InputSignal;
 use crate::model::{
     check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, PlaceKind,
-    PlaceSpec, SimulationError, SolverOptions, Trajectory,
+    PlaceSpec, SimulationError, Trajectory,
 };
 use crate::ode::{integrate, HybridSystem};
-use crate::user_effects::{Force, Forces};
+use crate::user_effects::Force;
+use crate::Run;
 use std::f64::consts::PI;
 
 /// Indices of the full parameter vector (base parameters, then effects).
@@ -283,27 +284,6 @@ impl Model for Furuta {
         40.0
     }
 
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_driven(params, grid, outputs, options, Inputs::none())
-    }
-
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_forced(params, grid, outputs, options, inputs, &Forces::default())
-    }
-
     /// A torque on each joint (`armJoint`, `pendulumJoint`), and each output.
     fn places(&self) -> Vec<PlaceSpec> {
         let torques = ["armJoint", "pendulumJoint"].map(|joint| PlaceSpec {
@@ -327,15 +307,15 @@ impl Model for Furuta {
         self.info.outputs.iter().map(|o| o.name.clone()).collect()
     }
 
-    fn simulate_forced(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-        forces: &Forces,
-    ) -> Result<Trajectory, SimulationError> {
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        let Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs,
+            forces,
+        } = *run;
         check_request(&self.info, params, grid, outputs)?;
         inputs
             .check(&self.info, 0.0, grid[grid.len() - 1])
@@ -680,6 +660,8 @@ pub fn joint_dynamics(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::inputs::Inputs;
+    use crate::SolverOptions;
 
     fn defaults() -> Vec<f64> {
         Furuta::new().info().default_vector()
@@ -705,7 +687,7 @@ mod tests {
         let model = Furuta::new();
         let t = grid(40.0, 0.01);
         let traj = model
-            .simulate(&p, &t, &[0, 1, 2, 3], &SolverOptions::default())
+            .simulate(&Run::new(&p, &t, &[0, 1, 2, 3], &SolverOptions::default()))
             .unwrap();
         let system = FurutaSystem::new(&p).unwrap();
         let e0 = energy(&system, &[p[10], p[11], p[12], p[13]]);
@@ -730,8 +712,8 @@ mod tests {
             max_steps: 10_000_000,
             ..SolverOptions::default()
         };
-        let a = model.simulate(&p, &t, &[0, 1], &calib).unwrap();
-        let b = model.simulate(&p, &t, &[0, 1], &tight).unwrap();
+        let a = model.simulate(&Run::new(&p, &t, &[0, 1], &calib)).unwrap();
+        let b = model.simulate(&Run::new(&p, &t, &[0, 1], &tight)).unwrap();
         let worst = a
             .values
             .iter()
@@ -754,14 +736,14 @@ mod tests {
         let model = Furuta::new();
         let t = grid(40.0, 0.1);
         let traj = model
-            .simulate(&p, &t, &[0, 2], &SolverOptions::default())
+            .simulate(&Run::new(&p, &t, &[0, 2], &SolverOptions::default()))
             .unwrap();
         assert!(traj.values[0].iter().all(|phi| *phi == 0.0));
         assert!(traj.values[1].iter().all(|w| *w == 0.0));
         // Just above the friction it must move.
         p[idx::BIAS] = 0.013;
         let traj = model
-            .simulate(&p, &t, &[0], &SolverOptions::default())
+            .simulate(&Run::new(&p, &t, &[0], &SolverOptions::default()))
             .unwrap();
         assert!(traj.values[0].last().unwrap() < &-0.1);
     }
@@ -772,7 +754,7 @@ mod tests {
         let p = defaults();
         let t = grid(120.0, 0.5);
         let traj = model
-            .simulate(&p, &t, &[1, 3, 2], &SolverOptions::default())
+            .simulate(&Run::new(&p, &t, &[1, 3, 2], &SolverOptions::default()))
             .unwrap();
         let theta_end = *traj.values[0].last().unwrap();
         assert!((theta_end - PI).abs() < 0.1, "θ(end) = {theta_end}");
@@ -800,11 +782,15 @@ mod tests {
         let t = grid(10.0, 0.01);
         let options = SolverOptions::default();
         let driven = model
-            .simulate_driven(&defaults(), &t, &[0, 1], &options, &constant(0, 0.02, 10.0))
+            .simulate(
+                &Run::new(&defaults(), &t, &[0, 1], &options).driven(&constant(0, 0.02, 10.0)),
+            )
             .unwrap();
         let mut biased = defaults();
         biased[idx::BIAS] = -0.02;
-        let reference = model.simulate(&biased, &t, &[0, 1], &options).unwrap();
+        let reference = model
+            .simulate(&Run::new(&biased, &t, &[0, 1], &options))
+            .unwrap();
         assert_eq!(driven.values, reference.values);
         assert!(
             driven.values[0].last().unwrap() > &1.0,
@@ -816,12 +802,9 @@ mod tests {
     fn an_input_must_cover_the_simulation() {
         let model = Furuta::new();
         let t = grid(10.0, 0.1);
-        let r = model.simulate_driven(
-            &defaults(),
-            &t,
-            &[0],
-            &SolverOptions::default(),
-            &constant(0, 0.02, 5.0),
+        let r = model.simulate(
+            &Run::new(&defaults(), &t, &[0], &SolverOptions::default())
+                .driven(&constant(0, 0.02, 5.0)),
         );
         let Err(SimulationError::InvalidInput(message)) = r else {
             panic!("{r:?}");
@@ -838,11 +821,11 @@ mod tests {
         let mut p = defaults();
         p[idx::PEND_IXX] = -1.0;
         p[idx::PEND_MASS] = 1.0;
-        let r = model.simulate(&p, &[1.0], &[0], &SolverOptions::default());
+        let r = model.simulate(&Run::new(&p, &[1.0], &[0], &SolverOptions::default()));
         assert!(matches!(r, Err(SimulationError::InvalidInput(_))), "{r:?}");
         let mut p = defaults();
         p[0] = f64::NAN;
-        let r = model.simulate(&p, &[1.0], &[0], &SolverOptions::default());
+        let r = model.simulate(&Run::new(&p, &[1.0], &[0], &SolverOptions::default()));
         assert!(matches!(r, Err(SimulationError::InvalidInput(_))));
     }
 

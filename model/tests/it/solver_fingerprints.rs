@@ -10,10 +10,11 @@
 //! into one; on a mismatch the test prints every case's fingerprint in the form of the table.
 
 use crate::reference_fmus::{read_reference, reference_fmus};
-use calib_worker::fmu::{self, Interface};
-use calib_worker::models::{furuta::Furuta, hx};
-use calib_worker::ode::{self, rkc, HybridSystem};
-use calib_worker::{Model, SimulationError, SolverOptions, SolverStats, Trajectory};
+use calib_model::fmu::{self, Interface};
+use calib_model::models::{furuta::Furuta, hx};
+use calib_model::ode::{self, rkc, HybridSystem};
+use calib_model::Run;
+use calib_model::{Model, SimulationError, SolverOptions, SolverStats, Trajectory};
 
 /// The fingerprint of one result (its stats and every value's bits, or its error), and what
 /// it is in words.
@@ -124,7 +125,7 @@ fn with(model: &dyn Model, set: &[(&str, f64)]) -> Vec<f64> {
 
 fn simulate(model: &dyn Model, p: &[f64], grid: &[f64], options: &SolverOptions) -> Case {
     let outputs: Vec<usize> = (0..model.info().outputs.len()).collect();
-    of_trajectory(model.simulate(p, grid, &outputs, options))
+    of_trajectory(model.simulate(&Run::new(p, grid, &outputs, options)))
 }
 
 const FURUTA: &[(&str, &str)] = &[

@@ -9,6 +9,7 @@ use crate::model::{
     SolverOptions, Trajectory,
 };
 use crate::validate::hint;
+use crate::Run;
 use std::sync::Arc;
 
 /// One definition, compiled.
@@ -314,24 +315,16 @@ impl Model for WithUserEffects {
         &self.definitions
     }
 
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_driven(params, grid, outputs, options, Inputs::none())
-    }
-
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-    ) -> Result<Trajectory, SimulationError> {
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        run.refuse_forces(self.info())?;
+        let Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs,
+            ..
+        } = *run;
         check_request(&self.info, params, grid, outputs)?;
         let (base_params, user) = params.split_at(self.base_len);
         let states = self.base.state_names().len();
@@ -363,9 +356,11 @@ impl Model for WithUserEffects {
                 }
             }
         }
-        let mut trajectory =
-            self.base
-                .simulate_forced(base_params, grid, &wanted, options, inputs, &forces)?;
+        let mut trajectory = self.base.simulate(
+            &Run::new(base_params, grid, &wanted, options)
+                .driven(inputs)
+                .forced(&forces),
+        )?;
         if wanted.len() > outputs.len() || self.compiled.iter().any(|c| c.output.is_some()) {
             let mut slot = vec![None; n];
             for (k, &o) in wanted.iter().enumerate() {

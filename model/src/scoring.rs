@@ -12,6 +12,7 @@
 
 use crate::content_hash::ContentHasher;
 use crate::inputs::{Inputs, NamedSignal};
+use crate::Run;
 use crate::{Model, SimulationError, SolverOptions};
 
 /// Objective value given to parameter sets whose simulation failed: far above any real fit.
@@ -116,12 +117,8 @@ pub fn simulate_and_score(
     params: &[f64],
     target: &Target,
 ) -> Result<Evaluation, SimulationError> {
-    let trajectory = model.simulate_driven(
-        params,
-        target.grid,
-        target.outputs,
-        target.solver,
-        target.inputs,
+    let trajectory = model.simulate(
+        &Run::new(params, target.grid, target.outputs, target.solver).driven(target.inputs),
     )?;
     Ok(score_with(
         &trajectory.values,

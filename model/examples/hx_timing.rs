@@ -6,8 +6,9 @@
 //!
 //! `cargo run --release -p calib-worker --example hx_timing [-- --tight]`
 
-use calib_worker::models::hx;
-use calib_worker::{Model, SolverOptions};
+use calib_model::models::hx;
+use calib_model::Run;
+use calib_model::{Model, SolverOptions};
 use std::time::Instant;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -45,7 +46,7 @@ fn main() {
             for _ in 0..21 {
                 let t0 = Instant::now();
                 let tr = model
-                    .simulate(&params, &grid, &outputs, &options)
+                    .simulate(&Run::new(&params, &grid, &outputs, &options))
                     .expect("simulation");
                 times.push(t0.elapsed().as_secs_f64());
                 stats = Some(tr.stats);

@@ -1,7 +1,8 @@
 //! Physics checks of both models.
 
 use super::*;
-use crate::inputs::{InputSignal, Interpolation};
+use crate::inputs::{InputSignal, Inputs as Signals, Interpolation};
+use crate::Run;
 
 fn grid(step: f64, start: f64, end: f64) -> Vec<f64> {
     let n = ((end - start) / step).round() as usize;
@@ -18,7 +19,12 @@ fn out(name: &str) -> usize {
 
 fn run(model: &HxModel, params: &[f64], times: &[f64]) -> Trajectory {
     model
-        .simulate(params, times, &all_outputs(), &SolverOptions::default())
+        .simulate(&Run::new(
+            params,
+            times,
+            &all_outputs(),
+            &SolverOptions::default(),
+        ))
         .expect("simulation")
 }
 
@@ -237,7 +243,7 @@ fn out_of_bounds_parameters_are_typed_errors() {
     let model = lowfi();
     let mut p = model.info().default_vector();
     p[0] = 10.0;
-    let r = model.simulate(&p, &[0.0, 1.0], &[0], &SolverOptions::default());
+    let r = model.simulate(&Run::new(&p, &[0.0, 1.0], &[0], &SolverOptions::default()));
     assert!(matches!(r, Err(SimulationError::InvalidInput(_))), "{r:?}");
 }
 
@@ -292,7 +298,12 @@ fn lowfi_gives_dp0_at_its_nominal_point() {
 }
 
 fn failure(model: &HxModel, params: &[f64], times: &[f64]) -> (f64, String) {
-    match model.simulate(params, times, &all_outputs(), &SolverOptions::default()) {
+    match model.simulate(&Run::new(
+        params,
+        times,
+        &all_outputs(),
+        &SolverOptions::default(),
+    )) {
         Err(SimulationError::Failed { time, reason }) => (time, reason),
         other => panic!("expected a failed simulation, got {other:?}"),
     }
@@ -361,7 +372,12 @@ fn leaving_the_property_table_fails_at_the_crossing_at_the_model_tolerance() {
     p[7] = 180.0; // h_in_end (kJ/kg)
     let times = grid(1.0, 0.0, 300.0);
     let (reference, _) = failure(&model, &p, &times);
-    let r = model.simulate(&p, &times, &all_outputs(), &model.default_options());
+    let r = model.simulate(&Run::new(
+        &p,
+        &times,
+        &all_outputs(),
+        &model.default_options(),
+    ));
     let Err(SimulationError::Failed { time, reason }) = r else {
         panic!("expected a failed simulation, got {r:?}");
     };
@@ -441,10 +457,15 @@ fn reference_cases(model: &HxModel) -> Vec<(&'static str, Vec<f64>, [f64; 2])> {
 fn deviation_from_reference(model: &HxModel, params: &[f64]) -> Vec<f64> {
     let times = grid(1.0, 0.0, 300.0);
     let fast = model
-        .simulate(params, &times, &all_outputs(), &model.default_options())
+        .simulate(&Run::new(
+            params,
+            &times,
+            &all_outputs(),
+            &model.default_options(),
+        ))
         .expect("simulation at the model's tolerance");
     let reference = model
-        .simulate(
+        .simulate(&Run::new(
             params,
             &times,
             &all_outputs(),
@@ -454,7 +475,7 @@ fn deviation_from_reference(model: &HxModel, params: &[f64]) -> Vec<f64> {
                 max_steps: 1_000_000,
                 ..SolverOptions::default()
             },
-        )
+        ))
         .expect("reference simulation");
     fast.values
         .iter()
@@ -540,13 +561,8 @@ fn driven(
     times: &[f64],
     inputs: &Signals,
 ) -> Result<Trajectory, SimulationError> {
-    model.simulate_driven(
-        params,
-        times,
-        &all_outputs(),
-        &model.default_options(),
-        inputs,
-    )
+    model
+        .simulate(&Run::new(params, times, &all_outputs(), &model.default_options()).driven(inputs))
 }
 
 #[test]
@@ -578,14 +594,19 @@ fn the_five_boundary_conditions_are_inputs() {
 }
 
 /// Undriven, a simulation is the one it always was: no signal, the same bits (the
-/// fingerprints of `worker/tests/it/solver_fingerprints.rs` pin them across versions).
+/// fingerprints of `model/tests/it/solver_fingerprints.rs` pin them across versions).
 #[test]
 fn undriven_runs_are_the_plain_simulation() {
     for model in [highfi(), lowfi()] {
         let p = model.info().default_vector();
         let times = grid(1.0, 0.0, 300.0);
         let plain = model
-            .simulate(&p, &times, &all_outputs(), &model.default_options())
+            .simulate(&Run::new(
+                &p,
+                &times,
+                &all_outputs(),
+                &model.default_options(),
+            ))
             .unwrap();
         let none = driven(&model, &p, &times, Signals::none()).unwrap();
         assert_eq!(plain, none);
@@ -630,7 +651,12 @@ fn signals_sampling_the_ramps_give_the_ramps_outputs() {
 
 fn run_at_model_tolerance(model: &HxModel, params: &[f64], times: &[f64]) -> Trajectory {
     model
-        .simulate(params, times, &all_outputs(), &model.default_options())
+        .simulate(&Run::new(
+            params,
+            times,
+            &all_outputs(),
+            &model.default_options(),
+        ))
         .expect("simulation")
 }
 

@@ -1,7 +1,7 @@
 //! User-defined effects as the protocol carries them (`UserEffect` of simulator.proto).
 
-use super::{place_of, EffectError, UserEffect, UserParameter};
-use crate::model::PlaceKind;
+use calib_model::user_effects::{place_of, EffectError, UserEffect, UserParameter};
+use calib_model::PlaceKind;
 use calib_proto::v1 as proto;
 
 /// The definition a request carries as effect `i`.

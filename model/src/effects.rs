@@ -12,11 +12,10 @@
 //! - `gain(o)` = g: `(1 + g)·y`;
 //! - `offset(o)` = c [output unit]: `y + c`.
 
-use crate::inputs::Inputs;
 use crate::model::{
     check_request, EffectSpec, Model, ModelInfo, SimulationError, SolverOptions, Trajectory,
 };
-use crate::user_effects::Forces;
+use crate::Run;
 
 /// The measurement-chain effects every output has, in the order of their slots.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -154,16 +153,6 @@ impl<M: Model> Model for WithOutputEffects<M> {
         self.inner.default_stop_time()
     }
 
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_driven(params, grid, outputs, options, Inputs::none())
-    }
-
     fn places(&self) -> Vec<crate::PlaceSpec> {
         self.inner.places()
     }
@@ -172,26 +161,15 @@ impl<M: Model> Model for WithOutputEffects<M> {
         self.inner.state_names()
     }
 
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_forced(params, grid, outputs, options, inputs, &Forces::default())
-    }
-
-    fn simulate_forced(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-        forces: &Forces,
-    ) -> Result<Trajectory, SimulationError> {
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        let Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs,
+            forces,
+        } = *run;
         check_request(&self.info, params, grid, outputs)?;
         let (inner_params, effects) = params.split_at(self.inner_len);
         let effect = |output: usize, kind: OutputEffect| effects[output * PER_OUTPUT + kind.slot()];
@@ -208,8 +186,11 @@ impl<M: Model> Model for WithOutputEffects<M> {
         }
 
         let mut trajectory = if delays.iter().all(|d| *d == 0.0) {
-            self.inner
-                .simulate_forced(inner_params, grid, outputs, options, inputs, forces)?
+            self.inner.simulate(
+                &Run::new(inner_params, grid, outputs, options)
+                    .driven(inputs)
+                    .forced(forces),
+            )?
         } else {
             // Simulate on the grid and every delayed copy of it, then pick.
             let mut times: Vec<f64> = grid.to_vec();
@@ -218,13 +199,10 @@ impl<M: Model> Model for WithOutputEffects<M> {
             }
             times.sort_by(f64::total_cmp);
             times.dedup();
-            let full = self.inner.simulate_forced(
-                inner_params,
-                &times,
-                outputs,
-                options,
-                inputs,
-                forces,
+            let full = self.inner.simulate(
+                &Run::new(inner_params, &times, outputs, options)
+                    .driven(inputs)
+                    .forced(forces),
             )?;
             let at = |k: usize, t: f64| {
                 let i = times.partition_point(|x| *x < t);
@@ -339,13 +317,8 @@ mod tests {
         fn info(&self) -> &ModelInfo {
             &self.info
         }
-        fn simulate(
-            &self,
-            params: &[f64],
-            grid: &[f64],
-            _outputs: &[usize],
-            _options: &SolverOptions,
-        ) -> Result<Trajectory, SimulationError> {
+        fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+            let Run { params, grid, .. } = *run;
             Ok(Trajectory {
                 time: grid.to_vec(),
                 values: vec![grid.iter().map(|t| params[0] * t).collect()],
@@ -361,7 +334,7 @@ mod tests {
         let mut p = vec![1.0];
         p.extend(effects);
         model
-            .simulate(&p, &grid, &[0], &SolverOptions::default())
+            .simulate(&Run::new(&p, &grid, &[0], &SolverOptions::default()))
             .unwrap()
             .values
             .remove(0)

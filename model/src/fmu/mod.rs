@@ -7,7 +7,7 @@
 //! outputs, then its other real variables, are the model's outputs; the measurement effects
 //! (offset, gain, delay, lag) apply to them as to every model ([`crate::effects`]); its
 //! inputs (causality `input`: Real, Integer, Boolean) are the model's inputs, set from the
-//! signals of [`Model::simulate_driven`] as `run.rs` says. The
+//! signals of a [`crate::Run`] as `run.rs` says. The
 //! model's name is `<modelIdentifier>.<me|cs>@<first 12 hex digits of the hash>`, so that
 //! two different FMUs never share cached evaluations.
 //!
@@ -43,6 +43,7 @@ use crate::model::{
     check_request, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec, SimulationError,
     SolverOptions, Trajectory,
 };
+use crate::Run;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -461,27 +462,19 @@ impl Model for FmuModel {
         }
     }
 
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_driven(params, grid, outputs, options, Inputs::none())
-    }
-
     /// The FMU's inputs (causality `input`) set from the signals as the standard's
     /// simulation algorithms do (see `run.rs`); inputs without a signal keep their start
     /// values.
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Inputs,
-    ) -> Result<Trajectory, SimulationError> {
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        run.refuse_forces(self.info())?;
+        let Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs,
+            ..
+        } = *run;
         check_request(&self.info, params, grid, outputs)?;
         let stop = grid.last().copied().unwrap_or(options.start_time);
         inputs

@@ -6,10 +6,11 @@
 
 use crate::real_tool_fmus::real_tool_fmus;
 use crate::reference_fmus::{read_reference, reference_fmus};
-use calib_worker::fmu::{self, Interface};
-use calib_worker::inputs::{InputSignal, Inputs, Interpolation};
-use calib_worker::testing::skip;
-use calib_worker::{Model, SolverOptions};
+use calib_model::fmu::{self, Interface};
+use calib_model::inputs::{InputSignal, Inputs, Interpolation};
+use calib_model::testing::skip;
+use calib_model::Run;
+use calib_model::{Model, SolverOptions};
 use std::path::{Path, PathBuf};
 
 fn repo() -> PathBuf {
@@ -123,7 +124,7 @@ fn calib(
         .map(|n| info.output_index(n).unwrap())
         .collect();
     let t = model
-        .simulate_driven(&info.default_vector(), grid, &outputs, options, inputs)
+        .simulate(&Run::new(&info.default_vector(), grid, &outputs, options).driven(inputs))
         .unwrap_or_else(|e| panic!("{}: {e}", info.name));
     grid.iter()
         .enumerate()
@@ -417,12 +418,14 @@ fn an_fmus_inputs_are_described_and_bad_signals_refused() {
         }],
     };
     let e = model
-        .simulate_driven(
-            &info.default_vector(),
-            &[0.0, 1.0],
-            &[0],
-            &SolverOptions::default(),
-            &short,
+        .simulate(
+            &Run::new(
+                &info.default_vector(),
+                &[0.0, 1.0],
+                &[0],
+                &SolverOptions::default(),
+            )
+            .driven(&short),
         )
         .unwrap_err();
     assert!(e.to_string().contains("do not cover"), "{e}");

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 /// Folder holding `fmi2/` and `fmi3/` with `<Model>.fmu` and `<Model>_ref.csv`, or why
-/// there is none. Under continuous integration (`calib_worker::testing`) a missing build script or
+/// there is none. Under continuous integration (`calib_model::testing`) a missing build script or
 /// compiler is a failure.
 pub fn reference_fmus() -> Option<&'static Path> {
     static BUILT: OnceLock<Result<PathBuf, String>> = OnceLock::new();
@@ -36,7 +36,7 @@ pub fn reference_fmus() -> Option<&'static Path> {
     match built {
         Ok(dir) => Some(dir.as_path()),
         Err(why) => {
-            calib_worker::testing::skip(&format!("the reference FMUs: {why}"));
+            calib_model::testing::skip(&format!("the reference FMUs: {why}"));
             None
         }
     }

@@ -153,12 +153,12 @@ pub mod refrigerant;
 #[cfg(test)]
 mod tests;
 
-use crate::inputs::Inputs as Signals;
 use crate::model::{
     check_request, EffectSpec, InputSpec, Model, ModelInfo, OutputSpec, ParameterSpec,
     SimulationError, SolverOptions, SolverStats, Trajectory,
 };
 use crate::ode::{integrate, rkc, HybridSystem};
+use crate::Run;
 use boundary::{Driven, Inputs, Ramps};
 use evaporator::{describe_out_of_range, Evaporator, Fidelity, NominalPoint, Settings};
 use geometry::Geometry;
@@ -729,24 +729,16 @@ impl Model for HxModel {
         }
     }
 
-    fn simulate(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-    ) -> Result<Trajectory, SimulationError> {
-        self.simulate_driven(params, grid, outputs, options, Signals::none())
-    }
-
-    fn simulate_driven(
-        &self,
-        params: &[f64],
-        grid: &[f64],
-        outputs: &[usize],
-        options: &SolverOptions,
-        inputs: &Signals,
-    ) -> Result<Trajectory, SimulationError> {
+    fn simulate(&self, run: &Run) -> Result<Trajectory, SimulationError> {
+        run.refuse_forces(self.info())?;
+        let Run {
+            params,
+            grid,
+            outputs,
+            options,
+            inputs,
+            ..
+        } = *run;
         check_request(&self.info, params, grid, outputs)?;
         inputs
             .check(&self.info, 0.0, grid[grid.len() - 1])

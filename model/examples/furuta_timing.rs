@@ -4,8 +4,9 @@
 //!
 //! `cargo run --release -p calib-worker --example furuta_timing [-- --repeat N]`
 
-use calib_worker::models::furuta::Furuta;
-use calib_worker::{Model, SolverOptions};
+use calib_model::models::furuta::Furuta;
+use calib_model::Run;
+use calib_model::{Model, SolverOptions};
 use std::time::Instant;
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -34,7 +35,7 @@ fn main() {
         for _ in 0..repeat {
             let t0 = Instant::now();
             let tr = model
-                .simulate(&params, &grid, &[0, 1], &options)
+                .simulate(&Run::new(&params, &grid, &[0, 1], &options))
                 .expect("simulation");
             times.push(t0.elapsed().as_secs_f64());
             stats = Some(tr.stats);

@@ -7,9 +7,10 @@
 
 use crate::real_tool_fmus::real_tool_fmus;
 use crate::reference_fmus::reference_fmus;
-use calib_worker::fmu::{self, Interface};
-use calib_worker::testing::skip;
-use calib_worker::{Model, SolverOptions};
+use calib_model::fmu::{self, Interface};
+use calib_model::testing::skip;
+use calib_model::Run;
+use calib_model::{Model, SolverOptions};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -207,7 +208,12 @@ fn run(case: &Case, scratch: &Path) -> Outcome {
     let info = model.info();
     let names: Vec<String> = info.outputs.iter().map(|o| o.name.clone()).collect();
     let outputs: Vec<usize> = (0..names.len()).collect();
-    let calib = match model.simulate(&info.default_vector(), &grid, &outputs, &options()) {
+    let calib = match model.simulate(&Run::new(
+        &info.default_vector(),
+        &grid,
+        &outputs,
+        &options(),
+    )) {
         Ok(t) => t,
         Err(e) => {
             let message = e.to_string();
@@ -438,7 +444,7 @@ fn simulate_lazy(max_switches: f64) -> Option<(Vec<f64>, Named)> {
         .map(|n| info.output_index(n).unwrap())
         .collect();
     let t = model
-        .simulate(&params, &grid, &outputs, &options())
+        .simulate(&Run::new(&params, &grid, &outputs, &options()))
         .unwrap();
     let named = names.iter().map(|n| n.to_string()).zip(t.values).collect();
     Some((grid, named))

@@ -432,9 +432,8 @@ pub fn serve(dir: &Path, interface: Interface) -> Result<(), FmuError> {
             Some((params, grid, outputs, options, inputs)) => {
                 #[cfg(target_os = "linux")]
                 super::contain::allow_cpu(deadline().as_secs_f64());
-                let result = crate::Model::simulate_driven(
-                    &model, &params, &grid, &outputs, &options, &inputs,
-                );
+                let run = crate::Run::new(&params, &grid, &outputs, &options).driven(&inputs);
+                let result = crate::Model::simulate(&model, &run);
                 // Nothing the simulation started outlives it.
                 #[cfg(target_os = "linux")]
                 if super::contain::reap_leftovers() > 0 {
