@@ -4,7 +4,7 @@
 //! (every effect under every setting) is `calib bench diagnose --matrix`.
 
 use crate::common::*;
-use calib_analysis::diagnosis::benchmark::draw;
+use calib_analysis::diagnosis::benchmark::{draw, Draw};
 use calib_analysis::diagnosis::matrix::{
     naive_real_campaign, parameter_toml, search_toml, synthetic_campaign, SEED_REAL_OBJECTIVE,
 };
@@ -307,25 +307,10 @@ fn the_naive_model_on_linear_bounds_adds_the_second_coulomb_friction_to_the_firs
 #[test]
 fn two_effects_at_once_are_both_named_and_nothing_more() {
     for index in [8, 18, 37, 38] {
-        let d = draw(1001, index);
-        let dir = tempfile::tempdir().unwrap();
-        let args = d.simulator_args();
-        let args: Vec<&str> = args.iter().map(String::as_str).collect();
-        let csv = dir.path().join("record.csv");
-        if simulator_record("furuta_driven.py", &csv, &args).is_none() {
+        let Some((d, diagnosis)) = diagnose_draw(1001, index) else {
             return;
-        }
-        let campaign = Campaign::parse(&d.campaign(&csv), &dir.path().join("cell.toml")).unwrap();
-        let diagnosis = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();
-        let mut selected = diagnosis.selected.clone();
-        selected.sort();
-        let ratio = diagnosis.final_fit.objective / diagnosis.noise_floor;
-        println!(
-            "record {index}, {}: selected {selected:?}, {ratio:.3}x the floor",
-            d.describe()
-        );
-        assert_eq!(selected, d.expected(), "record {index}: {}", d.describe());
-        assert!(ratio <= NOISE_FACTOR, "record {index}: {ratio}x the floor");
+        };
+        assert_named(&format!("record {index}, {}", d.describe()), &d, &diagnosis);
     }
 }
 
@@ -382,4 +367,97 @@ fn a_cogging_torque_where_the_arm_sticks_is_found_by_the_harmonic_scan() {
         "{}x the floor",
         refit.ratio_after()
     );
+}
+
+/// The diagnosis named exactly the record's effects and ended within the noise factor.
+fn assert_named(what: &str, d: &Draw, diagnosis: &Diagnosis) {
+    let mut selected = diagnosis.selected.clone();
+    selected.sort();
+    let ratio = diagnosis.final_fit.objective / diagnosis.noise_floor;
+    println!("{what}: selected {selected:?}, {ratio:.3}x the floor");
+    assert_eq!(selected, d.expected(), "{what}");
+    assert!(ratio <= NOISE_FACTOR, "{what}: {ratio}x the floor");
+}
+
+/// Record `index` of the randomised benchmark's seed `seed`, made by the independent
+/// simulator, and its diagnosis; `None` where the simulator is missing (the
+/// test then skips, and fails under CI).
+fn diagnose_draw(seed: u64, index: usize) -> Option<(Draw, Diagnosis)> {
+    let d = draw(seed, index);
+    let dir = tempfile::tempdir().unwrap();
+    let args = d.simulator_args();
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let csv = dir.path().join("record.csv");
+    simulator_record("furuta_driven.py", &csv, &args)?;
+    let campaign = Campaign::parse(&d.campaign(&csv), &dir.path().join("cell.toml")).unwrap();
+    let diagnosis = diagnose(&campaign, &LocalEvaluator, &Silent).unwrap();
+    Some((d, diagnosis))
+}
+
+/// A large Coulomb friction on the arm with a small constant torque, held at 0 by the
+/// campaign, as the randomised benchmark draws it (seed 3109, record 67: 1.79e-2 N·m and
+/// −3.46e-5 N·m, the pendulum's friction free on linear bounds, one Nelder–Mead and one Powell
+/// start). The arm sticks early in the record while the baseline lets it swing: the score
+/// test at 0 ranks the friction sixth (0.2% of the residual), below the refitted three. Once
+/// those leave more than noise, every other candidate is refitted alone; the friction then
+/// reaches its basin, and the forward step adds the torque: both named, nothing else, within
+/// 1.5× the noise floor (it selected nothing at 9,524× before).
+#[test]
+fn a_coulomb_friction_that_holds_the_arm_is_found_though_it_ranks_low_at_zero() {
+    let Some((d, diagnosis)) = diagnose_draw(3109, 67) else {
+        return;
+    };
+    let leaders: Vec<&str> = diagnosis
+        .candidates
+        .iter()
+        .take(diagnosis.campaign.diagnosis.refit)
+        .map(|c| c.effect.as_str())
+        .collect();
+    assert!(
+        !leaders.contains(&"coulomb_friction.arm"),
+        "the ranking now leads with the friction; this test no longer tests the fallback: {leaders:?}"
+    );
+    assert_named(&d.describe(), &d, &diagnosis);
+}
+
+/// Two effects where the criterion alone keeps a third (seed 3109, record 87: an arm sensor
+/// offset of 1.29e-2 rad and a pendulum torque bias of −4.24e-4 N·m, linear bounds, all three
+/// methods from four starts). The three effects with an arm spring end 1.6% below the pair,
+/// which the information criterion of 6,000 samples calls decisive; the pair alone already
+/// leaves nothing but noise, so backward elimination takes the spring out. Both named,
+/// nothing else, within 1.5× the noise floor.
+#[test]
+fn a_third_effect_goes_when_the_other_two_leave_nothing_but_noise() {
+    let Some((d, diagnosis)) = diagnose_draw(3109, 87) else {
+        return;
+    };
+    assert_named(&d.describe(), &d, &diagnosis);
+    assert!(diagnosis.explained(), "{:?}", diagnosis.verdict);
+}
+
+/// Two explanations the record cannot tell apart (seed 3109, record 77: a pendulum sensor gain
+/// of −2.01e-3 and dead time of 5.54e-3 s, log10 bounds, all three methods from one start). A
+/// dead time and a first-order lag of that size differ by less than the noise; the selection
+/// had settled on the lag. Each selected effect swapped for each candidate at its place and
+/// refitted: the dead time's swap fits better and becomes the selection, and the lag is named
+/// as an equivalent, both within the noise limit, in the verdict's sentence too.
+#[test]
+fn a_dead_time_the_record_cannot_tell_from_a_lag_is_named_with_it() {
+    let Some((d, diagnosis)) = diagnose_draw(3109, 77) else {
+        return;
+    };
+    assert_named(&d.describe(), &d, &diagnosis);
+    let equivalents = diagnosis.equivalent_sets();
+    println!("equivalents {equivalents:?}");
+    let lag = vec![
+        "gain(pendulumJoint.phi)".to_string(),
+        "lag(pendulumJoint.phi)".to_string(),
+    ];
+    assert!(equivalents.contains(&lag), "{equivalents:?}");
+    for f in &diagnosis.equivalents {
+        assert!(diagnosis.floor.holds(f.objective), "{:?}", f.effects);
+        assert!(f.objective >= diagnosis.final_fit.objective);
+    }
+    let sentence = calib_analysis::diagnosis::report::verdict_text(&diagnosis);
+    assert!(sentence.contains("cannot tell"), "{sentence}");
 }

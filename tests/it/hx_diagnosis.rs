@@ -1,5 +1,5 @@
 //! Diagnosis on the heat exchanger: a slow heat-flow sensor and heat lost to the room are
-//! found in records the project's own low-fidelity model makes, within 1,500 simulations.
+//! found in records the project's own low-fidelity model makes, within 2,200 simulations.
 
 use crate::common::*;
 use calib_analysis::diagnosis::{diagnose, Verdict};
@@ -108,8 +108,10 @@ fn finds(effect: &str, value: f64) {
     );
     assert_eq!(d.selected.first().map(String::as_str), Some(effect));
     // The refits start where the ranking left off and stop when the objective stops moving:
-    // the whole diagnosis costs at most 1,500 simulations (before: over 10,000).
-    assert!(simulations <= 1_500, "{simulations} simulations");
+    // the whole diagnosis costs at most 2,200 simulations (before: over 10,000), of which
+    // about 550 are the local refits of the swaps the equivalents' check tries (a lag for a
+    // dead time, a gain or an offset of the same output).
+    assert!(simulations <= 2_200, "{simulations} simulations");
     assert_eq!(d.verdict, Verdict::Explained);
     let found = d
         .final_fit
@@ -168,5 +170,6 @@ fn the_shipped_lag_example_finds_the_lag_docs_report() {
     assert!(ratio <= 1.2, "{ratio}x the noise floor");
     assert!(d.baseline.objective / d.final_fit.objective > 100.0);
     let simulations = d.stats.evaluations.simulated + d.stats.trajectories;
-    assert!(simulations <= 1_500, "{simulations} simulations");
+    println!("hx_lag: {simulations} simulations");
+    assert!(simulations <= 2_200, "{simulations} simulations");
 }

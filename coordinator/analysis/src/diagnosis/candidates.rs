@@ -61,6 +61,27 @@ pub(super) fn refit_campaign_from(campaign: &Campaign, fit: &Fit, out: &str) -> 
     c
 }
 
+/// The free parameter of `candidate`'s effect, in bounds scaled to its estimated size.
+pub(super) fn scaled(candidate: &Candidate, specs: &[FreeParameter]) -> FreeParameter {
+    let spec = specs
+        .iter()
+        .find(|s| s.name == candidate.effect)
+        .expect("candidates come from the specs");
+    let reach = (20.0 * candidate.estimate.abs())
+        .max(100.0 * candidate.step.abs())
+        .max(100.0 * candidate.centre);
+    let (min, max) = if spec.min >= 0.0 {
+        (0.0, reach.min(spec.max))
+    } else {
+        ((-reach).max(spec.min), reach.min(spec.max))
+    };
+    FreeParameter {
+        min,
+        max: if max > min { max } else { spec.max },
+        ..spec.clone()
+    }
+}
+
 /// The campaign of a refit: the baseline's free parameters (starting at the baseline optimum)
 /// plus the effects of `set`, in bounds scaled to their estimated size.
 pub(super) fn refit_campaign(
@@ -74,23 +95,7 @@ pub(super) fn refit_campaign(
         p.nominal = v.clamp(p.min, p.max);
     }
     for candidate in set {
-        let spec = specs
-            .iter()
-            .find(|s| s.name == candidate.effect)
-            .expect("candidates come from the specs");
-        let reach = (20.0 * candidate.estimate.abs())
-            .max(100.0 * candidate.step.abs())
-            .max(100.0 * candidate.centre);
-        let (min, max) = if spec.min >= 0.0 {
-            (0.0, reach.min(spec.max))
-        } else {
-            ((-reach).max(spec.min), reach.min(spec.max))
-        };
-        c.free.push(FreeParameter {
-            min,
-            max: if max > min { max } else { spec.max },
-            ..spec.clone()
-        });
+        c.free.push(scaled(candidate, specs));
     }
     // Informed starts: each effect at its estimate with the other parameters where the
     // ranking's descent left them (or at the baseline optimum).

@@ -10,13 +10,17 @@
 //!    each other's by more than [`SAME_BASIN`] of their objective; each candidate keeps its
 //!    better ranking (as a share of the baseline in use), and where that changes which
 //!    candidates lead, they are refitted as the first ones were.
-//! 2. **Forward steps** ([`forward`]): while the selected refit still leaves more than noise,
+//! 2. **Every candidate** ([`every_single`]): while the selection leaves more than noise,
+//!    each candidate not yet refitted is refitted alone with the diagnosis's own search. The
+//!    ranking is a first-order estimate at the baseline; it orders the work, and decides what
+//!    is tried only when its leaders settle the record.
+//! 3. **Forward steps** ([`forward`]): while the selected refit still leaves more than noise,
 //!    the candidates not in it are ranked from its optimum, and the leading
 //!    [`FORWARD_CANDIDATES`] of them are refitted together with it (one effect more), at most
 //!    [`FORWARD_STEPS`] times. A second effect the first ranking put fourth (the real rig's
 //!    pendulum friction, once the arm's is in) is found that way.
 //!
-//! Neither runs when the first refits already leave nothing but noise, so a diagnosis that
+//! None runs when the first refits already leave nothing but noise, so a diagnosis that
 //! the first refits settle costs what it did.
 
 use super::fair::fair_refits;
@@ -79,6 +83,7 @@ pub(super) fn escalate<E: Evaluator + Simulator>(
     }
     let mut refits = first.refits;
     from_other_basins(s, calibration, candidates, &mut refits)?;
+    every_single(s, candidates, &mut refits)?;
     forward_steps(s, &mut refits)?;
     for c in candidates.iter_mut() {
         if let Some(f) = refits
@@ -153,7 +158,51 @@ fn from_other_basins<E: Evaluator + Simulator>(
     Ok(())
 }
 
-/// Step (b): while the selected refit leaves more than noise, one effect more ([`forward`]),
+/// Step (b): while the selection leaves more than noise, every candidate not yet refitted
+/// is refitted alone, with the diagnosis's own search ([`fair_refits`]), into `refits`. The ranking is a first-order estimate
+/// made at the baseline; an effect that changes the kind of motion (a Coulomb friction that
+/// holds a joint the baseline lets swing) shows at first order only once the other
+/// parameters move too, and ranks near 0 there. The ranking decides the order of the work,
+/// not what is tried, whenever its leaders have not settled the record.
+fn every_single<E: Evaluator + Simulator>(
+    s: &Setting<E>,
+    candidates: &[Candidate],
+    refits: &mut Vec<Fit>,
+) -> Result<()> {
+    if verdict::select(s.baseline, refits).is_some_and(|f| s.explains(f)) {
+        return Ok(());
+    }
+    let sets: Vec<Vec<&Candidate>> = candidates
+        .iter()
+        .filter(|c| !refits.iter().any(|f| f.effects == [c.effect.clone()]))
+        .map(|c| vec![c])
+        .collect();
+    if sets.is_empty() {
+        return Ok(());
+    }
+    let fits = fair_refits(
+        s.fit_campaign,
+        s.baseline,
+        &sets,
+        s.specs,
+        &[],
+        s.engine,
+        s.progress,
+        s.holdout,
+    )?;
+    tracing::info!(
+        refitted = fits.len(),
+        best = ?fits
+            .iter()
+            .min_by(|a, b| a.objective.total_cmp(&b.objective))
+            .map(|f| (&f.effects, f.objective)),
+        "every other candidate refitted alone"
+    );
+    merge(refits, fits);
+    Ok(())
+}
+
+/// Step (c): while the selected refit leaves more than noise, one effect more ([`forward`]),
 /// at most [`FORWARD_STEPS`] times; stops as soon as a step changes nothing.
 fn forward_steps<E: Evaluator + Simulator>(s: &Setting<E>, refits: &mut Vec<Fit>) -> Result<()> {
     for _ in 0..FORWARD_STEPS {

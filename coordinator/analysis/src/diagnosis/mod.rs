@@ -20,27 +20,33 @@
 //!    pairs, starting from the baseline optimum. Every search after the baseline is the
 //!    diagnosis's own, whatever methods and starts the campaign asked for, so the verdict
 //!    does not hang on them. When that leaves more than noise ([`escalation`]), the
-//!    candidates are ranked again from the other minima the campaign's runs found, and the
-//!    selected effects get one more at a time (ranked from their refit), within a bound.
+//!    candidates are ranked again from the other minima the campaign's runs found, every
+//!    candidate not yet refitted is refitted alone, and the selected effects get one more at
+//!    a time (ranked from their refit), within a bound.
 //! 5. **Select** ([`verdict`]) by the Bayesian information criterion computed with the effective number of
 //!    independent samples of the residual (correlated residuals carry less information than
 //!    their count suggests), requiring a decrease of at least 10 (very strong evidence,
 //!    R. E. Kass, A. E. Raftery, JASA 90 (1995) 773–795) and a lower error on the held-out
 //!    window, which guards against over-fitting. A selection of two effects or more is then
 //!    pruned ([`prune`], backward elimination): each effect taken out in turn and the rest
-//!    refitted from the selected fit's point; an effect whose loss the rule above does not
-//!    call decisive goes.
+//!    refitted from the selected fit's point; an effect goes when the rule above does not
+//!    call its loss decisive, or when the rest already leaves nothing but noise.
 //! 6. **Uncertainty** ([`uncertainty`], [`fit`]): confidence intervals from the Jacobian at the
 //!    optimum, widened for correlated residuals, and parameter correlations.
 //! 7. **Verdict**: the residual is explained when what is left is within
 //!    [`NOISE_FACTOR`] of the noise floor; a selected effect that leaves more is partial; when
 //!    no candidate passes, the report says so and adds nothing.
+//! 8. **Equivalents** ([`equivalents`]): when the selection explains the record, each of its
+//!    effects swapped for each other candidate at the same place and refitted; a swap that
+//!    leaves nothing but noise too is named beside the selection (the record cannot tell
+//!    them apart); one that fits better becomes the selection.
 //!
 //! The windows come from [`window`]; every evaluation goes through the store ([`stored`]).
 
 pub mod benchmark;
 pub mod candidates;
 pub mod discovery;
+pub mod equivalents;
 pub mod escalation;
 pub mod fair;
 pub mod fit;
@@ -149,6 +155,9 @@ pub struct Diagnosis {
     pub selected: Vec<String>,
     /// The selected refit, or the baseline when nothing was selected.
     pub final_fit: Fit,
+    /// Other sets the record cannot tell from the selection: one effect swapped for another
+    /// at the same place, refitted, leaving nothing but noise too ([`equivalents`]).
+    pub equivalents: Vec<Fit>,
     pub verdict: Verdict,
     /// Fraction of the baseline's excess over the noise floor that the final fit removes.
     pub explained_fraction: f64,
@@ -165,6 +174,18 @@ pub struct Diagnosis {
 impl Diagnosis {
     pub fn explained(&self) -> bool {
         matches!(self.verdict, Verdict::Noise | Verdict::Explained)
+    }
+
+    /// The effects of each equivalent set, each sorted by name.
+    pub fn equivalent_sets(&self) -> Vec<Vec<String>> {
+        self.equivalents
+            .iter()
+            .map(|f| {
+                let mut set = f.effects.clone();
+                set.sort();
+                set
+            })
+            .collect()
     }
 }
 
@@ -246,13 +267,18 @@ where
         holdout: &holdout_objective,
         floor,
     };
-    let Judgement {
-        refits,
-        selected,
-        final_fit,
-        verdict,
-        explained_fraction,
-    } = judge(&setting, &calibration, &mut candidates)?;
+    let judged = judge(&setting, &calibration, &mut candidates)?;
+    // 8. What the record cannot tell from the selection.
+    let (
+        Judgement {
+            refits,
+            selected,
+            final_fit,
+            verdict,
+            explained_fraction,
+        },
+        equivalent,
+    ) = with_equivalents(&setting, judged, &candidates)?;
     Ok(Diagnosis {
         campaign: fit_campaign,
         measurement,
@@ -266,6 +292,7 @@ where
         refits,
         selected,
         final_fit,
+        equivalents: equivalent,
         verdict,
         explained_fraction,
         stats: EngineStats::default(),
@@ -273,6 +300,44 @@ where
         profiles: Vec::new(),
         profile_threshold: None,
     })
+}
+
+/// Step 8: the sets the record cannot tell from an explaining selection
+/// ([`equivalents`]), their refits added to the judgement's; one that fits better becomes
+/// the selection, and the selection its equivalent.
+fn with_equivalents<E: Evaluator + Simulator>(
+    setting: &escalation::Setting<'_, E>,
+    mut judged: Judgement,
+    candidates: &[Candidate],
+) -> Result<(Judgement, Vec<Fit>)> {
+    if judged.verdict != Verdict::Explained || judged.selected.is_empty() {
+        return Ok((judged, Vec::new()));
+    }
+    let (mut equivalent, tried) = equivalents::equivalents(
+        setting.fit_campaign,
+        &judged.final_fit,
+        candidates,
+        setting.specs,
+        setting.engine,
+        setting.progress,
+        setting.holdout,
+        &setting.floor,
+    )?;
+    judged.refits.extend(tried);
+    if equivalent
+        .first()
+        .is_some_and(|best| best.objective < judged.final_fit.objective)
+    {
+        let best = equivalent.remove(0);
+        let (verdict, explained_fraction) =
+            verdict::judge(setting.baseline, Some(&best), &setting.floor);
+        judged.selected = best.effects.clone();
+        equivalent.push(std::mem::replace(&mut judged.final_fit, best));
+        equivalent.sort_by(|a, b| a.objective.total_cmp(&b.objective));
+        judged.verdict = verdict;
+        judged.explained_fraction = explained_fraction;
+    }
+    Ok((judged, equivalent))
 }
 
 /// Steps 4–7: a baseline already within the noise floor is judged noise as it is; otherwise
@@ -312,6 +377,7 @@ fn judge<E: Evaluator + Simulator>(
                 setting.engine,
                 setting.progress,
                 setting.holdout,
+                &floor,
             )?;
             let (verdict, explained_fraction) = verdict::judge(baseline, Some(&fit), &floor);
             judged.refits.extend(tried);

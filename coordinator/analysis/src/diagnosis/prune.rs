@@ -6,12 +6,18 @@
 //! the selected fit's own point (every other parameter where the richer fit left it, a
 //! local Nelder–Mead run); an effect goes when the set without it is not decisively worse by
 //! the same rule that selects ([`verdict::improves`]: the information criterion and the
-//! held-out error). The weakest such effect goes first, and the rest is pruned again.
+//! held-out error), or when the set without it already leaves nothing but noise
+//! ([`Floor::holds`], the test with a stated false-positive rate). The second rule matters on
+//! long records: there the criterion calls a decrease of a percent or two decisive, and a
+//! spurious effect that absorbs what a fit of the others stopped short of (or a small
+//! difference between the model and the process that made the record) earns it, while the
+//! record gives no reason to look past a set whose residual is noise. The weakest such
+//! effect goes first, and the rest is pruned again.
 
 use super::candidates::refit_campaign_from;
 use super::fit::fit_of;
 use super::refit::local_refit;
-use super::verdict;
+use super::verdict::{self, Floor};
 use super::Fit;
 use calib_engine::calibration::calibrate;
 use calib_engine::campaign::Campaign;
@@ -28,15 +34,17 @@ pub(super) fn prune<E: Evaluator + Simulator>(
     engine: &E,
     progress: &dyn Progress,
     holdout: &Objective,
+    floor: &Floor,
 ) -> Result<(Fit, Vec<Fit>)> {
     let mut chosen = chosen;
     let mut tried = Vec::new();
     while chosen.effects.len() >= 2 {
         let without = without_each(fit_campaign, &chosen, engine, progress, holdout)?;
-        // The set whose loss matters least, if the richer one does not beat it.
+        // The set whose loss matters least, if the richer one does not beat it or it leaves
+        // nothing but noise itself.
         let weakest = without
             .iter()
-            .filter(|f| !verdict::improves(&chosen, f))
+            .filter(|f| !verdict::improves(&chosen, f) || floor.holds(f.objective))
             .min_by(|a, b| {
                 a.objective
                     .total_cmp(&b.objective)

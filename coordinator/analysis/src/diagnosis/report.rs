@@ -109,6 +109,11 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
         "refits": d.refits.iter().map(|f| fit_json(d, f)).collect::<Vec<_>>(),
         "selected": d.selected,
         "final": fit_json(d, &d.final_fit),
+        "equivalents": d.equivalents.iter().map(|f| json!({
+            "effects": f.effects,
+            "objective": f.objective,
+            "held_out_objective": f.held_out_objective,
+        })).collect::<Vec<_>>(),
         "verdict": d.verdict,
         "verdict_sentence": verdict_text(d),
         "explained": d.explained(),
@@ -125,9 +130,9 @@ pub fn diagnosis_json(d: &Diagnosis) -> Value {
     })
 }
 
-/// One sentence a person can act on.
+/// One sentence a person can act on, and the sets the record cannot tell from it.
 pub fn verdict_text(d: &Diagnosis) -> String {
-    verdict::sentence(&verdict::Outcome {
+    let sentence = verdict::sentence(&verdict::Outcome {
         verdict: d.verdict,
         selected: &d.selected,
         baseline: &d.baseline,
@@ -135,7 +140,28 @@ pub fn verdict_text(d: &Diagnosis) -> String {
         noise_floor: d.noise_floor,
         noise_limit: d.floor.limit,
         explained_fraction: d.explained_fraction,
-    })
+    });
+    if d.equivalents.is_empty() {
+        return sentence;
+    }
+    let others: Vec<String> = d
+        .equivalents
+        .iter()
+        .map(|f| {
+            format!(
+                "{} ({:.2}x the floor)",
+                f.effects.join(" + "),
+                f.objective / d.noise_floor
+            )
+        })
+        .collect();
+    format!(
+        "{sentence} The record cannot tell it from {}: {} also leave{} nothing but noise, \
+         so the data do not decide between them.",
+        others.join("; "),
+        if others.len() == 1 { "that" } else { "these" },
+        if others.len() == 1 { "s" } else { "" }
+    )
 }
 
 fn fit_table(s: &mut String, fit: &Fit) {

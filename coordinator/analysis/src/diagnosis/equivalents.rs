@@ -1,0 +1,131 @@
+//! Step 8 of a diagnosis: which other explanations the record cannot tell from the selected
+//! one. Two effects at one place can leave signatures that differ by less than the noise (a
+//! sensor's dead time and its first-order lag of the same size; a constant torque and a
+//! spring on a joint that holds nearly one angle). A verdict that names one of them alone
+//! claims more than the record says.
+//!
+//! For every selected effect and every other candidate acting at the same place (the same
+//! joint, or the same output), the selection with the one swapped for the other is refitted
+//! locally from the selected fit's point. A swap whose refit also leaves nothing but noise
+//! ([`Floor::holds`], the test with a stated false-positive rate) is an equivalent: the report
+//! names it beside the selection, and where it fits better it becomes the selection (the
+//! swap's refit starts from the selected fit, so it can end below it). Runs only when the
+//! selection explains the record.
+
+use super::candidates::{refit_campaign_from, scaled};
+use super::fit::fit_of;
+use super::refit::local_refit;
+use super::verdict::Floor;
+use super::{Candidate, Fit};
+use calib_engine::calibration::calibrate;
+use calib_engine::campaign::{Campaign, FreeParameter};
+use calib_engine::error::Result;
+use calib_engine::evaluator::{Evaluator, Simulator};
+use calib_engine::objective::Objective;
+use calib_engine::optim::problem::Progress;
+
+/// Where an effect acts: the output inside its parentheses (`lag(armJoint.phi)`), else the
+/// joint after its last dot (`torque_bias.arm`), else its whole name.
+pub fn place(effect: &str) -> &str {
+    if let (Some(open), Some(close)) = (effect.find('('), effect.rfind(')')) {
+        if open < close {
+            return &effect[open + 1..close];
+        }
+    }
+    effect.rsplit_once('.').map_or(effect, |(_, p)| p)
+}
+
+/// The swaps of `chosen`'s effects for candidates at the same place whose refits also
+/// leave nothing but noise (lowest objective first), and every refit made to find out.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn equivalents<E: Evaluator + Simulator>(
+    fit_campaign: &Campaign,
+    chosen: &Fit,
+    candidates: &[Candidate],
+    specs: &[FreeParameter],
+    engine: &E,
+    progress: &dyn Progress,
+    holdout: &Objective,
+    floor: &Floor,
+) -> Result<(Vec<Fit>, Vec<Fit>)> {
+    let swaps: Vec<(&str, &Candidate)> = chosen
+        .effects
+        .iter()
+        .flat_map(|out| {
+            candidates
+                .iter()
+                .filter(move |c| {
+                    !chosen.effects.contains(&c.effect) && place(&c.effect) == place(out)
+                })
+                .map(move |c| (out.as_str(), c))
+        })
+        .collect();
+    let tried: Vec<Fit> = std::thread::scope(|scope| {
+        let handles: Vec<_> = swaps
+            .iter()
+            .map(|&(out, with)| {
+                scope.spawn(move || -> Result<Fit> {
+                    let campaign = swap_campaign(fit_campaign, chosen, out, with, specs);
+                    let calibration = calibrate(&local_refit(&campaign), engine, progress)?;
+                    let effects: Vec<String> = chosen
+                        .effects
+                        .iter()
+                        .map(|e| {
+                            if e == out {
+                                with.effect.clone()
+                            } else {
+                                e.clone()
+                            }
+                        })
+                        .collect();
+                    fit_of(&calibration, &effects, engine, holdout)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)))
+            .collect::<Result<Vec<Fit>>>()
+    })?;
+    let mut equivalent: Vec<Fit> = tried
+        .iter()
+        .filter(|f| floor.holds(f.objective))
+        .cloned()
+        .collect();
+    equivalent.sort_by(|a, b| a.objective.total_cmp(&b.objective));
+    Ok((equivalent, tried))
+}
+
+/// `chosen`'s refit with `out` held off and `with` free, every other parameter starting where
+/// `chosen` left it and `with` at its ranking's estimate.
+fn swap_campaign(
+    fit_campaign: &Campaign,
+    chosen: &Fit,
+    out: &str,
+    with: &Candidate,
+    specs: &[FreeParameter],
+) -> Campaign {
+    let mut c = refit_campaign_from(fit_campaign, chosen, out);
+    let free = scaled(with, specs);
+    c.free.push(FreeParameter {
+        nominal: with.estimate.clamp(free.min, free.max),
+        ..free
+    });
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_effect_acts_at_its_output_or_its_joint() {
+        assert_eq!(place("lag(armJoint.phi)"), "armJoint.phi");
+        assert_eq!(place("delay(armJoint.phi)"), place("lag(armJoint.phi)"));
+        assert_eq!(place("torque_bias.arm"), "arm");
+        assert_eq!(place("stiffness.arm"), place("torque_bias.arm"));
+        assert_ne!(place("stiffness.pendulum"), place("stiffness.arm"));
+        assert_ne!(place("offset(armJoint.phi)"), place("torque_bias.arm"));
+        assert_eq!(place("ambient_loss"), "ambient_loss");
+    }
+}
