@@ -65,6 +65,8 @@ pub(super) struct Shared {
     pub(super) queued: AtomicUsize,
     /// Asked points waiting on a point another ask sent (for tests).
     pub(super) joined: AtomicUsize,
+    /// Asks handed to the dispatcher (for tests that wait for callers to have asked).
+    pub(super) sent: AtomicUsize,
 }
 
 impl Shared {
@@ -144,6 +146,12 @@ impl<E> StoredEvaluator<'_, E> {
         self.shared.joined.load(Ordering::SeqCst)
     }
 
+    /// Asks handed to the dispatcher so far.
+    #[cfg(test)]
+    pub(crate) fn asks_sent(&self) -> usize {
+        self.shared.sent.load(Ordering::SeqCst)
+    }
+
     fn objective(&self, objective: &Objective) -> Arc<Objective> {
         let mut objectives = self.shared.objectives.lock().expect("objectives lock");
         objectives
@@ -184,6 +192,7 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
         };
         let stopped = || Fault::unavailable("the evaluation dispatcher stopped");
         self.asks.send(Message::Ask(ask)).map_err(|_| stopped())?;
+        self.shared.sent.fetch_add(1, Ordering::SeqCst);
         match answer.recv().map_err(|_| stopped())? {
             Reply::Answer(answer) => answer,
             Reply::Panic(payload) => std::panic::resume_unwind(payload),

@@ -86,23 +86,16 @@ impl SledStore {
             path: path.to_path_buf(),
             message,
         };
-        let db = sled::Config::new()
-            .path(path)
-            .cache_capacity(64 << 20)
-            .open()
-            .map_err(|e| match e {
-                sled::Error::Io(io)
-                    if io.kind() == std::io::ErrorKind::WouldBlock
-                        || io.to_string().contains("acquire lock") =>
-                {
-                    open_error(
-                        "it is in use by another process (one calib process per store at a time)"
-                            .into(),
-                    )
-                }
-                e @ sled::Error::Corruption { .. } => damage::damaged(path, &e.to_string()),
-                e => open_error(e.to_string()),
-            })?;
+        let db = open_db(path, || {
+            sled::Config::new().path(path).cache_capacity(64 << 20)
+        })
+        .map_err(|e| match e {
+            e if is_locked(&e) => open_error(
+                "it is in use by another process (one calib process per store at a time)".into(),
+            ),
+            e @ sled::Error::Corruption { .. } => damage::damaged(path, &e.to_string()),
+            e => open_error(e.to_string()),
+        })?;
         let tree = |name: &str| db.open_tree(name).map_err(|e| open_error(e.to_string()));
         let evaluations = tree(Collection::Evaluations.name())?;
         let evaluation_keys = KeyFilter::build(evaluations.clone());
@@ -256,6 +249,35 @@ impl SledStore {
             .meta
             .get(key)?
             .map_or(0, |v| encoding::decode_counter(&v)))
+    }
+}
+
+/// Whether sled could not open because its file is locked.
+fn is_locked(error: &sled::Error) -> bool {
+    matches!(error, sled::Error::Io(io)
+        if io.kind() == std::io::ErrorKind::WouldBlock || io.to_string().contains("acquire lock"))
+}
+
+/// How long an opening waits for the lock of a store closed a moment ago.
+const LOCK_RELEASE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Open the database `config` describes. sled's background writes hold its file, and so its
+/// lock, for a moment after the last handle is dropped: a store closed and opened again in
+/// one process (a coordinator restarted in place) waits for that, up to [`LOCK_RELEASE`],
+/// before it is taken as held by another process.
+pub(crate) fn open_db(
+    path: &Path,
+    config: impl Fn() -> sled::Config,
+) -> Result<sled::Db, sled::Error> {
+    let deadline = std::time::Instant::now() + LOCK_RELEASE;
+    loop {
+        match config().open() {
+            Err(e) if is_locked(&e) && std::time::Instant::now() < deadline => {
+                tracing::debug!(store = %path.display(), "waiting for the store's lock");
+                std::thread::sleep(std::time::Duration::from_millis(20));
+            }
+            opened => return opened,
+        }
     }
 }
 

@@ -233,7 +233,7 @@ fn batched_evaluations_list_as_the_memory_store_lists_them() {
 /// Write a sled database as a calib of layout `layout` left it, with `evaluations` one
 /// value per key.
 fn write_layout(path: &Path, layout: u32, evaluations: &[(EvaluationKey, Evaluation)]) {
-    let db = ::sled::open(path).unwrap();
+    let db = raw_db(path);
     db.open_tree("meta")
         .unwrap()
         .insert("layout", &layout.to_le_bytes())
@@ -269,7 +269,7 @@ fn a_store_of_layout_1_is_read_and_marked_2() {
         assert_eq!(store.stats().unwrap().evaluations, 6);
         assert_eq!(store.raw_entries(Collection::Evaluations).unwrap().len(), 6);
     }
-    let db = ::sled::open(dir.path()).unwrap();
+    let db = raw_db(dir.path());
     let layout = db
         .open_tree("meta")
         .unwrap()
@@ -287,6 +287,11 @@ fn a_store_of_a_later_layout_is_refused() {
     assert!(error.to_string().contains("layout version"), "{error}");
 }
 
+/// The store's sled database itself, once the store closed a moment ago has let it go.
+fn raw_db(path: &Path) -> ::sled::Db {
+    super::sled::open_db(path, || ::sled::Config::new().path(path)).unwrap()
+}
+
 /// A batch cut short on disk is reported as damage at opening, naming what is wrong, not
 /// read as fewer evaluations.
 #[test]
@@ -299,7 +304,7 @@ fn a_damaged_batch_is_reported_at_opening() {
             .unwrap();
     }
     {
-        let db = ::sled::open(dir.path()).unwrap();
+        let db = raw_db(dir.path());
         let batches = db.open_tree("evaluation-batches").unwrap();
         let (k, v) = batches.first().unwrap().unwrap();
         batches.insert(k, &v[..v.len() - 3]).unwrap();
@@ -532,6 +537,18 @@ fn await_flag(flag: &AtomicBool) {
     }
 }
 
+/// Wait until `holds` (at most 10 s, then the test fails, naming `what`).
+fn await_that(what: &str, holds: impl Fn() -> bool) {
+    let deadline = std::time::Instant::now() + Duration::from_secs(10);
+    while !holds() {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "waited 10 s for {what}"
+        );
+        std::thread::yield_now();
+    }
+}
+
 #[test]
 fn a_crashed_simulation_does_not_leave_waiters_hanging() {
     let store = MemoryStore::new();
@@ -630,23 +647,42 @@ fn ask_from_runs(evaluator: &impl Evaluator, objective: &Objective, per_ask: usi
 
 #[test]
 fn concurrent_runs_share_one_durable_write_per_round() {
+    // One round travels at a time, and the first is held until the seven other runs have
+    // asked: their asks then go as one round, and each round is made durable with one write.
     let dir = tempfile::tempdir().unwrap();
     let store = SledStore::open(dir.path()).unwrap();
-    let inner = Counting::default();
-    StoredEvaluator::with(&inner, &store, |evaluator| {
+    let simulator = NoRoom::default();
+    let flushes_before = store.flushes();
+    StoredEvaluator::with(&simulator, &store, |evaluator| {
         let objective = objective(false);
-        let flushes_before = store.flushes();
-        let asks = ask_from_runs(&evaluator, &objective, 2);
-        assert_eq!(inner.simulated.load(Ordering::SeqCst), 2 * asks);
-        let batches = inner.batches.load(Ordering::SeqCst);
-        let flushes = store.flushes() - flushes_before;
-        assert!(batches < asks / 2, "{batches} batches for {asks} asks");
-        assert!(
-            flushes <= batches as u64,
-            "{flushes} flushes for {batches} rounds"
-        );
-        assert_eq!(store.stats().unwrap().evaluations, 2 * asks as u64);
+        std::thread::scope(|scope| {
+            for r in 0..8u32 {
+                let (evaluator, objective) = (evaluator, &objective);
+                scope.spawn(move || {
+                    let x = f64::from(r * 100);
+                    let answers = evaluator
+                        .evaluate(objective, &[vec![x], vec![x + 0.5]])
+                        .unwrap();
+                    assert_eq!((answers[0].objective, answers[1].objective), (x, x + 0.5));
+                });
+            }
+            assert!(simulator.started(1, Duration::from_secs(10)));
+            let first = simulator.first_points.load(Ordering::SeqCst);
+            await_that("the other runs' points to queue", || {
+                evaluator.rounds_waiting() + first == 16
+            });
+            simulator.let_go();
+        });
     });
+    assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 16);
+    let batches = simulator.counting.batches.load(Ordering::SeqCst);
+    let flushes = store.flushes() - flushes_before;
+    assert!(batches <= 2, "{batches} rounds for 8 runs' asks");
+    assert!(
+        flushes <= batches as u64,
+        "{flushes} flushes for {batches} rounds"
+    );
+    assert_eq!(store.stats().unwrap().evaluations, 16);
 }
 
 /// Scores as [`Counting`], never has room for a second round, tells when batches start,
@@ -656,9 +692,17 @@ struct NoRoom {
     counting: Counting,
     started: (std::sync::Mutex<usize>, std::sync::Condvar),
     let_go: (std::sync::Mutex<bool>, std::sync::Condvar),
+    /// The points of the first batch.
+    first_points: AtomicUsize,
 }
 
 impl NoRoom {
+    /// Let the first batch go on.
+    fn let_go(&self) {
+        *self.let_go.0.lock().unwrap() = true;
+        self.let_go.1.notify_all();
+    }
+
     /// Whether `n` batches have started within `timeout`.
     fn started(&self, n: usize, timeout: Duration) -> bool {
         let started = self.started.0.lock().unwrap();
@@ -680,6 +724,9 @@ impl Evaluator for NoRoom {
         let first = {
             let mut started = self.started.0.lock().unwrap();
             *started += 1;
+            if *started == 1 {
+                self.first_points.store(points.len(), Ordering::SeqCst);
+            }
             *started == 1
         };
         self.started.1.notify_all();
@@ -778,12 +825,8 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
             });
             // The first batch answers once the second caller waits for the next round.
             scope.spawn(move || {
-                let queued = std::time::Instant::now() + Duration::from_secs(10);
-                while evaluator.rounds_waiting() == 0 && std::time::Instant::now() < queued {
-                    std::thread::sleep(Duration::from_millis(1));
-                }
-                *simulator.let_go.0.lock().unwrap() = true;
-                simulator.let_go.1.notify_all();
+                await_that("the second ask to queue", || evaluator.rounds_waiting() > 0);
+                simulator.let_go();
             });
         });
         assert!(saw_second.load(Ordering::SeqCst));
@@ -793,23 +836,51 @@ fn the_next_round_is_simulated_while_a_rounds_write_is_made_durable() {
 }
 
 #[test]
-fn rounds_still_gather_when_durable_writes_are_slow() {
-    // A slow disk: each write takes longer than a batch's simulations. The callers a
-    // round answers ask again one by one; they must gather into the next round, not each
-    // lead one of their own while the rounds before settle.
+fn asks_that_arrive_while_a_round_is_written_gather_into_the_next() {
+    // A slow disk: a round's write lasts while four other runs ask. The round keeps its
+    // place until written, so their asks wait and then set out together as one round, not
+    // each as a round of its own while the first is made durable.
+    let (writing, let_go) = (AtomicBool::new(false), AtomicBool::new(false));
     let store = HookedStore {
         inner: MemoryStore::new(),
-        before_write: || std::thread::sleep(Duration::from_millis(30)),
+        before_write: || {
+            if !writing.swap(true, Ordering::SeqCst) {
+                await_flag(&let_go);
+            }
+        },
         before_lookup: || {},
     };
-    let inner = Counting::default();
-    StoredEvaluator::with(&inner, &store, |evaluator| {
+    let simulator = Gauge::default();
+    let started_during_the_write = StoredEvaluator::with(&simulator, &store, |evaluator| {
         let objective = objective(false);
-        let asks = ask_from_runs(&evaluator, &objective, 1);
-        assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
-        let batches = inner.batches.load(Ordering::SeqCst);
-        assert!(batches < asks / 2, "{batches} batches for {asks} asks");
+        std::thread::scope(|scope| {
+            let ask = |x: f64| {
+                let (evaluator, objective) = (evaluator, &objective);
+                scope.spawn(move || {
+                    let answers = evaluator.evaluate(objective, &[vec![x]]).unwrap();
+                    assert_eq!(answers[0].objective, x);
+                })
+            };
+            ask(0.0);
+            await_flag(&writing);
+            for r in 1..=4 {
+                ask(f64::from(r));
+            }
+            let batches = || simulator.counting.batches.load(Ordering::SeqCst);
+            await_that("four asks queued, or a round sent", || {
+                evaluator.rounds_waiting() == 4 || batches() > 1
+            });
+            let started = batches();
+            let_go.store(true, Ordering::SeqCst);
+            started
+        })
     });
+    assert_eq!(
+        started_during_the_write, 1,
+        "a round set out during the write"
+    );
+    assert_eq!(simulator.counting.simulated.load(Ordering::SeqCst), 5);
+    assert_eq!(simulator.counting.batches.load(Ordering::SeqCst), 2);
 }
 
 /// Has no worker for one objective (by fingerprint); scores the others as [`Counting`].
@@ -957,25 +1028,40 @@ fn a_batch_answered_short_is_a_fault_and_stores_nothing() {
 
 #[test]
 fn asks_that_arrive_together_share_one_store_lookup() {
-    // A slow disk: each lookup takes 10 ms, during which the other runs' asks arrive. The
-    // dispatcher looks up everything that waits with one lookup, not one per ask.
-    let lookups = AtomicUsize::new(0);
+    // A slow disk: the first lookup lasts until all eight runs have asked. The dispatcher
+    // then looks up the seven asks that waited with one lookup, not one per ask.
+    let (lookups, let_go) = (AtomicUsize::new(0), AtomicBool::new(false));
     let store = HookedStore {
         inner: MemoryStore::new(),
         before_write: || {},
         before_lookup: || {
-            lookups.fetch_add(1, Ordering::SeqCst);
-            std::thread::sleep(Duration::from_millis(10));
+            if lookups.fetch_add(1, Ordering::SeqCst) == 0 {
+                await_flag(&let_go);
+            }
         },
     };
     let inner = Counting::default();
     StoredEvaluator::with(&inner, &store, |evaluator| {
         let objective = objective(false);
-        let asks = ask_from_runs(evaluator, &objective, 1);
-        assert_eq!(inner.simulated.load(Ordering::SeqCst), asks);
-        let lookups = lookups.load(Ordering::SeqCst);
-        assert!(lookups < asks / 2, "{lookups} lookups for {asks} asks");
+        std::thread::scope(|scope| {
+            for r in 0..8u32 {
+                let (evaluator, objective) = (evaluator, &objective);
+                scope.spawn(move || {
+                    let x = f64::from(r);
+                    let answers = evaluator.evaluate(objective, &[vec![x]]).unwrap();
+                    assert_eq!(answers[0].objective, x);
+                });
+            }
+            await_that("eight asks", || evaluator.asks_sent() == 8);
+            let_go.store(true, Ordering::SeqCst);
+        });
     });
+    assert_eq!(inner.simulated.load(Ordering::SeqCst), 8);
+    let lookups = lookups.load(Ordering::SeqCst);
+    assert!(
+        lookups <= 2,
+        "{lookups} lookups for 8 asks that arrived together"
+    );
 }
 
 /// Scores as [`Counting`], has room as told, and records the most batches it ran at once.
@@ -1035,7 +1121,7 @@ fn datasets_are_files_beside_the_database_and_those_in_the_tree_are_still_read()
     let dir = tempfile::tempdir().unwrap();
     let (old, new) = ([4u8; 32], [5u8; 32]);
     {
-        let db = ::sled::open(dir.path()).unwrap();
+        let db = raw_db(dir.path());
         db.open_tree("datasets")
             .unwrap()
             .insert(old, &b"old"[..])
