@@ -30,6 +30,7 @@ mod diagnosis;
 mod diagnosis_matrix;
 mod discovery;
 mod discovery_refit;
+mod docs;
 mod fmu;
 mod fmu_api;
 mod fmu_grid;
