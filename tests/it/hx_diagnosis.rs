@@ -108,9 +108,9 @@ fn finds(effect: &str, value: f64) {
     );
     assert_eq!(d.selected.first().map(String::as_str), Some(effect));
     // The refits start where the ranking left off and stop when the objective stops moving:
-    // the whole diagnosis costs at most 2,200 simulations (before: over 10,000), of which
-    // about 550 are the local refits of the swaps the equivalents' check tries (a lag for a
-    // dead time, a gain or an offset of the same output).
+    // the whole diagnosis costs at most 2,200 simulations (before: over 10,000), with the
+    // local refits of the swaps the equivalents' check tries (a lag for a dead time, a gain
+    // or an offset of the same output) where no earlier refit answers them.
     assert!(simulations <= 2_200, "{simulations} simulations");
     assert_eq!(d.verdict, Verdict::Explained);
     let found = d
@@ -171,5 +171,8 @@ fn the_shipped_lag_example_finds_the_lag_docs_report() {
     assert!(d.baseline.objective / d.final_fit.objective > 100.0);
     let simulations = d.stats.evaluations.simulated + d.stats.trajectories;
     println!("hx_lag: {simulations} simulations");
-    assert!(simulations <= 2_200, "{simulations} simulations");
+    // 1,670 measured: the swaps for the dead time and the gain, whose refits alone ended at
+    // 33x and 175x the floor, are answered by those refits, not refitted again (1,999 when
+    // they were; see diagnosis::equivalents::SETTLED_FAR).
+    assert!(simulations <= 1_800, "{simulations} simulations");
 }

@@ -322,6 +322,7 @@ fn with_equivalents<E: Evaluator + Simulator>(
         setting.progress,
         setting.holdout,
         &setting.floor,
+        &judged.refits,
     )?;
     judged.refits.extend(tried);
     if equivalent
