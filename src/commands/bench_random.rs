@@ -328,6 +328,11 @@ fn print_categories(draws: &[Draw], records: &[Record], seed: u64) {
         ratios.sort_by(f64::total_cmp);
         let mut sims: Vec<f64> = of.iter().map(|r| r.simulations as f64).collect();
         sims.sort_by(f64::total_cmp);
+        if of.is_empty() {
+            // A category the run did not draw (--kinds): a row of dashes, not NaN.
+            println!("| {} | – | – | – |", category.name());
+            continue;
+        }
         println!(
             "| {} | {} | {:.3}, {:.3}, {:.3} | {:.0}, {:.0} |",
             category.name(),
