@@ -73,29 +73,9 @@ pub(super) fn equivalents<E: Evaluator + Simulator>(
                 .map(move |c| (out.as_str(), c))
         })
         .collect();
-    // The swapped set's refit already made, where it settled far from the noise.
-    let settled_far = |out: &str, with: &Candidate| -> Option<&Fit> {
-        let mut set: Vec<&str> = chosen
-            .effects
-            .iter()
-            .map(|e| {
-                if e == out {
-                    with.effect.as_str()
-                } else {
-                    e.as_str()
-                }
-            })
-            .collect();
-        set.sort_unstable();
-        earlier.iter().find(|f| {
-            let mut effects: Vec<&str> = f.effects.iter().map(String::as_str).collect();
-            effects.sort_unstable();
-            effects == set && f.objective > SETTLED_FAR * floor.limit * floor.value
-        })
-    };
     let (answered, swaps): (Vec<_>, Vec<_>) = swaps
         .into_iter()
-        .partition(|&(out, with)| settled_far(out, with).is_some());
+        .partition(|&(out, with)| settled_far(chosen, out, with, earlier, floor).is_some());
     for (out, with) in &answered {
         tracing::debug!(out, with = %with.effect, "swap answered by its earlier refit");
     }
@@ -133,6 +113,34 @@ pub(super) fn equivalents<E: Evaluator + Simulator>(
         .collect();
     equivalent.sort_by(|a, b| a.objective.total_cmp(&b.objective));
     Ok((equivalent, tried))
+}
+
+/// The refit among `earlier` of `chosen`'s set with `out` swapped for `with`, where it left
+/// more than [`SETTLED_FAR`] times the noise limit.
+fn settled_far<'e>(
+    chosen: &Fit,
+    out: &str,
+    with: &Candidate,
+    earlier: &'e [Fit],
+    floor: &Floor,
+) -> Option<&'e Fit> {
+    let mut set: Vec<&str> = chosen
+        .effects
+        .iter()
+        .map(|e| {
+            if e == out {
+                with.effect.as_str()
+            } else {
+                e.as_str()
+            }
+        })
+        .collect();
+    set.sort_unstable();
+    earlier.iter().find(|f| {
+        let mut effects: Vec<&str> = f.effects.iter().map(String::as_str).collect();
+        effects.sort_unstable();
+        effects == set && f.objective > SETTLED_FAR * floor.limit * floor.value
+    })
 }
 
 /// `chosen`'s refit with `out` held off and `with` free, every other parameter starting where
