@@ -990,10 +990,14 @@ fn a_record_larger_than_a_workers_request_is_refused_at_every_door_naming_the_in
     c.expect_refused(campaign, &["campaign.inputs", "more than the 6291456"]);
 }
 
-/// The resident memory of process `pid` [bytes].
-fn resident(pid: u32) -> u64 {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).unwrap();
-    let line = status.lines().find(|l| l.starts_with("VmRSS:")).unwrap();
+/// The anonymous memory of process `pid` (its heaps, maps and stacks; not the pages of its
+/// binary, which vary with the code a run touched) [bytes].
+fn anonymous(pid: u32) -> u64 {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/smaps_rollup")).unwrap();
+    let line = status
+        .lines()
+        .find(|l| l.starts_with("Anonymous:"))
+        .unwrap();
     line.split_whitespace()
         .nth(1)
         .unwrap()
@@ -1003,9 +1007,10 @@ fn resident(pid: u32) -> u64 {
 }
 
 /// A coordinator that ran a campaign on a record near the largest it takes (2.9 million rows,
-/// 93 MB as columns) holds less than that record once the campaign has ended: neither its
-/// store's cache, nor the record in the form workers take it, nor freed heap is kept (it
-/// kept 230–370 MB).
+/// 93 MB as columns) holds less than a tenth of that record more than before, once the
+/// campaign has ended: neither its store's cache, nor the record in the form workers take
+/// it, nor freed heap is kept (it kept 230–370 MB; then, with freed heap trimmed, 23–80 MB
+/// more, as glibc served large blocks from its heaps after the first was freed).
 #[test]
 fn a_coordinator_gives_back_the_memory_of_a_large_campaign_once_it_ends() {
     let dir = tempfile::tempdir().unwrap();
@@ -1048,6 +1053,7 @@ fn a_coordinator_gives_back_the_memory_of_a_large_campaign_once_it_ends() {
         &dir.path().join("worker.log"),
     );
     let out = dir.path().join("out");
+    let before = anonymous(coordinator.id());
     let run = calib(&[
         "submit",
         campaign.to_str().unwrap(),
@@ -1061,21 +1067,29 @@ fn a_coordinator_gives_back_the_memory_of_a_large_campaign_once_it_ends() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    let record = 2_900_000 * 4 * 8;
+    let allowed = 2_900_000 * 4 * 8 / 10;
     // The campaign's thread ends just after its result is served: wait for it.
-    let mut held = resident(coordinator.id());
+    let mut kept = anonymous(coordinator.id()).saturating_sub(before);
     for _ in 0..100 {
-        if held < record {
+        if kept < allowed {
             break;
         }
         std::thread::sleep(Duration::from_millis(100));
-        held = resident(coordinator.id());
+        kept = anonymous(coordinator.id()).saturating_sub(before);
     }
+    eprintln!(
+        "memory-test: the coordinator keeps {:.1} MB more than before the campaign",
+        kept as f64 / 1e6
+    );
     for child in [&mut worker, &mut coordinator] {
         child.kill().unwrap();
         child.wait().unwrap();
     }
-    assert!(held < record, "the coordinator holds {} MB", held >> 20);
+    assert!(
+        kept < allowed,
+        "the coordinator keeps {} MB more than before",
+        kept >> 20
+    );
 }
 
 /// A campaign the user cancels ends as cancelled, and the coordinator's log says so without

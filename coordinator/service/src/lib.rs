@@ -5,5 +5,6 @@
 pub mod api;
 pub mod dispatch;
 pub mod hosting;
+pub mod memory;
 pub mod server;
 pub mod web;

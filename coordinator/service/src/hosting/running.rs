@@ -34,7 +34,7 @@ impl Campaigns {
         let outcome = self.calibrate_until_served(&campaign, &live);
         self.conclude(&id, &campaign, &live, outcome);
         drop(campaign);
-        return_freed_memory();
+        crate::memory::return_freed();
     }
 
     /// Calibrate `campaign` live, waiting (the pause doubling up to `MAX_PAUSE`) and starting
@@ -308,16 +308,5 @@ impl<E: Evaluator + ?Sized> Evaluator for Cancellable<'_, E> {
 
     fn release(&self, objective: &Objective) {
         self.inner.release(objective)
-    }
-}
-
-/// Give the memory a campaign freed back to the system. glibc keeps freed blocks of its
-/// heap for the next allocations; after a campaign on a large record that is a few hundred
-/// megabytes a long-running coordinator would hold until it exits.
-fn return_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `malloc_trim` only releases free memory of the allocator; it is thread-safe.
-    unsafe {
-        libc::malloc_trim(0);
     }
 }

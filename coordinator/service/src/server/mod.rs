@@ -180,6 +180,7 @@ pub fn serve_coordinator(
     let address = listener
         .local_addr()
         .map_err(|e| Error::Dispatch(e.to_string()))?;
+    crate::memory::map_large_blocks();
     let web_listener = match config.http {
         Some(http) => Some(bind_http(http)?),
         None => None,

@@ -91,6 +91,7 @@ impl RunningUi {
 
 /// Open the store, bind `config.listen` and serve the app.
 pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
+    crate::memory::map_large_blocks();
     let store = Arc::new(SledStore::open(&config.store)?);
     let folder = config
         .api
