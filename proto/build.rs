@@ -18,6 +18,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ".calib.v1",
             "#[derive(serde::Serialize, serde::Deserialize)]",
         )
+        // The reports' JSON is the files the commands write: a parameter's statistics on the
+        // objective at the top of its entry, a correlation matrix as a list of lists, and
+        // intervals whose non-finite ends are null.
+        .field_attribute(
+            ".calib.v1.ParameterSensitivity.objective",
+            "#[serde(flatten)]",
+        )
+        .field_attribute(
+            ".calib.v1.DiagnosisFit.correlation",
+            "#[serde(with = \"crate::json::rows\")]",
+        )
+        .field_attribute(
+            ".calib.v1.SensitivityStatistics.first_ci",
+            "#[serde(deserialize_with = \"crate::json::numbers\")]",
+        )
+        .field_attribute(
+            ".calib.v1.SensitivityStatistics.total_ci",
+            "#[serde(deserialize_with = \"crate::json::numbers\")]",
+        )
         .file_descriptor_set_path(out.join("calib_descriptor.bin"))
         .compile_protos(
             &[

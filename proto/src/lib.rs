@@ -1,7 +1,10 @@
 //! gRPC contracts of calib, generated from `calib/v1/*.proto`.
 //!
-//! Nothing but generated code lives here: the services convert these types to domain types
-//! at their edge, so prost types never travel further than a handler.
+//! Nothing but generated code lives here, and the JSON forms it names ([`json`]): the
+//! services convert these types to domain types at their edge, so prost types never travel
+//! further than a handler.
+
+pub mod json;
 
 /// Package `calib.v1`: the Simulator (workers) and Registry (coordinator) services.
 pub mod v1 {

@@ -828,6 +828,11 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
         report["selected"],
         serde_json::json!(["viscous_friction.arm"])
     );
+    assert_typed_twin(done.report.as_ref(), &done.report_json, &[]);
+    assert_eq!(
+        done.report.as_ref().unwrap().selected,
+        vec!["viscous_friction.arm".to_string()]
+    );
     assert!(done.files.contains_key("diagnosis.md"));
     // Asked again: the finished diagnosis, at once.
     let again = diagnose(&mut client).unwrap();
@@ -843,6 +848,29 @@ fn a_finished_campaign_is_diagnosed_on_the_coordinator() {
             .map(|_| ())
     });
     assert_eq!(unknown.unwrap_err().code(), tonic::Code::NotFound);
+
+    // Its profile, typed as its report_json.
+    let profile = coordinator.runtime.block_on(async {
+        let mut stream = client
+            .profile(pb::ProfileRequest {
+                id: id.clone(),
+                parameters: vec!["armFriction".into()],
+                max_steps: 3,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        let mut last = None;
+        while let Some(s) = stream.message().await.unwrap() {
+            last = Some(s);
+        }
+        last.unwrap()
+    });
+    assert_eq!(profile.phase(), pb::CampaignPhase::Finished, "{profile:?}");
+    assert_typed_twin(profile.profile.as_ref(), &profile.report_json, &[]);
+    let typed = profile.profile.as_ref().unwrap();
+    assert_eq!(typed.parameters[0].name, "armFriction");
+    assert!(!typed.parameters[0].low.as_ref().unwrap().points.is_empty());
 }
 
 #[test]
@@ -883,6 +911,8 @@ fn a_sensitivity_analysis_over_the_api_equals_calib_sensitivitys_and_is_not_simu
         .windows(2)
         .all(|w| w[0].evaluations <= w[1].evaluations));
     let report: Value = serde_json::from_str(&done.report_json).unwrap();
+    assert_typed_twin(done.sensitivity.as_ref(), &done.report_json, &[]);
+    assert!(done.profile.is_none());
     assert!(done.files.contains_key("sensitivity_objective.svg"));
     assert_eq!(report["conclusion"].as_str().unwrap(), done.conclusion);
 

@@ -432,6 +432,8 @@ fn a_campaign_on_an_uploaded_fmu_is_watched_cancelled_profiled_and_diagnosed() {
     });
     assert_eq!(profile.phase(), pb::CampaignPhase::Finished, "{profile:?}");
     let report: serde_json::Value = serde_json::from_str(&profile.report_json).unwrap();
+    assert_typed_twin(profile.profile.as_ref(), &profile.report_json, &[]);
+    assert!(profile.sensitivity.is_none());
     let mu_profile = &report["parameters"][0];
     assert_eq!(mu_profile["identifiable"], true, "{report}");
     let (low, high) = (
@@ -463,4 +465,5 @@ fn a_campaign_on_an_uploaded_fmu_is_watched_cancelled_profiled_and_diagnosed() {
     );
     let report: serde_json::Value = serde_json::from_str(&diagnosis.report_json).unwrap();
     assert_eq!(report["selected"], serde_json::json!([]), "{report}");
+    assert_typed_twin(diagnosis.report.as_ref(), &diagnosis.report_json, &[]);
 }

@@ -671,3 +671,35 @@ pub fn spawn_server(args: &[&str], prefix: &str, stderr: &Path) -> (std::process
         .to_string();
     (child, address)
 }
+
+/// Assert that a report's typed message holds the values of its JSON text (`report_json`)
+/// field for field: the same names, the same values. What proto3 cannot tell apart counts
+/// as one: null, an empty list and an empty map are each an unset field. `apart` names the
+/// JSON's top-level keys the state holds in a message of their own.
+pub fn assert_typed_twin<T: serde::Serialize>(typed: Option<&T>, json: &str, apart: &[&str]) {
+    fn unset_removed(v: &mut serde_json::Value) -> bool {
+        match v {
+            serde_json::Value::Object(map) => {
+                map.retain(|_, v| !unset_removed(v));
+                map.is_empty()
+            }
+            serde_json::Value::Array(list) => {
+                list.iter_mut().for_each(|v| {
+                    unset_removed(v);
+                });
+                list.is_empty()
+            }
+            serde_json::Value::Null => true,
+            _ => false,
+        }
+    }
+    let typed = typed.expect("the typed report is set beside report_json");
+    let mut typed = serde_json::to_value(typed).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(json).unwrap();
+    for key in apart {
+        json.as_object_mut().unwrap().remove(*key);
+    }
+    unset_removed(&mut typed);
+    unset_removed(&mut json);
+    assert!(typed == json, "typed: {typed:#}\nreport_json: {json:#}");
+}

@@ -2,7 +2,7 @@
 //! diagnosis's, an analysis's, an uploaded FMU.
 
 use super::{discovery, result};
-use crate::hosting::analyses::AnalysisSnapshot;
+use crate::hosting::analyses::{AnalysisReport, AnalysisSnapshot};
 use crate::hosting::diagnoses::DiagnosisSnapshot;
 use crate::hosting::fmus::FmuInfo;
 use crate::hosting::{Phase, Snapshot};
@@ -112,6 +112,7 @@ pub(super) fn diagnosis_state(s: &DiagnosisSnapshot) -> pb::DiagnosisState {
         report_json: pretty_json(s.report.as_ref()),
         files: s.files.iter().cloned().collect(),
         found_outside_the_library: s.found.as_deref().map(discovery::found_message),
+        report: s.report.as_ref().and_then(typed),
     }
 }
 
@@ -122,10 +123,28 @@ pub(super) fn analysis_state(s: &AnalysisSnapshot) -> pb::AnalysisState {
         evaluations: s.evaluations,
         planned: s.planned,
         failure: s.failure.clone().unwrap_or_default(),
-        report_json: pretty_json(s.report.as_ref()),
+        report_json: pretty_json(s.report.as_ref().map(AnalysisReport::json)),
         conclusion: s.conclusion.clone(),
         files: s.files.iter().cloned().collect(),
+        sensitivity: match &s.report {
+            Some(AnalysisReport::Sensitivity(json)) => typed(json),
+            _ => None,
+        },
+        profile: match &s.report {
+            Some(AnalysisReport::Profile(json)) => typed(json),
+            _ => None,
+        },
     }
+}
+
+/// A report's typed message, read from the JSON of its file: the messages hold the files'
+/// names and values (`calibration.proto`, "The reports of the analyses, typed"), which
+/// the tests of each report hold field for field. A report the message cannot hold is a
+/// bug: logged, and left to `report_json`.
+fn typed<T: serde::de::DeserializeOwned>(json: &serde_json::Value) -> Option<T> {
+    T::deserialize(json)
+        .map_err(|e| tracing::error!(error = %e, "a report does not fit its typed message"))
+        .ok()
 }
 
 /// A report as the indented JSON of the `report_json` fields; empty before there is one.

@@ -31,16 +31,31 @@ pub struct AnalysisSnapshot {
     pub planned: u64,
     pub failure: Option<String>,
     /// The report (`sensitivity.json`, `profile.json`) once finished.
-    pub report: Option<serde_json::Value>,
+    pub report: Option<AnalysisReport>,
     /// The sentence that sums it up, once finished.
     pub conclusion: String,
     /// The plots, by file name, once finished.
     pub files: Vec<(String, String)>,
 }
 
+/// The report of a finished analysis: the value of the JSON file it wrote.
+#[derive(Debug, Clone, PartialEq)]
+pub enum AnalysisReport {
+    Sensitivity(serde_json::Value),
+    Profile(serde_json::Value),
+}
+
+impl AnalysisReport {
+    pub fn json(&self) -> &serde_json::Value {
+        match self {
+            AnalysisReport::Sensitivity(json) | AnalysisReport::Profile(json) => json,
+        }
+    }
+}
+
 /// What a finished analysis hands to those who follow it.
 struct Finished {
-    report: serde_json::Value,
+    report: AnalysisReport,
     conclusion: String,
     /// Its SVG plots, by file name.
     files: Vec<(String, String)>,
@@ -91,7 +106,7 @@ impl Campaigns {
                 &progress,
             )?;
             Ok(Finished {
-                report: report::sensitivity_json(&s),
+                report: AnalysisReport::Sensitivity(report::sensitivity_json(&s)),
                 conclusion: s.conclusion(),
                 files: svg_files(report::write(&s, folder)),
                 evaluations: None,
@@ -126,7 +141,7 @@ impl Campaigns {
             let p = profile::profile(&campaign, &engine, &*this.store, &settings)?;
             let conclusions = p.conclusions();
             Ok(Finished {
-                report: profile::report::profile_json(&p),
+                report: AnalysisReport::Profile(profile::report::profile_json(&p)),
                 conclusion: if conclusions.is_empty() {
                     "Every profiled parameter is identifiable: its profile crosses the \
                      threshold on both sides."
