@@ -24,7 +24,7 @@ export async function analyse() {
     await follow(`/api/v1/WatchAnalysis/${first.id}`, (a) => {
       $("sensitivity-status").textContent =
         `${PHASES[a.phase] || a.phase}, ${a.evaluations} of ${a.planned} evaluations` + (a.failure ? ` (${a.failure})` : "");
-      if (a.phase === 2 && a.report_json) showSensitivity(a);
+      if (a.phase === 2 && a.sensitivity) showSensitivity(a);
       if (a.phase === 3) showError("sensitivity-error", a.failure);
     });
   } catch (e) {
@@ -35,21 +35,21 @@ export async function analyse() {
 }
 
 export function showSensitivity(a) {
-  const report = JSON.parse(a.report_json);
+  const report = a.sensitivity;
   $("sensitivity-conclusion").textContent = a.conclusion;
   $("sensitivity-conclusion").hidden = false;
   const body = $("sensitivity-table").tBodies[0];
   body.replaceChildren();
   for (const p of report.parameters) {
     const o = p; // the objective's statistics sit on the parameter itself
-    const ci = o.total_ci ? `[${fmt(o.total_ci[0], 3)}, ${fmt(o.total_ci[1], 3)}]` : "—";
+    const ci = o.total_ci.length ? `[${fmt(o.total_ci[0], 3)}, ${fmt(o.total_ci[1], 3)}]` : "—";
     body.append(el("tr", {},
       el("th", { scope: "row", text: p.name }),
       el("td", { class: "flag", text: p.influential ? "influential" : "can be held fixed" }),
-      el("td", { class: "num", text: o.total === undefined ? "—" : fmt(o.total, 3) }),
+      el("td", { class: "num", text: o.total === null ? "—" : fmt(o.total, 3) }),
       el("td", { class: "num", text: ci }),
-      el("td", { class: "num", text: o.first === undefined ? "—" : fmt(o.first, 3) }),
-      el("td", { class: "num", text: o.mu_star === undefined ? "—" : fmt(o.mu_star, 4) })));
+      el("td", { class: "num", text: o.first === null ? "—" : fmt(o.first, 3) }),
+      el("td", { class: "num", text: o.mu_star === null ? "—" : fmt(o.mu_star, 4) })));
   }
   $("sensitivity-table").hidden = false;
   const plots = $("sensitivity-plots");
@@ -92,7 +92,7 @@ export async function profileParameters() {
       $("profile-status").textContent =
         a.phase === 1 ? "running: re-optimising along each parameter's profile…"
           : `${PHASES[a.phase] || a.phase}, ${a.evaluations} evaluations` + (a.failure ? ` (${a.failure})` : "");
-      if (a.phase === 2 && a.report_json) showProfiles(a);
+      if (a.phase === 2 && a.profile) showProfiles(a);
       if (a.phase === 3) showError("profile-error", a.failure);
     });
   } catch (e) {
@@ -103,7 +103,7 @@ export async function profileParameters() {
 }
 
 export function showProfiles(a) {
-  const report = JSON.parse(a.report_json);
+  const report = a.profile;
   $("profile-conclusion").textContent = a.conclusion;
   $("profile-conclusion").hidden = false;
   const interval = (low, high) => `[${low === null ? "open" : fmt(low, 7)}, ${high === null ? "open" : fmt(high, 7)}]`;

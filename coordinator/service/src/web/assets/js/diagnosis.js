@@ -16,7 +16,7 @@ export async function diagnose() {
   try {
     await follow(`/api/v1/Diagnose/${id}${discover ? "?discover=true" : ""}`, (d) => {
       $("diagnosis-status").textContent = `${PHASES[d.phase] || d.phase}, ${d.evaluations} evaluations` + (d.failure ? ` (${d.failure})` : "");
-      if (d.phase === 2 && d.report_json) showDiagnosis(d);
+      if (d.phase === 2 && d.report) showDiagnosis(d);
       if (d.phase === 2 && d.found_outside_the_library) showDiscovery(d.found_outside_the_library, d.campaign_id);
       if (d.phase === 3) showError("diagnosis-error", d.failure);
     });
@@ -28,7 +28,7 @@ export async function diagnose() {
 }
 
 export function showDiagnosis(d) {
-  const report = JSON.parse(d.report_json);
+  const report = d.report;
   $("verdict").textContent = report.verdict_sentence;
   $("verdict").hidden = false;
   const body = $("candidates").tBodies[0];
