@@ -339,3 +339,118 @@ fn the_cycle_finder_finds_a_circle() {
         Some(vec!["a".into(), "b".into(), "c".into(), "a".into()])
     );
 }
+
+/// The web app's modules (`coordinator/service/src/web/assets/js/`), by file name: each
+/// one's text, and the names it imports by the module they come from.
+type WebModules = BTreeMap<String, (String, Vec<(String, Vec<String>)>)>;
+
+fn web_modules() -> WebModules {
+    let dir = repo().join("coordinator/service/src/web/assets/js");
+    let mut modules = BTreeMap::new();
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "js") {
+            continue;
+        }
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut imports = Vec::new();
+        let mut rest = text.as_str();
+        while let Some(at) = rest.find("import {") {
+            let statement = &rest[at..];
+            let close = statement.find('}').expect("an import's closing brace");
+            let names = statement["import {".len()..close]
+                .split(',')
+                .map(|n| n.trim().to_string())
+                .filter(|n| !n.is_empty())
+                .collect();
+            let from = &statement[close..];
+            let quote = from.find("from \"./").expect("a relative import") + "from \"./".len();
+            let end = from[quote..].find('"').unwrap();
+            imports.push((from[quote..quote + end].to_string(), names));
+            rest = &from[quote + end..];
+        }
+        let name = path.file_name().unwrap().to_str().unwrap().to_string();
+        modules.insert(name, (text, imports));
+    }
+    assert!(
+        modules.len() >= 10,
+        "the web app's modules: {:?}",
+        modules.keys()
+    );
+    modules
+}
+
+/// Whether `text` holds `name` as a whole identifier.
+fn holds_identifier(text: &str, name: &str) -> bool {
+    let part = |c: char| c.is_alphanumeric() || c == '_' || c == '$';
+    text.match_indices(name).any(|(at, _)| {
+        let before = text[..at].chars().next_back();
+        let after = text[at + name.len()..].chars().next();
+        !before.is_some_and(part) && !after.is_some_and(part)
+    })
+}
+
+/// The names a module of the web app exports (`export function f`, `export const x`, …).
+fn exports(text: &str) -> BTreeSet<String> {
+    let part = |c: char| c.is_alphanumeric() || c == '_' || c == '$';
+    let mut names = BTreeSet::new();
+    for kind in ["function", "async function", "const", "let", "class"] {
+        let marker = format!("export {kind} ");
+        for (at, _) in text.match_indices(&marker) {
+            let name: String = text[at + marker.len()..]
+                .chars()
+                .take_while(|&c| part(c))
+                .collect();
+            names.insert(name);
+        }
+    }
+    names
+}
+
+/// The web app's modules tell each other of changes by events (`on`, `emit`), not by
+/// importing the module that imports them: its import graph has no circle (it had one of
+/// seven modules).
+#[test]
+fn the_web_apps_modules_import_no_circle() {
+    let modules = web_modules();
+    let graph: BTreeMap<String, BTreeSet<String>> = modules
+        .iter()
+        .map(|(name, (_, imports))| {
+            let targets = imports.iter().map(|(from, _)| from.clone()).collect();
+            (name.clone(), targets)
+        })
+        .collect();
+    assert_eq!(cycle(&graph), None);
+}
+
+/// Every name a module of the web app imports is exported by the module it names and used
+/// by the importer: a renamed or removed function fails here, not in a user's browser.
+#[test]
+fn every_name_the_web_app_imports_is_exported_and_used() {
+    let modules = web_modules();
+    let mut wrong = Vec::new();
+    for (name, (text, imports)) in &modules {
+        let body: String = text
+            .lines()
+            .filter(|l| !l.starts_with("import "))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for (from, names) in imports {
+            let Some((source, _)) = modules.get(from) else {
+                wrong.push(format!("{name} imports from {from}, which is absent"));
+                continue;
+            };
+            for imported in names {
+                if !exports(source).contains(imported) {
+                    wrong.push(format!(
+                        "{name} imports {imported}, which {from} does not export"
+                    ));
+                }
+                if !holds_identifier(&body, imported) {
+                    wrong.push(format!("{name} imports {imported} and never uses it"));
+                }
+            }
+        }
+    }
+    assert!(wrong.is_empty(), "{wrong:#?}");
+}

@@ -1,6 +1,6 @@
 // Sensitivity before a calibration, profile likelihoods after it (the Calibration tab).
 import { campaignMessage } from "./calibration.js";
-import { $, PHASES, app, call, el, figure, fmt, follow, number, showError } from "./common.js";
+import { $, PHASES, app, call, el, figure, fmt, follow, number, on, showError } from "./common.js";
 
 // ---- sensitivity, before a calibration --------------------------------------------------
 
@@ -70,6 +70,8 @@ export function showSensitivity(a) {
 }
 
 // ---- profile likelihoods, after a calibration --------------------------------------------
+
+on("campaign-shown", () => clearProfiles());
 
 export function clearProfiles() {
   showError("profile-error", "");

@@ -1,6 +1,5 @@
 // The Calibration tab: the form, the campaign's progress, its result and the list of campaigns.
-import { clearProfiles } from "./analysis.js";
-import { $, PHASES, app, bound, call, el, figure, fmt, follow, modelInputs, plot, showError } from "./common.js";
+import { $, PHASES, app, bound, call, el, emit, figure, fmt, follow, modelInputs, on, plot, showError } from "./common.js";
 import { compareBox, ticked } from "./compare.js";
 import { inputRows, renderExperiments } from "./experiments.js";
 import { campaignDraft, clearProblems, problemSummary, validateNow } from "./forms.js";
@@ -11,7 +10,9 @@ import { showRuns } from "./runs.js";
 
 // ---- Calibration tab --------------------------------------------------------------------
 
-export function renderCalibration() {
+on("inputs-changed", () => renderCalibration());
+
+function renderCalibration() {
   const model = app.model, dataset = app.dataset;
   $("calibration-context").textContent =
     `Model ${model ? model.name : "(choose one on the Model tab)"}; measurement ` +
@@ -149,7 +150,7 @@ export function watch(id) {
   writeRoute({ campaign: id });
   $("result").hidden = true;
   $("best-so-far").hidden = true;
-  clearProfiles();
+  emit("campaign-shown", id);
   $("progress-plot").replaceChildren();
   $("cancel").disabled = false;
   $("start").disabled = true;
@@ -384,7 +385,7 @@ export async function openCampaign(id) {
     writeRoute({ campaign: id });
     $("progress-plot").replaceChildren();
     $("result").hidden = true;
-    clearProfiles();
+    emit("campaign-shown", id);
     showState(s);
     if (s.phase === 2 && s.result) showResult(s);
     $("result").scrollIntoView({ block: "nearest" });

@@ -1,5 +1,6 @@
-// What every tab uses: the app's state, DOM helpers, number formatting, the APIs over
-// HTTP JSON (/api/v1/<Method>) and plots drawn by the server (/ui/plot).
+// What every tab uses: the app's state, the events the tabs tell each other, DOM helpers,
+// number formatting, the one fetch every route goes through, the APIs over HTTP JSON
+// (/api/v1/<Method>) and plots drawn by the server (/ui/plot).
 
 export const PHASES = { 0: "unknown", 1: "running", 2: "finished", 3: "failed", 4: "cancelled" };
 
@@ -17,6 +18,14 @@ export const app = {
   definedEffects: [], // effects defined by a formula in the form (DefinedEffect messages)
   nextExperiment: 0,  // key of the next experiment added
 };
+
+// ---- events ------------------------------------------------------------------------------
+// What one tab tells the others, so that no module imports the one that imports it:
+// "inputs-changed" (the model, its values or the measurement changed: the Calibration tab
+// redraws its form) and "campaign-shown" (another campaign is shown: its analyses go).
+const events = new EventTarget();
+export const on = (name, handler) => events.addEventListener(name, (e) => handler(e.detail));
+export const emit = (name, detail) => events.dispatchEvent(new CustomEvent(name, { detail }));
 
 export const $ = (id) => document.getElementById(id);
 
@@ -52,30 +61,37 @@ export function showError(id, message) {
 
 // ---- the APIs ---------------------------------------------------------------------------
 
-export async function call(method, request, init = {}) {
-  const response = await fetch(`/api/v1/${method}`, {
+// The one fetch of every route: its answer when it is ok; otherwise the login asked for
+// (401) and an Error with the server's message (`what` names the call when it gave none).
+export async function request(url, init = {}, what = url) {
+  const response = await fetch(url, init);
+  if (response.ok) return response;
+  if (response.status === 401) showLogin();
+  const text = await response.text();
+  let message = text;
+  try { message = JSON.parse(text).message; } catch { /* plain text */ }
+  throw new Error(message || `${what}: HTTP ${response.status}`);
+}
+
+// The init of a POST of `body` as JSON.
+export const post = (body) => ({
+  method: "POST",
+  headers: { "Content-Type": "application/json" },
+  body: JSON.stringify(body),
+});
+
+export async function call(method, message, init = {}) {
+  const response = await request(`/api/v1/${method}`, {
     method: "POST",
     headers: init.headers || { "Content-Type": "application/json" },
-    body: init.body !== undefined ? init.body : JSON.stringify(request || {}),
-  });
-  const text = await response.text();
-  let answer;
-  try { answer = JSON.parse(text); } catch { answer = { message: text }; }
-  if (response.status === 401) showLogin();
-  if (!response.ok) throw new Error(answer.message || `${method}: HTTP ${response.status}`);
-  return answer;
+    body: init.body !== undefined ? init.body : JSON.stringify(message || {}),
+  }, method);
+  return response.json();
 }
 
 // A server stream (Server-Sent Events, one whole state each) until it ends.
 export async function follow(url, onState, signal) {
-  const response = await fetch(url, { signal });
-  if (response.status === 401) showLogin();
-  if (!response.ok) {
-    const text = await response.text();
-    let message = text;
-    try { message = JSON.parse(text).message; } catch { /* plain text */ }
-    throw new Error(message);
-  }
+  const response = await request(url, { signal });
   const reader = response.body.getReader();
   const decoder = new TextDecoder();
   let buffer = "";
@@ -116,16 +132,8 @@ export function figure(svgText, caption) {
   return fig;
 }
 
-export async function plot(request) {
-  const response = await fetch("/ui/plot", {
-    method: "POST",
-    headers: { "Content-Type": "application/json" },
-    body: JSON.stringify(request),
-  });
-  const text = await response.text();
-  if (response.status === 401) showLogin();
-  if (!response.ok) throw new Error(JSON.parse(text).message);
-  return text;
+export async function plot(what) {
+  return (await request("/ui/plot", post(what), "plot")).text();
 }
 
 // ---- the login --------------------------------------------------------------------------

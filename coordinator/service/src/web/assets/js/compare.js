@@ -2,7 +2,7 @@
 // objective and parameters in one table (as their results hold them: the best point, and
 // each parameter's range over the runs that reached the best), their fit plots next to
 // each other, output by output.
-import { $, call, el, figure, fmt, showError } from "./common.js";
+import { $, call, el, figure, fmt, post, request, showError } from "./common.js";
 
 // The ids of the campaigns ticked for comparison.
 export const ticked = () =>
@@ -90,13 +90,8 @@ async function showOverlays(states) {
   const shared = outputs(states[0]).filter((o) => states.every((s) => outputs(s).includes(o)));
   for (const output of shared) {
     try {
-      const response = await fetch("/ui/compare", {
-        method: "POST",
-        headers: { "Content-Type": "application/json" },
-        body: JSON.stringify({ campaigns: states.map((s) => s.id), output }),
-      });
-      const text = await response.text();
-      if (!response.ok) throw new Error(JSON.parse(text).message);
+      const body = { campaigns: states.map((s) => s.id), output };
+      const text = await (await request("/ui/compare", post(body), "compare")).text();
       holder.append(el("div", { class: "overlay-row", "data-output": output },
         figure(text, `${output}: ${states.map((s) => s.name).join(", ")} over the measured data`)));
     } catch (e) {

@@ -1,6 +1,5 @@
 // The Measurement tab: a record uploaded, its columns plotted.
-import { renderCalibration } from "./calibration.js";
-import { $, app, call, el, fmt, showError, showLogin } from "./common.js";
+import { $, app, call, el, emit, fmt, request, showError } from "./common.js";
 import { scheduleValidation } from "./forms.js";
 import { writeRoute } from "./route.js";
 
@@ -77,7 +76,7 @@ export function showDataset(dataset) {
   $("measurement-columns").hidden = false;
   $("window-start").value = String(dataset.start_time);
   $("window-stop").value = String(dataset.stop_time);
-  renderCalibration();
+  emit("inputs-changed");
   plotColumns();
   writeRoute({ dataset: dataset.id });
 }
@@ -85,13 +84,7 @@ export function showDataset(dataset) {
 // What the server keeps of the uploaded dataset `id`: its file's name, time column,
 // columns, samples and time span.
 export async function fetchDataset(id) {
-  const response = await fetch(`/ui/datasets/${id}`);
-  const text = await response.text();
-  if (response.status === 401) showLogin();
-  let answer;
-  try { answer = JSON.parse(text); } catch { answer = { message: text }; }
-  if (!response.ok) throw new Error(answer.message || `dataset ${id}: HTTP ${response.status}`);
-  return answer;
+  return (await request(`/ui/datasets/${id}`, {}, `dataset ${id}`)).json();
 }
 
 // The dataset `id` shown again (a reload, a link, a reopened campaign).

@@ -1,6 +1,5 @@
 // The Model tab: the models (and uploaded FMUs), their parameters, and simulations.
-import { renderCalibration } from "./calibration.js";
-import { $, INTERPOLATIONS, app, bound, call, el, figure, fmt, modelInputs, plot, showError, showLogin, thin } from "./common.js";
+import { $, INTERPOLATIONS, app, bound, call, el, emit, figure, fmt, modelInputs, plot, request, showError, thin } from "./common.js";
 
 // ---- Model tab --------------------------------------------------------------------------
 
@@ -93,7 +92,7 @@ export async function describe(name) {
       id: `value-${p.name}`, "aria-label": `value of ${p.name} [${p.unit}]`,
       min: bound(p.min), max: bound(p.max),
     });
-    input.addEventListener("change", renderCalibration);
+    input.addEventListener("change", () => emit("inputs-changed"));
     body.append(el("tr", {},
       el("th", { scope: "row", text: p.name }),
       el("td", {}, input),
@@ -110,7 +109,7 @@ export async function describe(name) {
       `${o.name} [${o.unit}]`));
   }
   $("model-plots").replaceChildren();
-  renderCalibration();
+  emit("inputs-changed");
 }
 
 // The model's inputs on the Model tab: each left at the model's own value, or driven by a
@@ -153,11 +152,8 @@ export async function datasetColumn(key) {
   if (!columnCache[key]) {
     const cut = key.indexOf("/");
     const id = key.slice(0, cut), column = key.slice(cut + 1);
-    const response = await fetch(`/ui/datasets/${id}/column/${encodeURIComponent(column)}`);
-    const text = await response.text();
-    if (response.status === 401) showLogin();
-    if (!response.ok) throw new Error(JSON.parse(text).message);
-    columnCache[key] = JSON.parse(text);
+    const response = await request(`/ui/datasets/${id}/column/${encodeURIComponent(column)}`);
+    columnCache[key] = await response.json();
   }
   return columnCache[key];
 }

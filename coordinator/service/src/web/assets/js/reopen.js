@@ -2,8 +2,7 @@
 // back in the form: its model and fixed values, its dataset, outputs, inputs, free
 // parameters, window, search and further experiments. What the user then changes and
 // starts is a new campaign; the old one stays as it was.
-import { renderCalibration } from "./calibration.js";
-import { $, app, call, fmt, modelInputs } from "./common.js";
+import { $, app, call, emit, fmt, modelInputs } from "./common.js";
 import { setDefinedEffects } from "./effects.js";
 import { addExperiment, addFixedValue, renderExperiments } from "./experiments.js";
 import { fetchDataset, showDataset } from "./measurement.js";
@@ -36,7 +35,7 @@ export async function fillForm(message) {
   const first = experiments.length ? experiments[0] : null;
   const datasetId = first ? first.dataset_id : message.dataset_id;
   if (datasetId) showDataset(await fetchDataset(datasetId));
-  renderCalibration();
+  emit("inputs-changed");
   // Outputs compared, and how.
   for (const o of model.outputs) {
     const m = (message.outputs || []).find((x) => x.model === o.name);
