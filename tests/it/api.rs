@@ -368,6 +368,63 @@ fn two_campaigns_at_once_both_equal_their_local_runs_and_a_retried_submit_starts
     }
 }
 
+/// Two campaigns that ask for the same points at once (one search on one record, under two
+/// names) run through the coordinator's one dispatcher: each point is simulated once for
+/// both, counted by the campaign that sent it, so that together they simulate the points
+/// one campaign alone does; both end on the runs of `calib calibrate`.
+#[test]
+fn two_campaigns_asking_for_the_same_points_at_once_simulate_each_point_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let cluster = TestCluster::start(2, 1);
+    let coordinator = Coordinator::start(dir.path(), &cluster.urls());
+    let dataset = upload(&coordinator, &repo().join("examples/data/furuta_clean.csv"));
+    let search = "methods = [\"nelder-mead\"]\nstarts = 3\nmax_evaluations = 100\nseed = 5";
+    let mut client = coordinator.client();
+    let ids: Vec<String> = ["twin-a", "twin-b"]
+        .iter()
+        .map(|name| {
+            let mut campaign = message(search, &dataset.id);
+            campaign.name = name.to_string();
+            let request = pb::SubmitCampaignRequest {
+                campaign: Some(campaign),
+                idempotency_key: String::new(),
+            };
+            let reply = coordinator
+                .runtime
+                .block_on(client.submit_campaign(request));
+            reply.unwrap().into_inner().id
+        })
+        .collect();
+    assert_ne!(ids[0], ids[1]);
+    let lasts: Vec<pb::CampaignState> = ids
+        .iter()
+        .map(|id| watch(&coordinator, id).pop().unwrap())
+        .collect();
+    let campaign = write(dir.path(), "local.toml", &clean_campaign(search));
+    let local = calibrate_json(
+        &campaign,
+        &dir.path().join("local-db"),
+        &dir.path().join("local"),
+        &[],
+    );
+    for last in &lasts {
+        assert_eq!(last.phase(), pb::CampaignPhase::Finished, "{last:?}");
+        let result: Value = serde_json::from_str(&last.result_json).unwrap();
+        assert_eq!(runs_of(&result), runs_of(&local));
+    }
+    let simulated: Vec<u64> = lasts.iter().map(|s| s.simulated).collect();
+    eprintln!(
+        "shared-points: simulated {simulated:?}, alone {}, on the workers {}",
+        local["simulated"],
+        cluster.simulations()
+    );
+    assert_eq!(
+        simulated.iter().sum::<u64>(),
+        local["simulated"].as_u64().unwrap(),
+        "each point simulated once for both campaigns"
+    );
+}
+
 #[test]
 fn a_cancelled_campaign_stops_dispatching() {
     let dir = tempfile::tempdir().unwrap();

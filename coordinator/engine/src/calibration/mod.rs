@@ -15,7 +15,7 @@ use crate::optim::space::UnitBox;
 use crate::outcome::CalibrationOutcome;
 use crate::store::{
     encoding, hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, MemoryStore, RunBest,
-    Store, StoredEvaluator,
+    Store, Stored, StoredEvaluator,
 };
 use std::time::{Duration, Instant};
 
@@ -121,6 +121,19 @@ pub fn calibrate_with_store<E: Evaluator>(
     calibrate_measured(campaign, measurement, evaluator, store, progress)
 }
 
+/// Calibrate `campaign` as [`calibrate_with_store`] does, through `stored`: an evaluator of
+/// a dispatcher over `store` that others share (a coordinator's,
+/// [`SharedDispatcher`](crate::store::SharedDispatcher)).
+pub fn calibrate_through<S: Stored>(
+    campaign: &Campaign,
+    stored: &S,
+    store: &dyn Store,
+    progress: &dyn Progress,
+) -> Result<Calibration> {
+    let measurement = load_measurement(campaign)?;
+    calibrate_stored(campaign, measurement, stored, store, progress)
+}
+
 /// Re-run every campaign of `store` marked running (the coordinator calls this when it
 /// starts). A campaign that cannot be resumed (its file no longer resolves, its data is
 /// gone, the optimiser fails, a worker rejects its requests) is marked failed, logged, and
@@ -224,6 +237,18 @@ fn calibrate_measured<E: Evaluator>(
     store: &dyn Store,
     progress: &dyn Progress,
 ) -> Result<Calibration> {
+    StoredEvaluator::with(evaluator, store, |stored| {
+        calibrate_stored(campaign, measurement, stored, store, progress)
+    })
+}
+
+fn calibrate_stored<S: Stored>(
+    campaign: &Campaign,
+    measurement: Measurement,
+    stored: &S,
+    store: &dyn Store,
+    progress: &dyn Progress,
+) -> Result<Calibration> {
     let started = Instant::now();
     let objective = Objective::new(campaign, &measurement)?;
     let dataset = measurement.content_hash();
@@ -234,11 +259,9 @@ fn calibrate_measured<E: Evaluator>(
     let mut record = running_record(campaign, &dataset, store, &id)?;
     store.put_campaign(&id, &record)?;
     tracing::info!(campaign = %campaign.name, id = %hex(&id), "campaign running");
-    let (outcome, stats, error) = StoredEvaluator::with(evaluator, store, |evaluator| {
-        let outcome = search(campaign, &objective, evaluator, progress);
-        evaluator.release(&objective);
-        (outcome, evaluator.stats(), evaluator.error())
-    });
+    let outcome = search(campaign, &objective, stored, progress);
+    stored.release(&objective);
+    let (stats, error) = (stored.stats(), stored.error());
     if let Some(e) = error {
         return Err(e.into());
     }

@@ -1,8 +1,8 @@
 //! The dispatcher of [`super::StoredEvaluator`]: every decision about points, on one thread
 //! (see the [evaluator's module](super::evaluator) for what it does and why).
 
-use super::evaluator::{Ask, Group, Message, Reply, Round, Shared, Write, ROUNDS};
-use super::{EvaluationKey, Store};
+use super::evaluator::{Ask, Counts, Group, Message, Reply, Round, Shared, Write, ROUNDS};
+use super::{EvaluationKey, Store, StoreError};
 use crate::evaluator::{Evaluator, Fault};
 use crate::objective::{Evaluation, Objective};
 use std::any::Any;
@@ -16,11 +16,13 @@ use std::sync::Arc;
 type Looked = (Vec<(u64, usize)>, Arc<Objective>, Vec<f64>);
 
 /// A point being simulated: the round it went in, who waits for it (ask, position), the
-/// first being the ask that sent it.
+/// first being the ask that sent it, and the counts of the evaluator that sent it (its
+/// simulation is counted there, whichever campaigns it answers).
 struct Flight {
     objective: Arc<Objective>,
     point: Vec<f64>,
     waiters: Vec<(u64, usize)>,
+    counts: Arc<Counts>,
     /// The round it went in, once sent.
     round: Option<u64>,
     /// Its answer, once arrived and until written.
@@ -33,6 +35,8 @@ struct Pending {
     missing: usize,
     /// Of its points, those it sent and were simulated: the rest were hits.
     simulated: u64,
+    /// The counts of the evaluator that asked.
+    counts: Arc<Counts>,
     reply: SyncSender<Reply>,
 }
 
@@ -43,7 +47,7 @@ struct Travelling {
 }
 
 /// The dispatcher's state: everything about points lives here, on one thread.
-pub(super) struct Dispatcher<'d, E> {
+pub(super) struct Dispatcher<'d, E: ?Sized> {
     inner: &'d E,
     store: &'d dyn Store,
     shared: &'d Shared,
@@ -63,7 +67,7 @@ pub(super) struct Dispatcher<'d, E> {
     closing: bool,
 }
 
-impl<'d, E: Evaluator> Dispatcher<'d, E> {
+impl<'d, E: Evaluator + ?Sized> Dispatcher<'d, E> {
     pub(super) fn new(
         inner: &'d E,
         store: &'d dyn Store,
@@ -100,7 +104,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                     Message::Ask(ask) => asks.push(ask),
                     Message::Arrived { round, groups } => self.arrived(round, groups),
                     Message::Panicked { round, payload } => self.panicked(round, payload),
-                    Message::Written { round } => self.written(round),
+                    Message::Written { round, error } => self.written(round, error),
                     Message::Close => self.closing = true,
                 }
             }
@@ -117,6 +121,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         let mut lookup: Vec<EvaluationKey> = Vec::new();
         // Per key looked up: the asks' positions, the objective and the point.
         let mut looked: HashMap<EvaluationKey, Looked> = HashMap::new();
+        let mut askers: Vec<Arc<Counts>> = Vec::new();
         for ask in asks {
             let id = self.next_ask;
             self.next_ask += 1;
@@ -124,14 +129,17 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                 objective,
                 keys,
                 points,
+                counts,
                 reply,
             } = ask;
+            askers.push(counts.clone());
             self.pending.insert(
                 id,
                 Pending {
                     answers: vec![None; keys.len()],
                     missing: keys.len(),
                     simulated: 0,
+                    counts,
                     reply,
                 },
             );
@@ -152,7 +160,10 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
             }
         }
         let found = self.store.get_evaluations(&lookup).unwrap_or_else(|e| {
-            self.shared.note(e);
+            tracing::error!(error = %e, "evaluation store failed");
+            for counts in &askers {
+                counts.note(e.clone());
+            }
             vec![None; lookup.len()]
         });
         for (key, found) in lookup.into_iter().zip(found) {
@@ -163,20 +174,24 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                         self.answer(id, position, &evaluation);
                     }
                 }
-                None => self.queue_flight(key, objective, point, waiters),
+                None => {
+                    let counts = self.pending[&waiters[0].0].counts.clone();
+                    self.queue_flight(key, objective, point, waiters, counts);
+                }
             }
         }
         self.finish_answered();
     }
 
     /// Queue `point` for the next round, `waiters` (at least one) waiting on it, the first
-    /// the ask that sends it.
+    /// the ask that sends it (whose evaluator's `counts` count its simulation).
     fn queue_flight(
         &mut self,
         key: EvaluationKey,
         objective: Arc<Objective>,
         point: Vec<f64>,
         waiters: Vec<(u64, usize)>,
+        counts: Arc<Counts>,
     ) {
         self.shared
             .joined
@@ -187,6 +202,7 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                 objective,
                 point,
                 waiters,
+                counts,
                 round: None,
                 answer: None,
             },
@@ -281,16 +297,11 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                     if failed > 0 {
                         let first = evaluations.iter().find_map(|e| e.failure.as_ref());
                         tracing::info!(failed, first = ?first, "simulations failed");
-                        self.shared
-                            .failed
-                            .fetch_add(failed as u64, Ordering::Relaxed);
                     }
-                    self.shared
-                        .simulated
-                        .fetch_add(evaluations.len() as u64, Ordering::Relaxed);
                     for (key, evaluation) in keys.iter().zip(evaluations) {
                         if let Some(flight) = self.in_flight.get_mut(key) {
                             if flight.round == Some(round) {
+                                flight.counts.simulated(evaluation.failure.is_some());
                                 flight.answer = Some(evaluation.clone());
                             }
                         }
@@ -312,12 +323,13 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
         }
         // Nothing to write (or no writer left): published at once.
         if entries.is_empty() || self.writes.send(Write { round, entries }).is_err() {
-            self.written(round);
+            self.written(round, None);
         }
     }
 
-    /// A round's answers are durable: publish them, and free the round's place.
-    fn written(&mut self, round: u64) {
+    /// A round's answers are durable (or the store failed to keep them, `error`, which the
+    /// evaluators that sent them are told): publish them, and free the round's place.
+    fn written(&mut self, round: u64, error: Option<StoreError>) {
         let Some(travelling) = self.travelling.remove(&round) else {
             return;
         };
@@ -329,6 +341,9 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
             let Some(flight) = self.land(key, round) else {
                 continue;
             };
+            if let Some(e) = &error {
+                flight.counts.note(e.clone());
+            }
             let Some(answer) = flight.answer else {
                 continue;
             };
@@ -371,7 +386,8 @@ impl<'d, E: Evaluator> Dispatcher<'d, E> {
                 .filter(|(id, _)| self.pending.contains_key(id))
                 .collect();
             if !others.is_empty() {
-                self.queue_flight(key, flight.objective, flight.point, others);
+                let counts = self.pending[&others[0].0].counts.clone();
+                self.queue_flight(key, flight.objective, flight.point, others, counts);
             }
         }
     }

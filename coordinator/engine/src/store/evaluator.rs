@@ -1,9 +1,13 @@
 //! The evaluator the optimisers talk to: the store first, the simulator for the misses, all
 //! through one dispatcher.
 //!
-//! [`StoredEvaluator::with`] runs, for the time of its closure, one dispatcher thread that
-//! owns every decision about points: the callers (the runs of a campaign, each asking for a
-//! point or two at a time) send it `(objective, points, reply)` and wait for their reply; it
+//! A dispatcher is one thread that owns every decision about points. [`StoredEvaluator::with`]
+//! runs one for the time of its closure (a command's campaign or analysis);
+//! [`SharedDispatcher`] runs one for as long as it is kept (a coordinator's), and hands an
+//! evaluator to each campaign and analysis: a point one of them has in flight is simulated
+//! once for all, and one writer makes every answer durable. The callers (the runs of the
+//! campaigns, each asking for a point or two at a time) send it `(objective, points, reply)`
+//! and wait for their reply; it
 //! looks up what a drained batch of asks needs in one store lookup, keeps the points being
 //! simulated in one in-flight map (point → who waits for it) so that a point is simulated
 //! once however many runs ask, sends what is missing in rounds to the inner evaluator, has
@@ -23,7 +27,11 @@
 //! is such a fault. A simulation that panics ends the asks that sent its points (the panic
 //! resumes in their callers); asks that joined them later send the points again. A store
 //! failure does not stop the optimisers (their answers are still right), but the first one is
-//! kept and reported by [`StoredEvaluator::error`].
+//! kept and reported by [`StoredEvaluator::error`] of each evaluator whose points it touched.
+//!
+//! **Counts.** Each evaluator counts its own points ([`StoredEvaluator::stats`]): asked for,
+//! and simulated for it. A point two evaluators ask for at once is simulated once and counted
+//! by the one that sent it; the other counts it answered without a simulation, as a hit.
 //!
 //! Each point's answer is the answer for that point alone, so how points are grouped into
 //! rounds changes no number.
@@ -38,6 +46,7 @@ use std::panic::AssertUnwindSafe;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::mpsc::{self, Receiver, Sender, SyncSender};
 use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
 
 /// Rounds under way at once at most: a second fills idle workers while the first's answers
 /// travel back.
@@ -45,19 +54,69 @@ pub const ROUNDS: usize = 2;
 
 /// A handle on the dispatcher, for the optimisers: [`Evaluator::evaluate`] sends an ask and
 /// waits for its reply.
-pub struct StoredEvaluator<'d, E> {
+pub struct StoredEvaluator<'d, E: ?Sized> {
     inner: &'d E,
     shared: &'d Shared,
+    counts: Arc<Counts>,
     asks: Sender<Message>,
 }
 
-/// What the callers and the dispatcher share: counts and the first store failure.
+/// An evaluator that answers from a store: what it was asked and simulated, and the first
+/// store failure met on its points. [`StoredEvaluator`] is one; a wrapper that refuses
+/// asks (a cancelled campaign's) passes both on.
+pub trait Stored: Evaluator {
+    fn stats(&self) -> CacheStats;
+    /// The first store failure met, if any (taken).
+    fn error(&self) -> Option<StoreError>;
+}
+
+impl<E: Evaluator + ?Sized> Stored for StoredEvaluator<'_, E> {
+    fn stats(&self) -> CacheStats {
+        StoredEvaluator::stats(self)
+    }
+
+    fn error(&self) -> Option<StoreError> {
+        StoredEvaluator::error(self)
+    }
+}
+
+impl<S: Stored + ?Sized> Stored for &S {
+    fn stats(&self) -> CacheStats {
+        (**self).stats()
+    }
+
+    fn error(&self) -> Option<StoreError> {
+        (**self).error()
+    }
+}
+
+/// One evaluator's counts, kept by its calls and by the dispatcher, and the first store
+/// failure met on its points.
+#[derive(Default)]
+pub(super) struct Counts {
+    requested: AtomicU64,
+    simulated: AtomicU64,
+    failed: AtomicU64,
+    error: Mutex<Option<StoreError>>,
+}
+
+impl Counts {
+    /// One of its points was simulated (and `failed`, when the simulation failed).
+    pub(super) fn simulated(&self, failed: bool) {
+        self.simulated.fetch_add(1, Ordering::Relaxed);
+        if failed {
+            self.failed.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+
+    pub(super) fn note(&self, error: StoreError) {
+        self.error.lock().expect("error lock").get_or_insert(error);
+    }
+}
+
+/// What the callers and the dispatcher share.
 #[derive(Default)]
 pub(super) struct Shared {
-    pub(super) requested: AtomicU64,
-    pub(super) simulated: AtomicU64,
-    pub(super) failed: AtomicU64,
-    pub(super) error: Mutex<Option<StoreError>>,
     /// The objectives of the asks so far, by fingerprint: an ask carries its objective
     /// without copying it.
     pub(super) objectives: Mutex<HashMap<[u8; 32], Arc<Objective>>>,
@@ -69,10 +128,39 @@ pub(super) struct Shared {
     pub(super) sent: AtomicUsize,
 }
 
-impl Shared {
-    pub(super) fn note(&self, error: StoreError) {
-        tracing::error!(error = %error, "evaluation store failed");
-        self.error.lock().expect("error lock").get_or_insert(error);
+/// Closes its dispatcher when dropped (also when the closure of
+/// [`StoredEvaluator::with`] panics): it ends once nothing is under way.
+struct Closer(Sender<Message>);
+
+impl Drop for Closer {
+    fn drop(&mut self) {
+        let _ = self.0.send(Message::Close);
+    }
+}
+
+/// The channels between the callers, the dispatcher, its runners and its writer.
+struct Channels {
+    asks: Sender<Message>,
+    messages: Receiver<Message>,
+    rounds: Sender<Round>,
+    to_run: Mutex<Receiver<Round>>,
+    writes: Sender<Write>,
+    to_write: Receiver<Write>,
+}
+
+impl Channels {
+    fn new() -> Self {
+        let (asks, messages) = mpsc::channel();
+        let (rounds, to_run) = mpsc::channel::<Round>();
+        let (writes, to_write) = mpsc::channel::<Write>();
+        Channels {
+            asks,
+            messages,
+            rounds,
+            to_run: Mutex::new(to_run),
+            writes,
+            to_write,
+        }
     }
 }
 
@@ -81,10 +169,14 @@ impl<'d, E: Evaluator> StoredEvaluator<'d, E> {
     /// `inner`: the dispatcher, its runners and its writer live until `f` returns.
     pub fn with<R>(inner: E, store: &dyn Store, f: impl FnOnce(&StoredEvaluator<'_, E>) -> R) -> R {
         let shared = Shared::default();
-        let (asks, messages) = mpsc::channel();
-        let (rounds, to_run) = mpsc::channel::<Round>();
-        let (writes, to_write) = mpsc::channel::<Write>();
-        let to_run = Mutex::new(to_run);
+        let Channels {
+            asks,
+            messages,
+            rounds,
+            to_run,
+            writes,
+            to_write,
+        } = Channels::new();
         std::thread::scope(|scope| {
             let (inner, shared, to_run) = (&inner, &shared, &to_run);
             for _ in 0..ROUNDS {
@@ -97,7 +189,7 @@ impl<'d, E: Evaluator> StoredEvaluator<'d, E> {
             let back = asks.clone();
             std::thread::Builder::new()
                 .name("calib-store-write".into())
-                .spawn_scoped(scope, move || write_rounds(store, shared, to_write, back))
+                .spawn_scoped(scope, move || write_rounds(store, to_write, back))
                 .expect("a thread for store writes");
             std::thread::Builder::new()
                 .name("calib-dispatch".into())
@@ -105,33 +197,39 @@ impl<'d, E: Evaluator> StoredEvaluator<'d, E> {
                     Dispatcher::new(inner, store, shared, rounds, writes).run(messages)
                 })
                 .expect("a thread for the dispatcher");
-            let evaluator = StoredEvaluator {
-                inner,
-                shared,
-                asks,
-            };
-            // The handle's drop closes the dispatcher, also when `f` panics.
-            f(&evaluator)
+            let _closer = Closer(asks.clone());
+            f(&StoredEvaluator::new(inner, shared, asks))
         })
     }
 }
 
-impl<E> StoredEvaluator<'_, E> {
+impl<'d, E: Evaluator + ?Sized> StoredEvaluator<'d, E> {
+    fn new(inner: &'d E, shared: &'d Shared, asks: Sender<Message>) -> Self {
+        StoredEvaluator {
+            inner,
+            shared,
+            counts: Arc::default(),
+            asks,
+        }
+    }
+}
+
+impl<E: ?Sized> StoredEvaluator<'_, E> {
     /// `simulated`: points this evaluator had simulated; `cached`: the others.
     pub fn stats(&self) -> CacheStats {
-        let requested = self.shared.requested.load(Ordering::Relaxed);
-        let simulated = self.shared.simulated.load(Ordering::Relaxed);
+        let requested = self.counts.requested.load(Ordering::Relaxed);
+        let simulated = self.counts.simulated.load(Ordering::Relaxed);
         CacheStats {
             requested,
             simulated,
             cached: requested - simulated,
-            failed: self.shared.failed.load(Ordering::Relaxed),
+            failed: self.counts.failed.load(Ordering::Relaxed),
         }
     }
 
-    /// The first store failure met, if any (taken).
+    /// The first store failure met on this evaluator's points, if any (taken).
     pub fn error(&self) -> Option<StoreError> {
-        self.shared.error.lock().expect("error lock").take()
+        self.counts.error.lock().expect("error lock").take()
     }
 
     /// Points queued for a round not yet sent.
@@ -161,19 +259,81 @@ impl<E> StoredEvaluator<'_, E> {
     }
 }
 
-impl<E> Drop for StoredEvaluator<'_, E> {
-    fn drop(&mut self) {
-        let _ = self.asks.send(Message::Close);
+/// A dispatcher that lives as long as it is kept, with its runners and its writer: one per
+/// coordinator, shared by every campaign and analysis it runs ([`Self::evaluator`]). Dropped,
+/// it ends once nothing is under way.
+pub struct SharedDispatcher<E: ?Sized> {
+    inner: Arc<E>,
+    shared: Arc<Shared>,
+    asks: Sender<Message>,
+    threads: Vec<JoinHandle<()>>,
+}
+
+impl<E: Evaluator + ?Sized + 'static> SharedDispatcher<E> {
+    /// Start a dispatcher over `store` that simulates the misses with `inner`.
+    pub fn start(inner: Arc<E>, store: Arc<dyn Store>) -> Self {
+        let shared = Arc::new(Shared::default());
+        let Channels {
+            asks,
+            messages,
+            rounds,
+            to_run,
+            writes,
+            to_write,
+        } = Channels::new();
+        let to_run = Arc::new(to_run);
+        let spawn = |name: &str, run: Box<dyn FnOnce() + Send>| {
+            std::thread::Builder::new()
+                .name(name.into())
+                .spawn(run)
+                .expect("a thread of the dispatcher")
+        };
+        let mut threads = Vec::new();
+        for _ in 0..ROUNDS {
+            let (inner, to_run, back) = (inner.clone(), to_run.clone(), asks.clone());
+            let run = move || run_rounds(&*inner, &to_run, back);
+            threads.push(spawn("calib-round", Box::new(run)));
+        }
+        let (writer_store, back) = (store.clone(), asks.clone());
+        let write = move || write_rounds(&*writer_store, to_write, back);
+        threads.push(spawn("calib-store-write", Box::new(write)));
+        let (dispatch_inner, dispatch_shared) = (inner.clone(), shared.clone());
+        let dispatch = move || {
+            Dispatcher::new(&*dispatch_inner, &*store, &dispatch_shared, rounds, writes)
+                .run(messages)
+        };
+        threads.push(spawn("calib-dispatch", Box::new(dispatch)));
+        SharedDispatcher {
+            inner,
+            shared,
+            asks,
+            threads,
+        }
+    }
+
+    /// An evaluator for one campaign or analysis: its own counts, every point through this
+    /// dispatcher.
+    pub fn evaluator(&self) -> StoredEvaluator<'_, E> {
+        StoredEvaluator::new(&self.inner, &self.shared, self.asks.clone())
     }
 }
 
-impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
+impl<E: ?Sized> Drop for SharedDispatcher<E> {
+    fn drop(&mut self) {
+        let _ = self.asks.send(Message::Close);
+        for thread in self.threads.drain(..) {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl<E: Evaluator + ?Sized> Evaluator for StoredEvaluator<'_, E> {
     fn evaluate(
         &self,
         objective: &Objective,
         points: &[Vec<f64>],
     ) -> Result<Vec<Evaluation>, Fault> {
-        self.shared
+        self.counts
             .requested
             .fetch_add(points.len() as u64, Ordering::Relaxed);
         if points.is_empty() {
@@ -188,6 +348,7 @@ impl<E: Evaluator> Evaluator for StoredEvaluator<'_, E> {
             objective: self.objective(objective),
             keys,
             points: points.to_vec(),
+            counts: self.counts.clone(),
             reply,
         };
         let stopped = || Fault::unavailable("the evaluation dispatcher stopped");
@@ -213,6 +374,7 @@ pub(super) struct Ask {
     pub(super) objective: Arc<Objective>,
     pub(super) keys: Vec<EvaluationKey>,
     pub(super) points: Vec<Vec<f64>>,
+    pub(super) counts: Arc<Counts>,
     pub(super) reply: SyncSender<Reply>,
 }
 
@@ -234,11 +396,12 @@ pub(super) enum Message {
         round: u64,
         payload: Box<dyn Any + Send>,
     },
-    /// A round's answers are durable.
+    /// A round's answers are durable, or the store failed to keep them.
     Written {
         round: u64,
+        error: Option<StoreError>,
     },
-    /// The handle is gone: no more asks.
+    /// The dispatcher's owner is gone: no more asks.
     Close,
 }
 
@@ -262,7 +425,11 @@ pub(super) struct Write {
 
 /// A runner: each round's groups sent side by side, the first on this thread, the others
 /// on threads of their own; the answers (or the panic) back to the dispatcher.
-fn run_rounds<E: Evaluator>(inner: &E, rounds: &Mutex<Receiver<Round>>, back: Sender<Message>) {
+fn run_rounds<E: Evaluator + ?Sized>(
+    inner: &E,
+    rounds: &Mutex<Receiver<Round>>,
+    back: Sender<Message>,
+) {
     loop {
         let round = match rounds.lock().expect("rounds lock").recv() {
             Ok(round) => round,
@@ -296,17 +463,17 @@ fn run_rounds<E: Evaluator>(inner: &E, rounds: &Mutex<Receiver<Round>>, back: Se
 }
 
 /// The writer: each round's answers made durable with one write, then reported.
-fn write_rounds(
-    store: &dyn Store,
-    shared: &Shared,
-    writes: Receiver<Write>,
-    back: Sender<Message>,
-) {
+fn write_rounds(store: &dyn Store, writes: Receiver<Write>, back: Sender<Message>) {
     for write in writes {
-        if let Err(e) = store.put_evaluations(&write.entries) {
-            shared.note(e);
+        let error = store.put_evaluations(&write.entries).err();
+        if let Some(e) = &error {
+            tracing::error!(error = %e, "evaluation store failed");
         }
-        if back.send(Message::Written { round: write.round }).is_err() {
+        let written = Message::Written {
+            round: write.round,
+            error,
+        };
+        if back.send(written).is_err() {
             return;
         }
     }

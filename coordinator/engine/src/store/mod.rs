@@ -30,7 +30,7 @@ mod key_filter;
 mod memory;
 mod sled;
 
-pub use self::evaluator::StoredEvaluator;
+pub use self::evaluator::{SharedDispatcher, Stored, StoredEvaluator};
 pub use self::memory::MemoryStore;
 pub use self::sled::SledStore;
 
@@ -167,7 +167,7 @@ pub struct StoreStats {
 }
 
 /// A failure of the store itself (disk, corruption): never the user's input.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug, Clone, thiserror::Error)]
 pub enum StoreError {
     #[error("cannot open the store at {path}: {message}")]
     Open { path: PathBuf, message: String },

@@ -6,6 +6,7 @@ use crate::evaluator::{Evaluator, Fault};
 use crate::measurement::Measurement;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::Arc;
 use std::time::Duration;
 
 fn key(i: u64) -> EvaluationKey {
@@ -1158,4 +1159,73 @@ fn datasets_are_files_beside_the_database_and_those_in_the_tree_are_still_read()
     copy.put_raw(Collection::Datasets, &listed).unwrap();
     assert!(other.path().join("datasets").join(hex(&old)).exists());
     assert_eq!(copy.stats().unwrap().datasets, 2);
+}
+
+/// Two campaigns' evaluators of one shared dispatcher ask for the same points while the
+/// first's are simulated: each point is simulated once, counted by the evaluator that sent
+/// it, answered to the other as a hit; both get every answer.
+#[test]
+fn two_evaluators_of_one_shared_dispatcher_simulate_a_shared_point_once() {
+    let inner = Arc::new(NoRoom::default());
+    let store: Arc<dyn Store> = Arc::new(MemoryStore::new());
+    let dispatcher = SharedDispatcher::start(inner.clone(), store.clone());
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..6).map(|i| vec![i as f64 * 0.1]).collect();
+    let (first, second) = (dispatcher.evaluator(), dispatcher.evaluator());
+    let ask = |evaluator: &StoredEvaluator<'_, NoRoom>, points: &[Vec<f64>]| {
+        let answers = evaluator.evaluate(&objective, points).unwrap();
+        for (p, a) in points.iter().zip(answers) {
+            assert_eq!(a.objective, p[0]);
+        }
+    };
+    std::thread::scope(|scope| {
+        let first_asks = scope.spawn(|| ask(&first, &points[..4]));
+        assert!(inner.started(1, Duration::from_secs(10)), "the first batch");
+        // The second asks for two of the first's points in flight, and two others.
+        let second_asks = scope.spawn(|| ask(&second, &points[2..]));
+        await_that("the second to join the first's points", || {
+            first.waiting_on_others() == 2
+        });
+        inner.let_go();
+        first_asks.join().unwrap();
+        second_asks.join().unwrap();
+    });
+    assert_eq!(inner.counting.simulated.load(Ordering::SeqCst), 6);
+    let (a, b) = (first.stats(), second.stats());
+    assert_eq!((a.requested, a.simulated, a.cached), (4, 4, 0));
+    assert_eq!((b.requested, b.simulated, b.cached), (4, 2, 2));
+    // Every answer was made durable by the one writer.
+    let keys: Vec<EvaluationKey> = points
+        .iter()
+        .map(|p| evaluation_key(&objective, p))
+        .collect();
+    let stored = store.get_evaluations(&keys).unwrap();
+    assert!(stored.iter().all(Option::is_some));
+}
+
+/// A shared dispatcher outlives the evaluators it hands out: one dropped, the next still
+/// answers, from the store what the first simulated; dropping the dispatcher ends its
+/// threads.
+#[test]
+fn a_shared_dispatcher_serves_evaluators_one_after_another() {
+    let inner = Arc::new(Counting::default());
+    let dispatcher = SharedDispatcher::start(inner.clone(), Arc::new(MemoryStore::new()));
+    let objective = objective(false);
+    let points: Vec<Vec<f64>> = (0..3).map(|i| vec![i as f64]).collect();
+    {
+        let first = dispatcher.evaluator();
+        first.evaluate(&objective, &points).unwrap();
+        assert_eq!(first.stats().simulated, 3);
+    }
+    let second = dispatcher.evaluator();
+    let answers = second.evaluate(&objective, &points).unwrap();
+    assert_eq!(answers[2].objective, 2.0);
+    assert_eq!((second.stats().simulated, second.stats().cached), (0, 3));
+    drop(second);
+    drop(dispatcher);
+    assert_eq!(
+        Arc::strong_count(&inner),
+        1,
+        "the dispatcher's threads ended"
+    );
 }

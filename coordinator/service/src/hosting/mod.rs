@@ -28,11 +28,13 @@ use calib_analysis::report;
 use calib_engine::calibration::{self, Calibration};
 use calib_engine::campaign::Campaign;
 use calib_engine::error::{Error, Result};
+use calib_engine::evaluator::CacheStats;
 use calib_engine::evaluator::{Evaluator, Fault, FaultKind, Simulator};
 use calib_engine::objective::{Evaluation, Objective};
 use calib_engine::optim::problem::Progress;
 use calib_engine::store::{
-    hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, RunBest, Store,
+    hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, RunBest, SharedDispatcher, Store,
+    StoreError, Stored,
 };
 use datasets::Datasets;
 use fmus::Fmus;
@@ -154,6 +156,9 @@ struct Live {
 pub struct Campaigns {
     store: Arc<dyn Store>,
     engine: Arc<dyn Engine>,
+    /// The one dispatcher every hosted campaign's evaluations go through: a point one
+    /// campaign has in flight is simulated once for all, one writer stores every answer.
+    dispatcher: SharedDispatcher<dyn Engine>,
     datasets: Datasets,
     /// Uploaded FMUs, when this coordinator takes them.
     fmus: Option<Fmus>,
@@ -176,6 +181,7 @@ impl Campaigns {
         results: PathBuf,
     ) -> Self {
         Self {
+            dispatcher: SharedDispatcher::start(engine.clone(), store.clone()),
             store,
             engine,
             datasets,

@@ -44,12 +44,14 @@ impl Campaigns {
             live,
             evaluations: AtomicU64::new(0),
         };
-        let evaluator = Cancellable {
-            inner: &*self.engine,
-            cancel: &live.cancel,
-        };
         let mut pause = Duration::from_secs(1);
         loop {
+            // Each try counts its own evaluations, through the coordinator's dispatcher.
+            let stored = self.dispatcher.evaluator();
+            let evaluator = Cancellable {
+                inner: &stored,
+                cancel: &live.cancel,
+            };
             progress.evaluations.store(0, Ordering::SeqCst);
             // A run again replays the store from the start: so does its progress.
             live.state.send_modify(|s| {
@@ -57,7 +59,7 @@ impl Campaigns {
                 s.runs.clear();
                 s.run_best.clear();
             });
-            match calibration::calibrate_with_store(campaign, &evaluator, &*self.store, &progress) {
+            match calibration::calibrate_through(campaign, &evaluator, &*self.store, &progress) {
                 Err(Error::Fault(fault)) if fault.kind == FaultKind::Unavailable => {
                     tracing::warn!(campaign = %campaign.name, error = %fault, "waiting for workers");
                     live.state
@@ -284,7 +286,7 @@ impl Progress for LiveProgress<'_> {
     }
 }
 
-/// An evaluator that refuses every batch once its campaign is cancelled.
+/// An evaluator that refuses every ask once its campaign is cancelled.
 struct Cancellable<'a, E: ?Sized> {
     inner: &'a E,
     cancel: &'a AtomicBool,
@@ -308,5 +310,15 @@ impl<E: Evaluator + ?Sized> Evaluator for Cancellable<'_, E> {
 
     fn release(&self, objective: &Objective) {
         self.inner.release(objective)
+    }
+}
+
+impl<S: Stored + ?Sized> Stored for Cancellable<'_, S> {
+    fn stats(&self) -> CacheStats {
+        self.inner.stats()
+    }
+
+    fn error(&self) -> Option<StoreError> {
+        self.inner.error()
     }
 }
