@@ -58,6 +58,10 @@ pub struct StoredEvaluator<'d, E: ?Sized> {
     inner: &'d E,
     shared: &'d Shared,
     counts: Arc<Counts>,
+    /// The objectives of its asks so far, by fingerprint: an ask carries its objective
+    /// without copying it (an objective holds its record). They go with the evaluator, not
+    /// with a dispatcher that outlives it.
+    objectives: Mutex<HashMap<[u8; 32], Arc<Objective>>>,
     asks: Sender<Message>,
 }
 
@@ -117,9 +121,6 @@ impl Counts {
 /// What the callers and the dispatcher share.
 #[derive(Default)]
 pub(super) struct Shared {
-    /// The objectives of the asks so far, by fingerprint: an ask carries its objective
-    /// without copying it.
-    pub(super) objectives: Mutex<HashMap<[u8; 32], Arc<Objective>>>,
     /// Points queued for the next round (for tests that wait for a caller to queue).
     pub(super) queued: AtomicUsize,
     /// Asked points waiting on a point another ask sent (for tests).
@@ -209,6 +210,7 @@ impl<'d, E: Evaluator + ?Sized> StoredEvaluator<'d, E> {
             inner,
             shared,
             counts: Arc::default(),
+            objectives: Mutex::default(),
             asks,
         }
     }
@@ -251,7 +253,7 @@ impl<E: ?Sized> StoredEvaluator<'_, E> {
     }
 
     fn objective(&self, objective: &Objective) -> Arc<Objective> {
-        let mut objectives = self.shared.objectives.lock().expect("objectives lock");
+        let mut objectives = self.objectives.lock().expect("objectives lock");
         objectives
             .entry(objective.fingerprint())
             .or_insert_with(|| Arc::new(objective.clone()))
