@@ -210,6 +210,21 @@ pub fn diagnose_with_store<E>(
 where
     E: Evaluator + Simulator,
 {
+    StoredEngine::with(engine, store, |stored| {
+        diagnose_through(campaign, stored, progress)
+    })
+}
+
+/// [`diagnose_with_store`] through `stored`: an engine over an evaluator of a dispatcher
+/// others share (a coordinator's).
+pub fn diagnose_through<E>(
+    campaign: &Campaign,
+    stored: &StoredEngine<'_, E>,
+    progress: &dyn Progress,
+) -> Result<Diagnosis>
+where
+    E: Evaluator + Simulator,
+{
     if !campaign.more.is_empty() {
         return Err(Error::InvalidRequest(format!(
             "the diagnosis takes one record: this campaign fits {} experiments together; \
@@ -217,10 +232,8 @@ where
             1 + campaign.more.len()
         )));
     }
-    let (outcome, error, stats) = StoredEngine::with(engine, store, |stored| {
-        let outcome = diagnose_on(campaign, stored, progress);
-        (outcome, stored.error(), stored.stats())
-    });
+    let outcome = diagnose_on(campaign, stored, progress);
+    let (error, stats) = (stored.error(), stored.stats());
     if let Some(e) = error {
         return Err(e.into());
     }

@@ -54,7 +54,7 @@ use calib_engine::objective::{Objective, FAILURE_PENALTY};
 use calib_engine::optim::problem::Silent;
 use calib_engine::optim::space::UnitBox;
 use calib_engine::store::engine::{EngineStats, StoredEngine};
-use calib_engine::store::{encoding, CampaignStatus, Store};
+use calib_engine::store::{encoding, CampaignStatus, Store, Stored};
 use serde::Serialize;
 use std::time::{Duration, Instant};
 use walk::{End, Side};
@@ -584,6 +584,38 @@ pub fn profile<E: Evaluator + Simulator>(
     store: &dyn Store,
     settings: &Settings,
 ) -> Result<Profiles> {
+    let through = |f: &mut dyn FnMut(&StoredEngine<'_, E>)| {
+        StoredEngine::with(engine, store, |stored| f(stored))
+    };
+    profile_with(campaign, engine, store, settings, &through)
+}
+
+/// [`profile`], its own evaluations through `evaluator`: one of a dispatcher over `store`
+/// that others share (a coordinator's). A best point the store lacks is calibrated with a
+/// dispatcher of its own, so that its evaluations are counted apart.
+pub fn profile_through<E: Evaluator + Simulator>(
+    campaign: &Campaign,
+    engine: &E,
+    evaluator: &dyn Stored,
+    store: &dyn Store,
+    settings: &Settings,
+) -> Result<Profiles> {
+    let through = |f: &mut dyn FnMut(&StoredEngine<'_, E>)| {
+        f(&StoredEngine::over(evaluator, engine));
+    };
+    profile_with(campaign, engine, store, settings, &through)
+}
+
+/// Runs a closure with the engine a profile's own evaluations go through.
+type Through<'r, E> = &'r dyn Fn(&mut dyn FnMut(&StoredEngine<'_, E>));
+
+fn profile_with<E: Evaluator + Simulator>(
+    campaign: &Campaign,
+    engine: &E,
+    store: &dyn Store,
+    settings: &Settings,
+    through: Through<'_, E>,
+) -> Result<Profiles> {
     let started = Instant::now();
     settings.check()?;
     if campaign.free.is_empty() {
@@ -600,7 +632,8 @@ pub fn profile<E: Evaluator + Simulator>(
     let objective = Objective::new(campaign, &measurement)?;
     let (point, best_objective, best_from, calibration) =
         best_point(campaign, engine, store, &dataset)?;
-    let (outcome, error, stored_stats) = StoredEngine::with(engine, store, |stored| {
+    let mut ran = None;
+    through(&mut |stored| {
         let outcome = (|| {
             let (linearised, correlation, threshold) =
                 local_statistics(stored, &objective, &campaign.free, &point, best_objective)?;
@@ -616,8 +649,9 @@ pub fn profile<E: Evaluator + Simulator>(
             let profiles = profile_around(&around, &which, stored, settings.max_steps)?;
             Ok::<_, Error>((threshold, profiles))
         })();
-        (outcome, stored.error(), stored.stats())
+        ran = Some((outcome, stored.error(), stored.stats()));
     });
+    let (outcome, error, stored_stats) = ran.expect("the profile's engine ran");
     if let Some(e) = error {
         return Err(e.into());
     }

@@ -19,7 +19,7 @@ use calib_engine::evaluator::{CacheStats, Evaluator};
 use calib_engine::limits::MAX_SENSITIVITY_SAMPLES;
 use calib_engine::objective::{Evaluation, Objective};
 use calib_engine::optim::space::UnitBox;
-use calib_engine::store::{encoding, Store, StoredEvaluator};
+use calib_engine::store::{encoding, Store, Stored, StoredEvaluator};
 use sampling::{MorrisEffects, SobolIndices};
 
 /// The total index on the objective at and above which a parameter is influential.
@@ -385,6 +385,20 @@ pub fn analyse_reporting<E: Evaluator>(
     settings: Settings,
     progress: &(dyn Fn(usize, usize) + Sync),
 ) -> Result<Sensitivity> {
+    StoredEvaluator::with(evaluator, store, |stored| {
+        analyse_through(campaign, stored, store, settings, progress)
+    })
+}
+
+/// [`analyse_reporting`] through `evaluator`: one of a dispatcher over `store` that others
+/// share (a coordinator's).
+pub fn analyse_through<S: Stored>(
+    campaign: &Campaign,
+    evaluator: &S,
+    store: &dyn Store,
+    settings: Settings,
+    progress: &(dyn Fn(usize, usize) + Sync),
+) -> Result<Sensitivity> {
     let dim = campaign.free.len();
     check(dim, &settings)?;
     let measurement = load_measurement(campaign)?;
@@ -394,58 +408,56 @@ pub fn analyse_reporting<E: Evaluator>(
         store.put_dataset(&dataset, &encoding::encode_measurement(&measurement))?;
     }
     let space = UnitBox::new(&campaign.free);
-    StoredEvaluator::with(evaluator, store, |evaluator| {
-        let outputs = objective.series_count();
-        let total = planned(dim, settings);
-        let done = std::cell::Cell::new(0);
-        progress(0, total);
-        let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
-            let mut values = Vec::with_capacity(unit.len());
-            for slice in unit.chunks(SLICE_POINTS) {
-                let physical: Vec<Vec<f64>> = slice.iter().map(|u| space.to_physical(u)).collect();
-                let evaluations = evaluator.evaluate(&objective, &physical)?;
-                if let Some(e) = evaluator.error() {
-                    return Err(e.into());
-                }
-                values.extend(evaluations.iter().map(|e| quantities(&objective, e)));
-                done.set(done.get() + slice.len());
-                progress(done.get(), total);
+    let outputs = objective.series_count();
+    let total = planned(dim, settings);
+    let done = std::cell::Cell::new(0);
+    progress(0, total);
+    let evaluate = |unit: &[Vec<f64>]| -> Result<Vec<Option<Vec<f64>>>> {
+        let mut values = Vec::with_capacity(unit.len());
+        for slice in unit.chunks(SLICE_POINTS) {
+            let physical: Vec<Vec<f64>> = slice.iter().map(|u| space.to_physical(u)).collect();
+            let evaluations = evaluator.evaluate(&objective, &physical)?;
+            if let Some(e) = evaluator.error() {
+                return Err(e.into());
             }
-            Ok(values)
-        };
-        let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
-            values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
-        };
-        let mut result = empty_result(campaign, &objective, settings);
-        if settings.methods.morris() {
-            let design = sampling::morris_design(dim, settings.samples, settings.seed);
-            let values = evaluate(&design)?;
-            result.morris_points = design.len();
-            result.morris_failed = values.iter().filter(|v| v.is_none()).count();
-            for q in 0..=outputs {
-                result.quantities[q].morris =
-                    Some(sampling::morris_effects(&design, &column(&values, q), dim));
-            }
+            values.extend(evaluations.iter().map(|e| quantities(&objective, e)));
+            done.set(done.get() + slice.len());
+            progress(done.get(), total);
         }
-        if settings.methods.sobol() {
-            let n = settings.samples;
-            let design = sampling::saltelli_design(dim, n, settings.seed);
-            let values = evaluate(&design)?;
-            result.sobol_points = design.len();
-            result.sobol_failed = values.iter().filter(|v| v.is_none()).count();
-            result.sobol_excluded = (0..n)
-                .filter(|&j| (0..dim + 2).any(|block| values[block * n + j].is_none()))
-                .count();
-            for q in 0..=outputs {
-                result.quantities[q].sobol = Some(sampling::sobol_indices(
-                    &column(&values, q),
-                    dim,
-                    n,
-                    settings.seed,
-                ));
-            }
+        Ok(values)
+    };
+    let column = |values: &[Option<Vec<f64>>], q: usize| -> Vec<Option<f64>> {
+        values.iter().map(|v| v.as_ref().map(|v| v[q])).collect()
+    };
+    let mut result = empty_result(campaign, &objective, settings);
+    if settings.methods.morris() {
+        let design = sampling::morris_design(dim, settings.samples, settings.seed);
+        let values = evaluate(&design)?;
+        result.morris_points = design.len();
+        result.morris_failed = values.iter().filter(|v| v.is_none()).count();
+        for q in 0..=outputs {
+            result.quantities[q].morris =
+                Some(sampling::morris_effects(&design, &column(&values, q), dim));
         }
-        result.stats = evaluator.stats();
-        Ok(result)
-    })
+    }
+    if settings.methods.sobol() {
+        let n = settings.samples;
+        let design = sampling::saltelli_design(dim, n, settings.seed);
+        let values = evaluate(&design)?;
+        result.sobol_points = design.len();
+        result.sobol_failed = values.iter().filter(|v| v.is_none()).count();
+        result.sobol_excluded = (0..n)
+            .filter(|&j| (0..dim + 2).any(|block| values[block * n + j].is_none()))
+            .count();
+        for q in 0..=outputs {
+            result.quantities[q].sobol = Some(sampling::sobol_indices(
+                &column(&values, q),
+                dim,
+                n,
+                settings.seed,
+            ));
+        }
+    }
+    result.stats = evaluator.stats();
+    Ok(result)
 }

@@ -6,7 +6,7 @@
 
 use crate::evaluator::{CacheStats, Evaluator, Fault, Outputs, Simulator};
 use crate::objective::{Evaluation, Objective};
-use crate::store::{Store, StoreError, StoredEvaluator};
+use crate::store::{Store, StoreError, Stored, StoredEvaluator};
 use serde::Serialize;
 use std::sync::atomic::{AtomicU64, Ordering};
 
@@ -22,22 +22,28 @@ pub struct EngineStats {
 
 /// Evaluations through a store, trajectories straight from the inner engine.
 pub struct StoredEngine<'a, E> {
-    evaluator: &'a StoredEvaluator<'a, &'a E>,
+    evaluator: &'a dyn Stored,
     inner: &'a E,
     trajectories: AtomicU64,
 }
 
-impl<E: Evaluator + Simulator> StoredEngine<'_, E> {
+impl<'a, E: Evaluator + Simulator> StoredEngine<'a, E> {
     /// Run `f` with an engine that evaluates through `store` (the store's dispatcher lives
     /// until `f` returns) and simulates trajectories with `inner`.
     pub fn with<R>(inner: &E, store: &dyn Store, f: impl FnOnce(&StoredEngine<'_, E>) -> R) -> R {
         StoredEvaluator::with(inner, store, |evaluator| {
-            f(&StoredEngine {
-                evaluator,
-                inner,
-                trajectories: AtomicU64::new(0),
-            })
+            f(&StoredEngine::over(evaluator, inner))
         })
+    }
+
+    /// An engine that evaluates through `evaluator` (one of a dispatcher others share, a
+    /// coordinator's) and simulates trajectories with `inner`.
+    pub fn over(evaluator: &'a dyn Stored, inner: &'a E) -> Self {
+        StoredEngine {
+            evaluator,
+            inner,
+            trajectories: AtomicU64::new(0),
+        }
     }
 
     pub fn stats(&self) -> EngineStats {

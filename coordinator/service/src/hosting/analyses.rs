@@ -97,10 +97,10 @@ impl Campaigns {
             let progress = |done: usize, _planned: usize| {
                 state.send_modify(|s| s.evaluations = done as u64);
             };
-            let engine = &*this.engine;
-            let s = sensitivity::analyse_reporting(
+            let evaluator = this.dispatcher.evaluator();
+            let s = sensitivity::analyse_through(
                 &campaign,
-                engine,
+                &evaluator,
                 &*this.store,
                 settings,
                 &progress,
@@ -137,8 +137,9 @@ impl Campaigns {
         }
         let name = format!("profile {}", campaign.name);
         let receiver = self.analysis(h.finish(), 0, name, move |this, _state, folder| {
-            let engine = &*this.engine;
-            let p = profile::profile(&campaign, &engine, &*this.store, &settings)?;
+            let (engine, evaluator) = (&*this.engine, this.dispatcher.evaluator());
+            let p =
+                profile::profile_through(&campaign, &engine, &evaluator, &*this.store, &settings)?;
             let conclusions = p.conclusions();
             Ok(Finished {
                 report: AnalysisReport::Profile(profile::report::profile_json(&p)),

@@ -79,23 +79,20 @@ impl Campaigns {
             state: &state,
             evaluations: AtomicU64::new(0),
         };
-        let engine = &*self.engine;
-        let outcome = diagnosis::diagnose_with_store(&campaign, &engine, &*self.store, &progress)
-            .and_then(|d| {
-                let found = if discover {
-                    let (found, error) = StoredEngine::with(&engine, &*self.store, |stored| {
-                        let found = found_outside_the_library(&d, stored, &progress);
-                        (found, stored.error())
-                    });
-                    if let Some(e) = error {
-                        return Err(e.into());
-                    }
-                    Some(found?)
-                } else {
-                    None
-                };
-                Ok((d, found))
-            });
+        let (engine, evaluator) = (&*self.engine, self.dispatcher.evaluator());
+        let stored = StoredEngine::over(&evaluator, &engine);
+        let outcome = diagnosis::diagnose_through(&campaign, &stored, &progress).and_then(|d| {
+            let found = if discover {
+                let found = found_outside_the_library(&d, &stored, &progress);
+                if let Some(e) = stored.error() {
+                    return Err(e.into());
+                }
+                Some(found?)
+            } else {
+                None
+            };
+            Ok((d, found))
+        });
         match outcome {
             Ok((d, found)) => {
                 // Apart from the plain diagnosis' folder: both may be asked for.
