@@ -7,11 +7,10 @@
 //! evaluator to each campaign and analysis: a point one of them has in flight is simulated
 //! once for all, and one writer makes every answer durable. The callers (the runs of the
 //! campaigns, each asking for a point or two at a time) send it `(objective, points, reply)`
-//! and wait for their reply; it
-//! looks up what a drained batch of asks needs in one store lookup, keeps the points being
-//! simulated in one in-flight map (point → who waits for it) so that a point is simulated
-//! once however many runs ask, sends what is missing in rounds to the inner evaluator, has
-//! each round's answers written durably, and only then answers.
+//! and wait for their reply; it looks up what a drained batch of asks needs in one store
+//! lookup, keeps the points being simulated in one in-flight map (point → who waits for it)
+//! so that a point is simulated once however many runs ask, sends what is missing in rounds
+//! to the inner evaluator, has each round's answers written durably, and only then answers.
 //!
 //! **Rounds.** A round is everything queued when it sets out, one batch per objective, sent
 //! side by side by a runner thread ([`ROUNDS`] runners: a second round fills idle workers
