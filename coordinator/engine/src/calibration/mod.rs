@@ -15,7 +15,7 @@ use crate::optim::space::UnitBox;
 use crate::outcome::CalibrationOutcome;
 use crate::store::{
     encoding, hex, unhex32, CampaignId, CampaignRecord, CampaignStatus, MemoryStore, RunBest,
-    Store, Stored, StoredEvaluator,
+    SharedDispatcher, Store, Stored, StoredEvaluator,
 };
 use std::time::{Duration, Instant};
 
@@ -123,7 +123,7 @@ pub fn calibrate_with_store<E: Evaluator>(
 
 /// Calibrate `campaign` as [`calibrate_with_store`] does, through `stored`: an evaluator of
 /// a dispatcher over `store` that others share (a coordinator's,
-/// [`SharedDispatcher`](crate::store::SharedDispatcher)).
+/// [`SharedDispatcher`]).
 pub fn calibrate_through<S: Stored>(
     campaign: &Campaign,
     stored: &S,
@@ -167,6 +167,42 @@ pub fn resume_unfinished_except<E: Evaluator>(
     evaluator: &E,
     progress: &dyn Progress,
     skip: &dyn Fn(&CampaignId) -> bool,
+    finished: impl FnMut(Calibration),
+) -> Result<()> {
+    let run = |campaign: &Campaign, measurement: Measurement| {
+        calibrate_measured(campaign, measurement, evaluator, store, progress)
+    };
+    resume_each(store, &run, skip, finished)
+}
+
+/// [`resume_unfinished_except`], each campaign through an evaluator of `dispatcher`, one
+/// over `store` that others share (a coordinator's).
+pub fn resume_unfinished_through<E: Evaluator + ?Sized + 'static>(
+    store: &dyn Store,
+    dispatcher: &SharedDispatcher<E>,
+    progress: &dyn Progress,
+    skip: &dyn Fn(&CampaignId) -> bool,
+    finished: impl FnMut(Calibration),
+) -> Result<()> {
+    let run = |campaign: &Campaign, measurement: Measurement| {
+        calibrate_stored(
+            campaign,
+            measurement,
+            &dispatcher.evaluator(),
+            store,
+            progress,
+        )
+    };
+    resume_each(store, &run, skip, finished)
+}
+
+/// Calibrates a campaign on its record: how a resume runs each campaign.
+type Run<'r> = &'r dyn Fn(&Campaign, Measurement) -> Result<Calibration>;
+
+fn resume_each(
+    store: &dyn Store,
+    run: Run<'_>,
+    skip: &dyn Fn(&CampaignId) -> bool,
     mut finished: impl FnMut(Calibration),
 ) -> Result<()> {
     for (id, record) in store.campaigns()? {
@@ -174,7 +210,7 @@ pub fn resume_unfinished_except<E: Evaluator>(
             continue;
         }
         tracing::info!(campaign = %record.name, id = %hex(&id), "resuming campaign");
-        match resume(store, &id, &record, evaluator, progress) {
+        match resume(store, &id, &record, run) {
             Ok(calibration) => finished(calibration),
             Err(Error::Store(e)) => return Err(Error::Store(e)),
             // No result without workers: it stays marked running for a later resume.
@@ -190,12 +226,11 @@ pub fn resume_unfinished_except<E: Evaluator>(
     Ok(())
 }
 
-fn resume<E: Evaluator>(
+fn resume(
     store: &dyn Store,
     id: &CampaignId,
     record: &CampaignRecord,
-    evaluator: &E,
-    progress: &dyn Progress,
+    run: Run<'_>,
 ) -> Result<Calibration> {
     let campaign = Campaign::parse(&record.spec, &record.source)?;
     let hash = unhex32(&record.dataset).ok_or_else(|| {
@@ -216,7 +251,7 @@ fn resume<E: Evaluator>(
             format!("superseded by campaign {}", hex(&now)),
         )?;
     }
-    calibrate_measured(&campaign, measurement, evaluator, store, progress)
+    run(&campaign, measurement)
 }
 
 fn mark_failed(

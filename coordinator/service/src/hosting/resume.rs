@@ -5,13 +5,13 @@
 //! worker could do its points stays running, and is resumed again once a worker is up
 //! ([`resume_until_finished`]).
 
+use super::Campaigns;
 use crate::dispatch::{Health, WorkerPool};
 use calib_analysis::report;
 use calib_engine::calibration::{self, Calibration};
 use calib_engine::error::Result;
-use calib_engine::evaluator::Evaluator;
 use calib_engine::optim::problem::Silent;
-use calib_engine::store::{CampaignId, CampaignStatus, Store};
+use calib_engine::store::{CampaignId, CampaignStatus};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -37,27 +37,19 @@ pub fn result_folder(calibration: &Calibration, results: Option<&Path>) -> PathB
     }
 }
 
-/// Resume every unfinished campaign of `store` through `evaluator` and write each one's
-/// results as it finishes; the number of campaigns finished. Blocks for as long as the
-/// campaigns run: call it on a thread of its own, never on the async runtime.
-pub fn resume_campaigns<E: Evaluator>(
-    store: &dyn Store,
-    evaluator: &E,
-    results: Option<&Path>,
-) -> Result<usize> {
-    resume_campaigns_except(store, evaluator, results, &|_| false)
-}
-
-/// [`resume_campaigns`], leaving alone the campaigns `skip` names (submitted through the
-/// Calibration API and running in this coordinator already).
-pub fn resume_campaigns_except<E: Evaluator>(
-    store: &dyn Store,
-    evaluator: &E,
+/// Resume every unfinished campaign of the store of `campaigns`, through its dispatcher, and
+/// write each one's results as it finishes, leaving alone the campaigns `skip` names
+/// (submitted through the Calibration API and running in this coordinator already); the
+/// number of campaigns finished. Blocks for as long as the campaigns run: call it on a
+/// thread of its own, never on the async runtime.
+pub fn resume_campaigns_except(
+    campaigns: &Campaigns,
     results: Option<&Path>,
     skip: &dyn Fn(&CampaignId) -> bool,
 ) -> Result<usize> {
     let mut finished = 0;
-    calibration::resume_unfinished_except(store, evaluator, &Silent, skip, |calibration| {
+    let (store, dispatcher) = (&*campaigns.store, &campaigns.dispatcher);
+    calibration::resume_unfinished_through(store, dispatcher, &Silent, skip, |calibration| {
         finished += 1;
         let folder = result_folder(&calibration, results);
         let best = calibration.best_run();
@@ -91,14 +83,13 @@ pub struct ResumeControl {
     pub passes: AtomicUsize,
 }
 
-/// [`resume_campaigns`] again and again until the store holds no running campaign: after a
+/// [`resume_campaigns_except`] again and again until the store holds no running campaign: after a
 /// pass that left some running (their workers went away), wait until a worker of `pool` is
 /// up and a pause has passed (doubling from the probe interval to a minute while passes keep
 /// failing), then resume them. Ends early when `control.stop` is set; the number of
 /// campaigns finished.
-pub fn resume_until_finished<E: Evaluator>(
-    store: &dyn Store,
-    evaluator: &E,
+pub fn resume_until_finished(
+    campaigns: &Campaigns,
     results: Option<&Path>,
     pool: &WorkerPool,
     control: &ResumeControl,
@@ -108,9 +99,10 @@ pub fn resume_until_finished<E: Evaluator>(
     let mut pause = tick;
     let mut finished = 0;
     loop {
-        finished += resume_campaigns_except(store, evaluator, results, skip)?;
+        finished += resume_campaigns_except(campaigns, results, skip)?;
         control.passes.fetch_add(1, Ordering::SeqCst);
-        let running = store
+        let running = campaigns
+            .store
             .campaigns()?
             .iter()
             .filter(|(id, r)| r.status == CampaignStatus::Running && !skip(id))

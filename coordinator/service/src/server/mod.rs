@@ -213,7 +213,7 @@ pub fn serve_coordinator(
         }
     }
     let control = Arc::new(resume::ResumeControl::default());
-    let resume = store.map(|store| spawn_resume(store, &config, &pool, &control, &campaigns));
+    let resume = store.map(|_| spawn_resume(&config, &pool, &control, &campaigns));
     Ok(RunningCoordinator {
         address,
         pool,
@@ -346,26 +346,21 @@ fn spawn_grpc(
 /// Finish, on a thread of their own, the campaigns a previous coordinator left running on
 /// `store` (those the API follows live excepted).
 fn spawn_resume(
-    store: Arc<SledStore>,
     config: &CoordinatorConfig,
     pool: &Arc<WorkerPool>,
     control: &Arc<resume::ResumeControl>,
     campaigns: &Arc<Campaigns>,
 ) -> JoinHandle<Result<usize>> {
-    let evaluator = GrpcEvaluator::new(pool.clone(), tokio::runtime::Handle::current());
     let results = config.results.clone();
     let (pool, control) = (pool.clone(), control.clone());
     let live = campaigns.clone();
-    // Campaigns block for as long as they run: on a thread of their own.
+    // Campaigns block for as long as they run: on a thread of their own, through the
+    // coordinator's one dispatcher.
     tokio::task::spawn_blocking(move || {
-        let resumed = resume::resume_until_finished(
-            &*store,
-            &evaluator,
-            results.as_deref(),
-            &pool,
-            &control,
-            &|id| live.is_live(id),
-        );
+        let resumed =
+            resume::resume_until_finished(&live, results.as_deref(), &pool, &control, &|id| {
+                live.is_live(id)
+            });
         match &resumed {
             Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
             Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),

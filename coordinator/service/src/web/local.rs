@@ -119,7 +119,7 @@ pub async fn start_ui(config: UiConfig) -> Result<RunningUi> {
     let live = campaigns.clone();
     tokio::task::spawn_blocking(move || {
         let skip = |id: &_| live.is_live(id);
-        match resume::resume_campaigns_except(&*store, &LocalEvaluator, None, &skip) {
+        match resume::resume_campaigns_except(&live, None, &skip) {
             Ok(0) => {}
             Ok(count) => tracing::info!(campaigns = count, "unfinished campaigns resumed"),
             Err(e) => tracing::error!(error = %e, "cannot resume unfinished campaigns"),
