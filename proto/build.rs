@@ -37,6 +37,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             ".calib.v1.SensitivityStatistics.total_ci",
             "#[serde(deserialize_with = \"crate::json::numbers\")]",
         )
+        // Enums by name, as the proto's JSON mapping writes them (read by name or number).
+        .field_attribute(
+            ".calib.v1.CampaignState.phase",
+            "#[serde(with = \"crate::json::campaign_phase\")]",
+        )
+        .field_attribute(
+            ".calib.v1.DiagnosisState.phase",
+            "#[serde(with = \"crate::json::campaign_phase\")]",
+        )
+        .field_attribute(
+            ".calib.v1.AnalysisState.phase",
+            "#[serde(with = \"crate::json::campaign_phase\")]",
+        )
+        .field_attribute(
+            ".calib.v1.InputSeries.interpolation",
+            "#[serde(with = \"crate::json::interpolation\")]",
+        )
         .file_descriptor_set_path(out.join("calib_descriptor.bin"))
         .compile_protos(
             &[

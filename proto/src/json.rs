@@ -31,9 +31,62 @@ pub mod rows {
     }
 }
 
+/// A module that writes an enum field by its name in the proto (`CAMPAIGN_PHASE_FINISHED`),
+/// as the proto's JSON mapping does, and reads it by name or by number.
+macro_rules! by_name {
+    ($module:ident, $enum:ty) => {
+        pub mod $module {
+            use serde::{Deserialize, Deserializer, Serializer};
+
+            pub fn serialize<S: Serializer>(value: &i32, s: S) -> Result<S::Ok, S::Error> {
+                match <$enum>::try_from(*value) {
+                    Ok(known) => s.serialize_str(known.as_str_name()),
+                    Err(_) => s.serialize_i32(*value),
+                }
+            }
+
+            pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<i32, D::Error> {
+                #[derive(Deserialize)]
+                #[serde(untagged)]
+                enum NameOrNumber {
+                    Name(String),
+                    Number(i32),
+                }
+                match NameOrNumber::deserialize(d)? {
+                    NameOrNumber::Number(n) => Ok(n),
+                    NameOrNumber::Name(name) => <$enum>::from_str_name(&name)
+                        .map(|v| v as i32)
+                        .ok_or_else(|| serde::de::Error::custom(format!("no such value: {name}"))),
+                }
+            }
+        }
+    };
+}
+
+by_name!(campaign_phase, crate::v1::CampaignPhase);
+by_name!(interpolation, crate::v1::Interpolation);
+
 #[cfg(test)]
 mod tests {
-    use crate::v1::{DiagnosisFit, SensitivityStatistics};
+    use crate::v1::{CampaignState, DiagnosisFit, SensitivityStatistics};
+
+    #[test]
+    fn a_phase_is_written_by_name_and_read_by_name_or_number() {
+        let state = CampaignState {
+            phase: crate::v1::CampaignPhase::Finished as i32,
+            ..Default::default()
+        };
+        let json = serde_json::to_value(&state).unwrap();
+        assert_eq!(json["phase"], "CAMPAIGN_PHASE_FINISHED");
+        let back: CampaignState = serde_json::from_value(json).unwrap();
+        assert_eq!(back.phase, state.phase);
+        let by_number: CampaignState =
+            serde_json::from_value(serde_json::json!({"phase": 3})).unwrap();
+        assert_eq!(by_number.phase(), crate::v1::CampaignPhase::Failed);
+        assert!(
+            serde_json::from_value::<CampaignState>(serde_json::json!({"phase": "DONE"})).is_err()
+        );
+    }
 
     #[test]
     fn a_correlation_matrix_reads_and_writes_as_a_list_of_lists() {

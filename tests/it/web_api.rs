@@ -371,7 +371,7 @@ fn calib_ui_finishes_the_campaigns_its_store_holds_unfinished() {
             let (code, body) = post(web, "GetCampaign", serde_json::json!({ "id": id }));
             assert_eq!(code, 200, "{body}");
             state = serde_json::from_str(&body).unwrap();
-            state["phase"] == pb::CampaignPhase::Finished as i32
+            state["phase"] == pb::CampaignPhase::Finished.as_str_name()
         },
     );
     let result: serde_json::Value =
@@ -409,7 +409,7 @@ fn run_campaign(c: &Coordinator, text: &str, dataset: &str) -> String {
     let state: serde_json::Value = serde_json::from_str(last).unwrap();
     assert_eq!(
         state["phase"],
-        pb::CampaignPhase::Finished as i32,
+        pb::CampaignPhase::Finished.as_str_name(),
         "{state}"
     );
     id

@@ -794,7 +794,7 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
     assert_eq!(reloaded["dataset"], after["dataset"]);
     assert!(reloaded["progress_plots"].as_u64().unwrap() >= 1);
     let state = &page["state"];
-    assert_eq!(state["phase"], 2, "{state}");
+    assert_eq!(state["phase"], "CAMPAIGN_PHASE_FINISHED", "{state}");
     let history = state["history"].as_array().unwrap().len();
     assert!((1..=200).contains(&history), "{history}");
 
@@ -910,7 +910,7 @@ fn the_page_reloaded_mid_campaign_and_after_finds_its_work_and_edits_and_reruns_
     let second = page["second"].as_str().unwrap();
     assert_ne!(second, first);
     let rerun = &page["rerun"];
-    assert_eq!(rerun["phase"], 2, "{rerun}");
+    assert_eq!(rerun["phase"], "CAMPAIGN_PHASE_FINISHED", "{rerun}");
     let max_of = |campaign: &Value, name: &str| {
         campaign["parameters"]
             .as_array()

@@ -709,7 +709,7 @@ def workbench(url, data, shot, out):
         wait(driver, LONG).until(lambda d: progressed.append(json.loads(get_campaign(d, first)))
                                  or progressed[-1]["history"])
         before_reload = progressed[-1]
-        mid = {"running_when_reloaded": before_reload["phase"] == 1,
+        mid = {"running_when_reloaded": before_reload["phase"] == "CAMPAIGN_PHASE_RUNNING",
                "history_before": len(before_reload["history"]),
                "evaluations_before": before_reload["evaluations"]}
         driver.refresh()

@@ -1,6 +1,6 @@
 // Sensitivity before a calibration, profile likelihoods after it (the Calibration tab).
 import { campaignMessage } from "./calibration.js";
-import { $, PHASES, app, call, el, figure, fmt, follow, number, on, showError } from "./common.js";
+import { $, FAILED, FINISHED, PHASES, RUNNING, app, call, el, figure, fmt, follow, number, on, showError } from "./common.js";
 
 // ---- sensitivity, before a calibration --------------------------------------------------
 
@@ -24,8 +24,8 @@ export async function analyse() {
     await follow(`/api/v1/WatchAnalysis/${first.id}`, (a) => {
       $("sensitivity-status").textContent =
         `${PHASES[a.phase] || a.phase}, ${a.evaluations} of ${a.planned} evaluations` + (a.failure ? ` (${a.failure})` : "");
-      if (a.phase === 2 && a.sensitivity) showSensitivity(a);
-      if (a.phase === 3) showError("sensitivity-error", a.failure);
+      if (a.phase === FINISHED && a.sensitivity) showSensitivity(a);
+      if (a.phase === FAILED) showError("sensitivity-error", a.failure);
     });
   } catch (e) {
     showError("sensitivity-error", e.message);
@@ -92,10 +92,10 @@ export async function profileParameters() {
     await follow(`/api/v1/WatchAnalysis/${first.id}`, (a) => {
       if (app.campaignId !== shown) return; // another campaign is shown now
       $("profile-status").textContent =
-        a.phase === 1 ? "running: re-optimising along each parameter's profile…"
+        a.phase === RUNNING ? "running: re-optimising along each parameter's profile…"
           : `${PHASES[a.phase] || a.phase}, ${a.evaluations} evaluations` + (a.failure ? ` (${a.failure})` : "");
-      if (a.phase === 2 && a.profile) showProfiles(a);
-      if (a.phase === 3) showError("profile-error", a.failure);
+      if (a.phase === FINISHED && a.profile) showProfiles(a);
+      if (a.phase === FAILED) showError("profile-error", a.failure);
     });
   } catch (e) {
     showError("profile-error", e.message);

@@ -1,5 +1,5 @@
 // The Calibration tab: the form, the campaign's progress, its result and the list of campaigns.
-import { $, PHASES, app, bound, call, el, emit, figure, fmt, follow, modelInputs, on, plot, showError } from "./common.js";
+import { $, FINISHED, PHASES, RUNNING, app, bound, call, el, emit, figure, fmt, follow, modelInputs, on, plot, showError } from "./common.js";
 import { compareBox, ticked } from "./compare.js";
 import { inputRows, renderExperiments } from "./experiments.js";
 import { campaignDraft, clearProblems, problemSummary, validateNow } from "./forms.js";
@@ -125,7 +125,7 @@ function showState(s) {
   showFailure(s);
   if ((s.history || []).length) drawProgress();
   showRuns(s, parameterNames(s));
-  $("campaign-actions").hidden = s.phase === 1 || !s.campaign;
+  $("campaign-actions").hidden = s.phase === RUNNING || !s.campaign;
   $("use-values").hidden = !Object.keys(s.best_parameters || {}).length;
   showBestSoFar(s);
 }
@@ -158,7 +158,7 @@ export function watch(id) {
   app.watching = controller;
   follow(`/api/v1/WatchCampaign/${id}`, (s) => {
     showState(s);
-    if (s.phase !== 1) finish(s);
+    if (s.phase !== RUNNING) finish(s);
   }, controller.signal).catch((e) => {
     if (e.name !== "AbortError") showError("calibration-error", e.message);
   }).finally(() => {
@@ -210,7 +210,7 @@ export async function drawProgress() {
 function showBestSoFar(s) {
   const best = s.best_parameters || {};
   const names = parameterNames(s).filter((n) => n in best);
-  const show = s.phase !== 1 && s.phase !== 2 && names.length > 0;
+  const show = s.phase !== RUNNING && s.phase !== FINISHED && names.length > 0;
   $("best-so-far").hidden = !show;
   if (!show) return;
   $("best-so-far-note").textContent =
@@ -259,7 +259,7 @@ export function useValues() {
 export function finish(s) {
   $("cancel").disabled = true;
   $("start").disabled = false;
-  if (s.phase === 2 && s.result) showResult(s);
+  if (s.phase === FINISHED && s.result) showResult(s);
   refreshCampaigns();
 }
 
@@ -364,7 +364,7 @@ export async function refreshCampaigns() {
         el("td", { class: "num", text: String(s.evaluations) }),
         el("td", { class: "num", text: fmt(s.best_objective) }),
         el("td", {}, el("code", { text: s.id.slice(0, 12) })), el("td", {}, open)));
-      if (s.phase === 2) select.append(el("option", { value: s.id, text: `${s.name} (${s.id.slice(0, 8)}), best ${fmt(s.best_objective)}` }));
+      if (s.phase === FINISHED) select.append(el("option", { value: s.id, text: `${s.name} (${s.id.slice(0, 8)}), best ${fmt(s.best_objective)}` }));
     }
     if ([...select.options].some((o) => o.value === chosen)) select.value = chosen;
   } catch (e) {
@@ -379,7 +379,7 @@ export async function openCampaign(id) {
   try {
     const s = await call("GetCampaign", { id });
     if (s.campaign) await fillForm(s.campaign);
-    if (s.phase === 1) { watch(id); return; }
+    if (s.phase === RUNNING) { watch(id); return; }
     if (app.watching) app.watching.abort();
     app.campaignId = id;
     writeRoute({ campaign: id });
@@ -387,7 +387,7 @@ export async function openCampaign(id) {
     $("result").hidden = true;
     emit("campaign-shown", id);
     showState(s);
-    if (s.phase === 2 && s.result) showResult(s);
+    if (s.phase === FINISHED && s.result) showResult(s);
     $("result").scrollIntoView({ block: "nearest" });
   } catch (e) {
     showError("calibration-error", e.message);

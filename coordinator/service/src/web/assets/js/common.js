@@ -2,7 +2,14 @@
 // number formatting, the one fetch every route goes through, the APIs over HTTP JSON
 // (/api/v1/<Method>) and plots drawn by the server (/ui/plot).
 
-export const PHASES = { 0: "unknown", 1: "running", 2: "finished", 3: "failed", 4: "cancelled" };
+// A campaign's or an analysis' phase, as the API names it, and in words.
+export const RUNNING = "CAMPAIGN_PHASE_RUNNING";
+export const FINISHED = "CAMPAIGN_PHASE_FINISHED";
+export const FAILED = "CAMPAIGN_PHASE_FAILED";
+export const PHASES = {
+  CAMPAIGN_PHASE_UNSPECIFIED: "unknown", [RUNNING]: "running", [FINISHED]: "finished",
+  [FAILED]: "failed", CAMPAIGN_PHASE_CANCELLED: "cancelled",
+};
 
 export const app = {
   model: null,        // ModelDescription of the chosen model

@@ -2,7 +2,7 @@
 // objective and parameters in one table (as their results hold them: the best point, and
 // each parameter's range over the runs that reached the best), their fit plots next to
 // each other, output by output.
-import { $, call, el, figure, fmt, post, request, showError } from "./common.js";
+import { $, FINISHED, call, el, figure, fmt, post, request, showError } from "./common.js";
 
 // The ids of the campaigns ticked for comparison.
 export const ticked = () =>
@@ -10,7 +10,7 @@ export const ticked = () =>
 
 // A tick box for a finished campaign `s` in the list (kept ticked across refreshes).
 export function compareBox(s, wasTicked) {
-  if (s.phase !== 2) return el("td");
+  if (s.phase !== FINISHED) return el("td");
   return el("td", {}, el("input", {
     type: "checkbox", name: "compare", value: s.id, checked: wasTicked,
     "aria-label": `compare campaign ${s.name} ${s.id.slice(0, 8)}`,

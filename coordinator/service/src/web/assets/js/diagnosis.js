@@ -1,5 +1,5 @@
 // ---- Diagnosis tab ----------------------------------------------------------------------
-import { $, PHASES, el, figure, fmt, follow, showError } from "./common.js";
+import { $, FAILED, FINISHED, PHASES, el, figure, fmt, follow, showError } from "./common.js";
 import { clearDiscovery, showDiscovery } from "./discovery.js";
 
 export async function diagnose() {
@@ -16,9 +16,9 @@ export async function diagnose() {
   try {
     await follow(`/api/v1/Diagnose/${id}${discover ? "?discover=true" : ""}`, (d) => {
       $("diagnosis-status").textContent = `${PHASES[d.phase] || d.phase}, ${d.evaluations} evaluations` + (d.failure ? ` (${d.failure})` : "");
-      if (d.phase === 2 && d.report) showDiagnosis(d);
-      if (d.phase === 2 && d.found_outside_the_library) showDiscovery(d.found_outside_the_library, d.campaign_id);
-      if (d.phase === 3) showError("diagnosis-error", d.failure);
+      if (d.phase === FINISHED && d.report) showDiagnosis(d);
+      if (d.phase === FINISHED && d.found_outside_the_library) showDiscovery(d.found_outside_the_library, d.campaign_id);
+      if (d.phase === FAILED) showError("diagnosis-error", d.failure);
     });
   } catch (e) {
     showError("diagnosis-error", e.message);

@@ -2,7 +2,7 @@
 // (CampaignState.runs: label, method, start, evaluations, rounds, iterations, termination,
 // objective, parameters, whether it is at the best), sortable by any column. Runs are named
 // by the server's label, the name the progress plot and the waterfall use.
-import { $, el, fmt } from "./common.js";
+import { $, RUNNING, el, fmt } from "./common.js";
 
 // Columns: [key, heading, value of a run for sorting, cell of a run].
 const COLUMNS = [
@@ -15,7 +15,7 @@ const COLUMNS = [
     (r) => el("td", { class: "num", "data-value": String(r.rounds || 0), text: String(r.rounds || 0) })],
   ["iterations", "iterations", (r) => Number(r.iterations),
     (r) => el("td", { class: "num", text: r.termination ? String(r.iterations) : "—" })],
-  ["termination", "termination", (r) => r.termination, (r) => el("td", { text: r.termination || (shown.phase === 1 ? "running" : "stopped before its end") })],
+  ["termination", "termination", (r) => r.termination, (r) => el("td", { text: r.termination || (shown.phase === RUNNING ? "running" : "stopped before its end") })],
   ["objective", "objective", (r) => objective(r),
     (r) => el("td", { class: "num", "data-value": String(objective(r)), text: fmt(objective(r)) })],
   ["at_best", "at the best", (r) => (r.at_best ? 0 : 1), (r) => el("td", { class: "flag", text: r.at_best ? "at the best" : "" })],
@@ -25,7 +25,7 @@ const objective = (r) => (r.objective === null || r.objective === undefined ? In
 
 // How the table is sorted: a column's key and its direction (1 ascending, -1 descending).
 const order = { key: "objective", direction: 1 };
-let shown = { runs: [], names: [], phase: 0 };
+let shown = { runs: [], names: [], phase: "CAMPAIGN_PHASE_UNSPECIFIED" };
 
 // Show the runs of campaign state `s`, their parameters in the order `names`.
 export function showRuns(s, names = []) {
