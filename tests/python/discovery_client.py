@@ -135,6 +135,38 @@ refit_json = report["refits"][0]
 assert (r.objective_before, r.objective_after, r.noise_floor) == (
     refit_json["objective_before"], refit_json["objective_after"], refit_json["noise_floor"])
 assert r.effects_toml == refit_json["toml"]
+# The refit's windows, residual, threshold and profile intervals, and what each joint's
+# search looked at, are typed too: equal to report_json's.
+assert len(r.stages) == len(refit_json["stages"]) > 0, r.stages
+for s, j in zip(r.stages, refit_json["stages"]):
+    assert [s.start, s.stop] == j["window"], (s, j)
+    assert (s.objective, s.evaluations, s.method) == (j["objective"], j["evaluations"], j["method"]), (s, j)
+assert [x.output for x in r.residual] == [j["output"] for j in refit_json["residual"]]
+for x, j in zip(r.residual, refit_json["residual"]):
+    assert (x.rms, x.lag1, x.ljung_box, x.white) == (j["rms"], j["lag1"], j["ljung_box"], j["white"]), x
+assert r.threshold.delta == refit_json["threshold"]["delta"], (r.threshold, refit_json["threshold"])
+assert len(r.intervals) == len(refit_json["intervals"]) > 0, r.intervals
+for i, j in zip(r.intervals, refit_json["intervals"]):
+    assert (i.name, i.value) == (j["name"], j["value"]), (i, j)
+    for side in ("ci_low", "ci_high"):
+        assert (getattr(i, side) if i.HasField(side) else None) == j[side], (side, i, j)
+def same(typed, written):
+    """A typed number equals the JSON's, where the JSON writes a non-finite one as null (the
+    threshold above which no term enters is infinite)."""
+    return typed == written or (written is None and not math.isfinite(typed))
+
+
+for searched, j in zip(found.searched, report["discovery"]["joints"]):
+    assert searched.torque == j["joint"] and same(searched.threshold, j["threshold"]), (searched, j)
+    assert searched.unseen == (j.get("unseen") or ""), (searched, j)
+    cv = j["cross_validation"]
+    assert len(searched.cross_validation) == len(cv) > 0, searched
+    for c, w in zip(searched.cross_validation, cv):
+        assert same(c.threshold, w["threshold"]) and (c.error, c.terms) == (w["error"], w["terms"]), (c, w)
+scan_json = report["harmonic_scan"]
+assert found.HasField("harmonic_scan") == (scan_json is not None), scan_json
+if scan_json is not None:
+    assert [k.multiple for k in found.harmonic_scan.scanned] == [k["multiple"] for k in scan_json["scanned"]]
 assert "## Found outside the library" in last.files["diagnosis.md"]
 
 # Accepted into the campaign: the next run would fit it.

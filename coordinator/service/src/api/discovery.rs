@@ -2,10 +2,13 @@
 //! API's typed `FoundOutsideLibrary`: every figure computed here, on the server, for clients
 //! that only show them.
 
+use calib_analysis::diagnosis::discovery::scan::{HarmonicScan, Scanned};
 use calib_analysis::diagnosis::discovery::{
-    DiscoveredEffect, EffectParameter, FoundHarmonic, FoundTerm, JointDiscovery, ProposalRefit,
+    DiscoveredEffect, EffectInterval, EffectParameter, FoundHarmonic, FoundTerm, JointDiscovery,
+    OutputResidual, ProposalRefit, RefitStage,
 };
 use calib_analysis::diagnosis::outside::{formula_in_words, words, Found};
+use calib_analysis::profile::Threshold;
 use calib_proto::v1 as pb;
 
 /// `found` as `DiagnosisState.found_outside_the_library` carries it.
@@ -36,6 +39,24 @@ pub fn found_message(found: &Found) -> pb::FoundOutsideLibrary {
             .into_iter()
             .map(|(effect, refit)| proposal_message(effect, joint_of(effect), refit))
             .collect(),
+        harmonic_scan: found.scan.as_ref().map(scan_message),
+    }
+}
+
+fn scan_message(s: &HarmonicScan) -> pb::HarmonicScan {
+    let scanned = |s: &Scanned| pb::ScannedHarmonic {
+        joint: s.joint.clone(),
+        multiple: s.multiple as u64,
+        share: s.share,
+        objective: s.objective,
+        held_out_objective: s.held_out_objective,
+    };
+    pb::HarmonicScan {
+        objective: s.objective,
+        held_out_objective: s.held_out_objective,
+        scanned: s.scanned.iter().map(scanned).collect(),
+        best: s.best.as_ref().map(scanned),
+        withheld: s.withheld,
     }
 }
 
@@ -48,6 +69,18 @@ fn search_message(j: &JointDiscovery) -> pb::DiscoverySearch {
         library: j.library as u64,
         residual_rms: j.residual_rms,
         remaining_rms: j.remaining_rms,
+        unseen: j.unseen.clone().unwrap_or_default(),
+        threshold: j.threshold,
+        cross_validation: j
+            .cross_validation
+            .iter()
+            .map(|c| pb::CrossValidationPoint {
+                threshold: c.threshold,
+                error: c.error,
+                standard_error: c.standard_error,
+                terms: c.terms as u64,
+            })
+            .collect(),
     }
 }
 
@@ -128,6 +161,55 @@ fn refit_message(r: &ProposalRefit) -> pb::ProposalRefit {
         evaluations: r.evaluations as u64,
         effect: kept,
         effects_toml: r.toml.clone(),
+        stages: r.stages.iter().map(stage_message).collect(),
+        residual: r.residual.iter().map(residual_message).collect(),
+        threshold: r.threshold.as_ref().map(threshold_message),
+        intervals: r.intervals.iter().map(interval_message).collect(),
+    }
+}
+
+fn stage_message(s: &RefitStage) -> pb::RefitStage {
+    pb::RefitStage {
+        start: s.window.0,
+        stop: s.window.1,
+        objective: s.objective,
+        evaluations: s.evaluations as u64,
+        method: s.method.clone(),
+    }
+}
+
+fn residual_message(r: &OutputResidual) -> pb::RefitResidual {
+    pb::RefitResidual {
+        output: r.output.clone(),
+        rms: r.rms,
+        lag1: r.lag1,
+        ljung_box: r.ljung_box,
+        ljung_box_critical: r.ljung_box_critical,
+        white: r.white,
+    }
+}
+
+fn threshold_message(t: &Threshold) -> pb::ProfileThreshold {
+    pb::ProfileThreshold {
+        chi_square: t.chi_square,
+        s2: t.s2,
+        samples: t.samples as u64,
+        parameters: t.parameters as u64,
+        effective_samples: t.effective_samples,
+        inflation: t.inflation,
+        delta: t.delta,
+    }
+}
+
+fn interval_message(i: &EffectInterval) -> pb::EffectInterval {
+    pb::EffectInterval {
+        name: i.name.clone(),
+        value: i.value,
+        ci_low: i.ci_low,
+        ci_high: i.ci_high,
+        linearised_low: i.linearised_low,
+        linearised_high: i.linearised_high,
+        evaluations: i.evaluations as u64,
     }
 }
 
@@ -206,6 +288,21 @@ mod tests {
                 max: 0.009,
             }],
             evaluations: 500,
+            stages: vec![RefitStage {
+                window: (0.0, 4.0),
+                objective: 2.5,
+                evaluations: 120,
+                method: "nelder-mead".into(),
+            }],
+            intervals: vec![EffectInterval {
+                name: "discovered.armJoint.a1".into(),
+                value: 0.0059,
+                ci_low: Some(0.0055),
+                ci_high: None,
+                linearised_low: 0.0054,
+                linearised_high: 0.0064,
+                evaluations: 40,
+            }],
             ..ProposalRefit::default()
         };
         let found = Found {
@@ -213,7 +310,14 @@ mod tests {
             discovery: Some(Discovery {
                 joints: vec![joint],
             }),
-            scan: None,
+            scan: Some(HarmonicScan {
+                objective: 300.0,
+                held_out_objective: 90.0,
+                scanned: vec![],
+                best: None,
+                proposal: None,
+                withheld: Some(49.8),
+            }),
             refits: vec![refit],
         };
         let m = found_message(&found);
@@ -235,6 +339,12 @@ mod tests {
         assert_eq!(e.formula, "a1 * sin(8 * armJoint.phi)");
         assert_eq!(e.parameters.len(), 1);
         assert_eq!(e.parameters[0].nominal, Some(0.006));
+        // The refit's windows and intervals, and the scan's withheld best, are typed too.
+        assert_eq!((r.stages[0].start, r.stages[0].stop), (0.0, 4.0));
+        assert_eq!(r.stages[0].method, "nelder-mead");
+        let interval = &r.intervals[0];
+        assert_eq!((interval.ci_low, interval.ci_high), (Some(0.0055), None));
+        assert_eq!(m.harmonic_scan.as_ref().unwrap().withheld, Some(49.8));
 
         let nothing = found_message(&Found {
             unavailable: Some("discovery is not available for model `hx_lowfi`".into()),
