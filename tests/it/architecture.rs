@@ -454,3 +454,31 @@ fn every_name_the_web_app_imports_is_exported_and_used() {
     }
     assert!(wrong.is_empty(), "{wrong:#?}");
 }
+
+/// The web app's JavaScript passes TypeScript's checker (`tsc` over `// checkJs`, settings
+/// in `assets/js/jsconfig.json`): a name no module declares, a call with the wrong number of
+/// arguments, a state field the `App` type does not declare, or a DOM property an element
+/// lacks fails here. `tsc` comes from Debian's `node-typescript` (installed by `.ci/run`).
+#[test]
+fn the_web_apps_javascript_passes_the_type_checker() {
+    let config = repo().join("coordinator/service/src/web/assets/js/jsconfig.json");
+    let output = match std::process::Command::new("tsc")
+        .arg("-p")
+        .arg(&config)
+        .output()
+    {
+        Ok(output) => output,
+        Err(e) => {
+            return crate::common::skip(&format!(
+                "the type checker `tsc` cannot run ({e}): apt-get install node-typescript"
+            ))
+        }
+    };
+    assert!(
+        output.status.success(),
+        "tsc -p {}:\n{}{}",
+        config.display(),
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+}

@@ -11,6 +11,25 @@ export const PHASES = {
   [FAILED]: "failed", CAMPAIGN_PHASE_CANCELLED: "cancelled",
 };
 
+/**
+ * The page's state. Messages of the API are as its JSON gives them (`any`).
+ * @typedef {object} App
+ * @property {any} model
+ * @property {Object<string, {id: string, model: any}>} fmus
+ * @property {any} dataset
+ * @property {string | null} campaignId
+ * @property {any} campaign
+ * @property {AbortController | null} watching
+ * @property {boolean} plotting
+ * @property {boolean} plotDue
+ * @property {boolean} started
+ * @property {{key: number, prefix: string, dataset: any, card: HTMLElement, fixed: any}[]} experiments
+ * @property {any[]} definedEffects
+ * @property {number} nextExperiment
+ * @property {File | null} datasetFile
+ * @property {{model: string, [k: string]: any} | null} lastSimulation
+ */
+/** @type {App} */
 export const app = {
   model: null,        // ModelDescription of the chosen model
   fmus: {},           // uploaded FMUs' models by name: {id, model: ModelDescription}
@@ -24,6 +43,8 @@ export const app = {
   experiments: [],    // further records: {key, prefix, dataset, card, fixed}
   definedEffects: [], // effects defined by a formula in the form (DefinedEffect messages)
   nextExperiment: 0,  // key of the next experiment added
+  datasetFile: null,  // the measurement file chosen, until it is uploaded
+  lastSimulation: null, // the model's last simulation shown, to redraw it beside the next
 };
 
 // ---- events ------------------------------------------------------------------------------
@@ -31,10 +52,28 @@ export const app = {
 // "inputs-changed" (the model, its values or the measurement changed: the Calibration tab
 // redraws its form) and "campaign-shown" (another campaign is shown: its analyses go).
 const events = new EventTarget();
-export const on = (name, handler) => events.addEventListener(name, (e) => handler(e.detail));
+export const on = (name, handler) =>
+  events.addEventListener(name, (e) => handler(/** @type {CustomEvent} */ (e).detail));
 export const emit = (name, detail) => events.dispatchEvent(new CustomEvent(name, { detail }));
 
+// An element of the page by id. Typed `any`: the page holds inputs, selects, tables and
+// links by id, and each caller knows which it asked for.
+/** @type {(id: string) => any} */
 export const $ = (id) => document.getElementById(id);
+
+/**
+ * The check boxes (or radio buttons) of the form named `name`, or only those checked.
+ * @param {string} name
+ * @param {boolean} [checkedOnly]
+ * @returns {HTMLInputElement[]}
+ */
+export function boxes(name, checkedOnly = false) {
+  const selector = `input[name="${name}"]${checkedOnly ? ":checked" : ""}`;
+  return [.../** @type {NodeListOf<HTMLInputElement>} */ (document.querySelectorAll(selector))];
+}
+
+/** The values of the boxes named `name` that are checked. @param {string} name */
+export const checkedValues = (name) => boxes(name, true).map((box) => box.value);
 
 export function el(tag, attrs = {}, ...children) {
   const node = document.createElement(tag);

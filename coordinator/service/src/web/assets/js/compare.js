@@ -2,11 +2,11 @@
 // objective and parameters in one table (as their results hold them: the best point, and
 // each parameter's range over the runs that reached the best), their fit plots next to
 // each other, output by output.
-import { $, FINISHED, call, el, figure, fmt, post, request, showError } from "./common.js";
+import { $, FINISHED, call, checkedValues, el, figure, fmt, post, request, showError } from "./common.js";
 
 // The ids of the campaigns ticked for comparison.
 export const ticked = () =>
-  [...document.querySelectorAll('input[name="compare"]:checked')].map((box) => box.value);
+  checkedValues("compare");
 
 // A tick box for a finished campaign `s` in the list (kept ticked across refreshes).
 export function compareBox(s, wasTicked) {

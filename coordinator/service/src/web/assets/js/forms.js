@@ -1,7 +1,7 @@
 // Forms that say what will happen: the Calibration tab's campaign checked by the server as
 // it is filled in (ValidateCampaign runs the checks SubmitCampaign runs, on the same code:
 // the page re-implements none of them), each problem shown next to the field it names.
-import { $, app, el, call, showError } from "./common.js";
+import { $, app, call, checkedValues, el, showError } from "./common.js";
 import { experimentName, inputMessages } from "./experiments.js";
 import { modelValue } from "./model.js";
 
@@ -36,7 +36,7 @@ export function campaignDraft() {
   for (const p of model.parameters) {
     if (!free.includes(p) && modelValue(p) !== p.default_value) fixed[p.name] = modelValue(p);
   }
-  const methods = [...document.querySelectorAll('input[name="method"]:checked')].map((m) => m.value);
+  const methods = checkedValues("method");
   const windowStart = num("window-start"), windowStop = num("window-stop");
   const inputs = inputMessages("");
   const places = {
@@ -213,9 +213,9 @@ export async function validateNow() {
   }
   if (mine !== sequence) return null;
   const all = [...draft.local, ...problems];
-  const unplaced = showProblems(all, draft.places);
+  // Those the form has no place for are in the list the page shows beside it.
+  showProblems(all, draft.places);
   for (const p of all) p.sentence = sentence({ ...p, id: p.id || placeOf(p.field || "", draft.places) });
-  app.unplacedProblems = unplaced;
   return all;
 }
 

@@ -72,7 +72,7 @@ async function restore() {
 // ---- tabs -------------------------------------------------------------------------------
 
 function selectTab(tab, focus = false) {
-  for (const t of document.querySelectorAll('[role="tab"]')) {
+  for (const t of /** @type {NodeListOf<HTMLElement>} */ (document.querySelectorAll('[role="tab"]'))) {
     const on = t === tab;
     t.setAttribute("aria-selected", String(on));
     t.tabIndex = on ? 0 : -1;
@@ -87,7 +87,7 @@ function setUpTabs() {
   const tabs = [...document.querySelectorAll('[role="tab"]')];
   for (const [i, tab] of tabs.entries()) {
     tab.addEventListener("click", () => selectTab(tab));
-    tab.addEventListener("keydown", (e) => {
+    tab.addEventListener("keydown", (/** @type {KeyboardEvent} */ e) => {
       const step = { ArrowRight: 1, ArrowLeft: -1 }[e.key];
       if (step) {
         e.preventDefault();

@@ -1,5 +1,5 @@
 // The Measurement tab: a record uploaded, its columns plotted.
-import { $, app, call, el, emit, fmt, request, showError } from "./common.js";
+import { $, app, call, checkedValues, el, emit, fmt, request, showError } from "./common.js";
 import { scheduleValidation } from "./forms.js";
 import { writeRoute } from "./route.js";
 
@@ -100,8 +100,7 @@ export async function restoreDataset(id) {
 export function plotColumns() {
   const plots = $("measurement-plots");
   plots.replaceChildren();
-  for (const input of document.querySelectorAll('input[name="measured-column"]:checked')) {
-    const c = input.value;
+  for (const c of checkedValues("measured-column")) {
     const img = el("img", {
       src: `/ui/datasets/${app.dataset.id}/plot/${encodeURIComponent(c)}`,
       alt: `plot of the measured column ${c} over time`,

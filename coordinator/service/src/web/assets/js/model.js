@@ -1,5 +1,5 @@
 // The Model tab: the models (and uploaded FMUs), their parameters, and simulations.
-import { $, INTERPOLATIONS, app, bound, call, el, emit, figure, fmt, modelInputs, plot, request, showError, thin } from "./common.js";
+import { $, INTERPOLATIONS, app, bound, call, checkedValues, el, emit, figure, fmt, modelInputs, plot, request, showError, thin } from "./common.js";
 
 // ---- Model tab --------------------------------------------------------------------------
 
@@ -173,7 +173,7 @@ export async function simulate() {
   }
   const times = [];
   for (let i = 0; i * step <= stop * (1 + 1e-12); i++) times.push(i * step);
-  const outputs = [...document.querySelectorAll('input[name="model-output"]:checked')].map((i) => i.value);
+  const outputs = checkedValues("model-output");
   if (!outputs.length) { showError("model-error", "pick at least one output to plot"); return; }
   const parameters = model.parameters
     .filter((p) => modelValue(p) !== p.default_value)

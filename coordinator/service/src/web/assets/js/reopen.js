@@ -2,7 +2,7 @@
 // back in the form: its model and fixed values, its dataset, outputs, inputs, free
 // parameters, window, search and further experiments. What the user then changes and
 // starts is a new campaign; the old one stays as it was.
-import { $, app, call, emit, fmt, modelInputs } from "./common.js";
+import { $, app, boxes, call, emit, fmt, modelInputs } from "./common.js";
 import { setDefinedEffects } from "./effects.js";
 import { addExperiment, addFixedValue, renderExperiments } from "./experiments.js";
 import { fetchDataset, showDataset } from "./measurement.js";
@@ -69,7 +69,7 @@ export async function fillForm(message) {
   set("campaign-name", message.name);
   const search = message.search || {};
   const methods = search.methods && search.methods.length ? search.methods : ["nelder-mead"];
-  for (const box of document.querySelectorAll('input[name="method"]')) box.checked = methods.includes(box.value);
+  for (const box of boxes("method")) box.checked = methods.includes(box.value);
   set("starts", search.starts || 1);
   set("max-evaluations", search.max_evaluations || 1000);
   set("seed", search.seed || 0);
