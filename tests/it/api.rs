@@ -135,23 +135,7 @@ fn experiments_campaign(swing: &Path, driven: &Path) -> String {
 name = "pair"
 [model]
 name = "furuta"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-[[experiments]]
+{FURUTA_OUTPUTS}{FURUTA_FRICTIONS}[[experiments]]
 name = "swing"
 file = "{}"
 time_column = "time_s"

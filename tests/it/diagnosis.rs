@@ -212,13 +212,7 @@ stop_time = 40.0
 [measurement]
 file = "{}"
 time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[window]
+{FURUTA_OUTPUTS}[window]
 start = 0.0
 stop = 30.0
 [search]

@@ -85,25 +85,10 @@ fn records() -> Option<Records> {
     })
 }
 
-const HEAD: &str = r#"[model]
-name = "furuta"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-"#;
+/// The head of the campaigns here: the model, its outputs and its two frictions.
+fn head() -> String {
+    format!("[model]\nname = \"furuta\"\n{FURUTA_OUTPUTS}{FURUTA_FRICTIONS}")
+}
 
 const SEARCH: &str = r#"[search]
 methods = ["nelder-mead"]
@@ -121,9 +106,10 @@ measured = "motor_torque_Nm"
 /// nothing) and `window` (a `[window]` section or a top-level `windows = ...` line).
 fn one_record(name: &str, csv: &Path, theta0: f64, inputs: &str, window: &str) -> String {
     format!(
-        "name = \"{name}\"\n{window}\n{HEAD}[model.parameters]\ntheta0 = {theta0:?}\n\
+        "name = \"{name}\"\n{window}\n{head}[model.parameters]\ntheta0 = {theta0:?}\n\
          [measurement]\nfile = \"{}\"\ntime_column = \"time_s\"\n{inputs}{SEARCH}",
-        csv.display()
+        csv.display(),
+        head = head(),
     )
 }
 
@@ -136,7 +122,7 @@ fn window() -> String {
 fn both(r: &Records, driven_parameters: &str) -> String {
     format!(
         r#"name = "both"
-{HEAD}
+{head}
 [[experiments]]
 name = "swing"
 file = "{}"
@@ -156,7 +142,8 @@ measured = "motor_torque_Nm"
 {driven_parameters}
 {SEARCH}"#,
         r.swing.display(),
-        r.driven.display()
+        r.driven.display(),
+        head = head(),
     )
 }
 

@@ -36,24 +36,8 @@ theta0 = {theta0:?}
 [measurement]
 file = "{}"
 time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-{inputs}
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-[window]
+{FURUTA_OUTPUTS}{inputs}
+{FURUTA_FRICTIONS}[window]
 start = 0.0
 stop = {STOP:?}
 [search]

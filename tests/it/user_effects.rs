@@ -25,23 +25,7 @@ stop_time = 40.0
 [measurement]
 file = "{}"
 time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-{effect}
+{FURUTA_OUTPUTS}{FURUTA_FRICTIONS}{effect}
 [window]
 start = 0.0
 stop = 30.0

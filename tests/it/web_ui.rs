@@ -589,23 +589,7 @@ name = "pair"
 name = "furuta"
 [model.parameters]
 theta0 = 0.5235987755983
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-[[experiments]]
+{}{}[[experiments]]
 name = "swing"
 file = "{}"
 time_column = "time_s"
@@ -623,6 +607,8 @@ starts = 2
 max_evaluations = 150
 seed = 1
 "#,
+            common::FURUTA_OUTPUTS,
+            common::FURUTA_FRICTIONS,
             swing.display(),
             driven.display()
         ),

@@ -160,6 +160,29 @@ pub fn true_frictions() -> (f64, f64) {
     )
 }
 
+/// The outputs of a Furuta campaign on the seed's records: the arm's and the pendulum's
+/// angle, by the names the records give their columns.
+pub const FURUTA_OUTPUTS: &str = r#"[[outputs]]
+model = "armJoint.phi"
+measured = "arm_angle_rad"
+[[outputs]]
+model = "pendulumJoint.phi"
+measured = "pendulum_angle_rad"
+"#;
+
+/// The two bearing frictions free on [0, 0.9] from the seed's nominal values.
+pub const FURUTA_FRICTIONS: &str = r#"[[parameters]]
+name = "armFriction"
+nominal = 0.012
+min = 0.0
+max = 0.9
+[[parameters]]
+name = "pendulumFriction"
+nominal = 0.002
+min = 0.0
+max = 0.9
+"#;
+
 /// A campaign for the clean synthetic record; `search` is the `[search]` body.
 pub fn clean_campaign(search: &str) -> String {
     format!(
@@ -170,23 +193,7 @@ name = "furuta"
 [measurement]
 file = "{}"
 time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[parameters]]
-name = "armFriction"
-nominal = 0.012
-min = 0.0
-max = 0.9
-[[parameters]]
-name = "pendulumFriction"
-nominal = 0.002
-min = 0.0
-max = 0.9
-[window]
+{FURUTA_OUTPUTS}{FURUTA_FRICTIONS}[window]
 start = 0.0
 stop = 40.0
 [search]
@@ -207,13 +214,7 @@ name = "furuta"
 [measurement]
 file = "{}"
 time_column = "time_s"
-[[outputs]]
-model = "armJoint.phi"
-measured = "arm_angle_rad"
-[[outputs]]
-model = "pendulumJoint.phi"
-measured = "pendulum_angle_rad"
-[[inputs]]
+{FURUTA_OUTPUTS}[[inputs]]
 model = "armTorque"
 measured = "motor_torque_Nm"
 [[parameters]]
