@@ -139,10 +139,19 @@ fn submit(body: &[u8]) {
         return;
     };
     let folder = Path::new("/srv/calib-api/datasets");
-    let Ok(text) = spec::campaign_file(&campaign, &folder.join("x.csv"), "time_s") else {
+    let Ok(spec) = spec::campaign_spec(&campaign, &folder.join("x.csv"), "time_s") else {
         return;
     };
-    if let Ok(c) = Campaign::parse(&text, &folder.join("submitted-campaign.toml")) {
+    if let Ok(c) = Campaign::from_spec(spec, &folder.join("submitted-campaign.toml")) {
+        // The campaign file it is stored as resolves to the same campaign.
+        let stored = Campaign::parse(&c.spec, &folder.join("submitted-campaign.toml"))
+            .unwrap_or_else(|e| panic!("{e}\n{}", c.spec));
+        assert_eq!(
+            stored.identity(&[0; 32]),
+            c.identity(&[0; 32]),
+            "{}",
+            c.spec
+        );
         assert!((1..=limits::MAX_STARTS).contains(&c.search.starts));
         assert!(c.search.max_evaluations <= limits::MAX_EVALUATIONS);
         assert!(c.search.screening.unwrap_or(0) <= limits::MAX_SCREENING);
@@ -157,13 +166,13 @@ fn submit(body: &[u8]) {
 fn the_good_request_loads() {
     let body = serde_json::to_vec(&good()).unwrap();
     let request: pb::SubmitCampaignRequest = serde_json::from_slice(&body).unwrap();
-    let text = spec::campaign_file(
+    let spec = spec::campaign_spec(
         &request.campaign.unwrap(),
         Path::new("/srv/x.csv"),
         "time_s",
     )
     .unwrap();
-    Campaign::parse(&text, Path::new("/srv/submitted-campaign.toml")).unwrap();
+    Campaign::from_spec(spec, Path::new("/srv/submitted-campaign.toml")).unwrap();
 }
 
 /// Any count up to a few times its limit, or anything a `uint64` holds.
@@ -185,12 +194,12 @@ proptest! {
         search.starts = Some(starts);
         search.screening = Some(screening);
         search.max_evaluations = Some(max_evaluations);
-        let Ok(text) = spec::campaign_file(&campaign, Path::new("/srv/x.csv"), "time_s") else {
-            // Only what TOML cannot hold (above i64::MAX) is refused here.
+        let Ok(spec) = spec::campaign_spec(&campaign, Path::new("/srv/x.csv"), "time_s") else {
+            // Only what a campaign file cannot hold (above i64::MAX) is refused here.
             prop_assert!([starts, screening, max_evaluations].iter().any(|n| *n > i64::MAX as u64));
             return Ok(());
         };
-        let loaded = Campaign::parse(&text, Path::new("/srv/submitted-campaign.toml"));
+        let loaded = Campaign::from_spec(spec, Path::new("/srv/submitted-campaign.toml"));
         let beyond = [
             ("search.starts", starts == 0 || starts > limits::MAX_STARTS as u64),
             ("search.max_evaluations", max_evaluations > limits::MAX_EVALUATIONS as u64),

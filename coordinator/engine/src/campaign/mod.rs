@@ -4,19 +4,19 @@
 //! models before anything runs, so every mistake is reported up front with the file, the
 //! line and the field. See docs/campaigns.md for the format.
 
-mod file;
 mod identity;
 mod resolve;
+pub mod spec;
 #[cfg(test)]
 mod tests;
 mod user_effects;
 
 pub use calib_model::inputs::Interpolation;
 use calib_model::{Model, SolverOptions};
-pub use file::default_methods;
 pub use resolve::MAX_EXPERIMENTS;
 use resolve::{resolve, Locator};
 use serde::Deserialize;
+pub use spec::{default_methods, CampaignSpec};
 use std::fmt;
 use std::path::{Path, PathBuf};
 
@@ -326,6 +326,27 @@ fn readable_type_error(message: &str) -> String {
     out
 }
 
+impl CampaignSpec {
+    /// Read campaign text, not yet checked against its model; `path` locates errors.
+    pub fn parse(text: &str, path: &Path) -> Result<CampaignSpec, CampaignError> {
+        let locate = Locator {
+            text: Some(text),
+            path,
+        };
+        let error = |e: toml::de::Error, field: String| CampaignError {
+            file: path.to_path_buf(),
+            line: e.span().and_then(|s| locate.line(s.start)),
+            field,
+            message: readable_type_error(e.message().trim()),
+        };
+        let document = toml::Deserializer::parse(text).map_err(|e| error(e, String::new()))?;
+        serde_path_to_error::deserialize(document).map_err(|e| {
+            let field = field_of(e.path());
+            error(e.into_inner(), field)
+        })
+    }
+}
+
 impl Campaign {
     /// Read and resolve a campaign file.
     pub fn load(path: &Path) -> Result<Campaign, CampaignError> {
@@ -340,19 +361,26 @@ impl Campaign {
 
     /// Resolve campaign text; `path` locates errors and relative measurement files.
     pub fn parse(text: &str, path: &Path) -> Result<Campaign, CampaignError> {
-        let locate = Locator { text, path };
-        let error = |e: toml::de::Error, field: String| CampaignError {
-            file: path.to_path_buf(),
-            line: e.span().map(|s| locate.line(s.start)),
-            field,
-            message: readable_type_error(e.message().trim()),
+        let spec = CampaignSpec::parse(text, path)?;
+        let locate = Locator {
+            text: Some(text),
+            path,
         };
-        let document = toml::Deserializer::parse(text).map_err(|e| error(e, String::new()))?;
-        let file: file::CampaignFile = serde_path_to_error::deserialize(document).map_err(|e| {
-            let field = field_of(e.path());
-            error(e.into_inner(), field)
+        resolve(spec, &locate, text.to_string())
+    }
+
+    /// Resolve `spec`, a campaign built rather than read (from a message of the Calibration
+    /// API): its errors name the field, with no line; `path` is where it is said to be, and
+    /// what relative files are relative to. It keeps its campaign file
+    /// ([`CampaignSpec::to_toml`]), which parses back to the same campaign.
+    pub fn from_spec(spec: CampaignSpec, path: &Path) -> Result<Campaign, CampaignError> {
+        let text = spec.to_toml().map_err(|message| CampaignError {
+            file: path.to_path_buf(),
+            line: None,
+            field: String::new(),
+            message,
         })?;
-        resolve(file, &locate)
+        resolve(spec, &Locator { text: None, path }, text)
     }
 
     /// Nominal values of the free parameters.

@@ -1,210 +1,269 @@
-//! The campaign file as written: the TOML sections, before they are checked against the
-//! model ([`super::resolve`]). Spans are kept so that every mistake names its line.
+//! The campaign as written, before it is checked against the model ([`super::resolve`]):
+//! the one campaign type of every door. A campaign file deserializes into it (spans kept,
+//! so that every mistake names its line); the Calibration API's `Campaign` message is
+//! converted into it field by field; and it serializes back to the campaign file a hosted
+//! campaign is stored and downloaded as. Built values carry empty spans ([`at`]).
 
 use super::Method;
-use serde::Deserialize;
-use toml::Spanned;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+pub use toml::Spanned;
 
-#[derive(Debug, Deserialize)]
+/// `value` where no text locates it (a campaign built from a message, not read from a file).
+pub fn at<T>(value: T) -> Spanned<T> {
+    Spanned::new(0..0, value)
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct CampaignFile {
-    pub(super) name: Option<Spanned<String>>,
-    pub(super) model: Spanned<ModelSection>,
+pub struct CampaignSpec {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<Spanned<String>>,
+    pub model: Spanned<ModelSection>,
     /// The one-experiment form's record; or else `[[experiments]]`.
-    pub(super) measurement: Option<MeasurementSection>,
-    #[serde(default)]
-    pub(super) outputs: Vec<Spanned<OutputEntry>>,
-    #[serde(default)]
-    pub(super) inputs: Vec<Spanned<InputEntry>>,
-    #[serde(default)]
-    pub(super) parameters: Vec<Spanned<ParameterEntry>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub measurement: Option<MeasurementSection>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outputs: Vec<Spanned<OutputEntry>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<Spanned<InputEntry>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameters: Vec<Spanned<ParameterEntry>>,
     /// Built-in effects made free, and effects defined by a formula.
-    #[serde(default)]
-    pub(super) effects: Vec<Spanned<EffectEntry>>,
-    #[serde(default)]
-    pub(super) diagnosis: Option<Spanned<DiagnosisSection>>,
-    pub(super) window: Option<Spanned<WindowSection>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub effects: Vec<Spanned<EffectEntry>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<Spanned<DiagnosisSection>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window: Option<Spanned<WindowSection>>,
     /// Disjoint fitted intervals `[[start, stop], ...]`, instead of `[window]`.
-    pub(super) windows: Option<Spanned<Vec<[f64; 2]>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub windows: Option<Spanned<Vec<[f64; 2]>>>,
     /// Several records fitted together with the same parameters.
-    #[serde(default)]
-    pub(super) experiments: Vec<Spanned<ExperimentEntry>>,
-    #[serde(default)]
-    pub(super) search: Option<Spanned<SearchSection>>,
-    #[serde(default)]
-    pub(super) solver: Option<Spanned<SolverSection>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub experiments: Vec<Spanned<ExperimentEntry>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub search: Option<Spanned<SearchSection>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub solver: Option<Spanned<SolverSection>>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct ModelSection {
+pub struct ModelSection {
     /// A hosted model; or else `fmu`.
-    pub(super) name: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub name: Option<Spanned<String>>,
     /// The path of an FMU, relative to the campaign file or absolute.
-    pub(super) fmu: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fmu: Option<Spanned<String>>,
     /// How the FMU is run: `"model-exchange"` (default when it has it) or `"co-simulation"`.
-    pub(super) interface: Option<Spanned<String>>,
-    pub(super) stop_time: Option<Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interface: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop_time: Option<Spanned<f64>>,
     /// Where an FMU's simulation starts [s] (default 0).
-    pub(super) start_time: Option<Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub start_time: Option<Spanned<f64>>,
     /// A Co-Simulation FMU's communication step [s] (default: its DefaultExperiment's).
-    pub(super) step: Option<Spanned<f64>>,
-    #[serde(default)]
-    pub(super) parameters: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub step: Option<Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub parameters: BTreeMap<Spanned<String>, Spanned<f64>>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct MeasurementSection {
-    pub(super) file: Spanned<String>,
+pub struct MeasurementSection {
+    pub file: Spanned<String>,
     #[serde(default = "default_time_column")]
-    pub(super) time_column: String,
+    pub time_column: String,
 }
 
-pub(super) fn default_time_column() -> String {
+pub fn default_time_column() -> String {
     "time".into()
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct OutputEntry {
-    pub(super) model: Spanned<String>,
-    pub(super) measured: String,
+pub struct OutputEntry {
+    pub model: Spanned<String>,
+    pub measured: String,
     /// `k_i`, default 1; not with `sigma`.
-    pub(super) weight: Option<Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub weight: Option<Spanned<f64>>,
     /// The output's uncertainty `σ_i` in its unit: `k_i = 1/σ_i²`.
-    pub(super) sigma: Option<Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sigma: Option<Spanned<f64>>,
     /// `"none"` (default) or `"variance"`: `k_i` divided by the measured signal's variance
     /// over the window.
-    pub(super) scale: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale: Option<Spanned<String>>,
 }
 
 /// One record of several fitted together.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct ExperimentEntry {
-    pub(super) name: Spanned<String>,
-    pub(super) file: Spanned<String>,
+pub struct ExperimentEntry {
+    pub name: Spanned<String>,
+    pub file: Spanned<String>,
     #[serde(default = "default_time_column")]
-    pub(super) time_column: String,
+    pub time_column: String,
     /// Where this experiment's plots end (default: its window's stop).
-    pub(super) stop_time: Option<Spanned<f64>>,
-    pub(super) window: Option<Spanned<WindowSection>>,
-    pub(super) windows: Option<Spanned<Vec<[f64; 2]>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub stop_time: Option<Spanned<f64>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub window: Option<Spanned<WindowSection>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub windows: Option<Spanned<Vec<[f64; 2]>>>,
     /// Model values for this experiment alone (a start angle, a set-point).
-    #[serde(default)]
-    pub(super) fixed: std::collections::BTreeMap<Spanned<String>, Spanned<f64>>,
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub fixed: BTreeMap<Spanned<String>, Spanned<f64>>,
     /// This experiment's inputs (default: the campaign's `[[inputs]]`).
-    #[serde(default)]
-    pub(super) inputs: Vec<Spanned<InputEntry>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<Spanned<InputEntry>>,
     /// This experiment's outputs (default: the campaign's `[[outputs]]`).
-    #[serde(default)]
-    pub(super) outputs: Vec<Spanned<OutputEntry>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub outputs: Vec<Spanned<OutputEntry>>,
     /// Parameters free in this experiment alone (its unknown start angle, a sensor offset
     /// of one day).
-    #[serde(default)]
-    pub(super) parameters: Vec<Spanned<ParameterEntry>>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameters: Vec<Spanned<ParameterEntry>>,
 }
 
 /// A model input driven by a measured column.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct InputEntry {
-    pub(super) model: Spanned<String>,
-    pub(super) measured: String,
+pub struct InputEntry {
+    pub model: Spanned<String>,
+    pub measured: String,
     /// `"linear"` (default) or `"hold"`.
-    pub(super) interpolation: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub interpolation: Option<Spanned<String>>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct ParameterEntry {
-    pub(super) name: Spanned<String>,
-    pub(super) nominal: Option<f64>,
-    pub(super) min: f64,
-    pub(super) max: f64,
-    #[serde(default)]
-    pub(super) scale: super::Scale,
+pub struct ParameterEntry {
+    pub name: Spanned<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    pub min: f64,
+    pub max: f64,
+    #[serde(default, skip_serializing_if = "is_linear")]
+    pub scale: super::Scale,
 }
 
 /// An `[[effects]]` entry: a built-in effect made free (`name`, `min`, `max`, `nominal`,
 /// `scale`), or an effect defined by a formula (`name`, `torque` or `output`, `formula`,
 /// `parameters`, `fixed`).
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct EffectEntry {
-    pub(super) name: Spanned<String>,
-    pub(super) nominal: Option<f64>,
-    pub(super) min: Option<f64>,
-    pub(super) max: Option<f64>,
-    #[serde(default)]
-    pub(super) scale: super::Scale,
-    pub(super) torque: Option<Spanned<String>>,
-    pub(super) output: Option<Spanned<String>>,
-    pub(super) formula: Option<Spanned<String>>,
-    pub(super) parameters: Option<Vec<Spanned<UserParameterEntry>>>,
+pub struct EffectEntry {
+    pub name: Spanned<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+    #[serde(default, skip_serializing_if = "is_linear")]
+    pub scale: super::Scale,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub torque: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub formula: Option<Spanned<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parameters: Option<Vec<Spanned<UserParameterEntry>>>,
     /// Every parameter of the defined effect held at its nominal value (diagnosis may
     /// still offer it as a candidate).
-    pub(super) fixed: Option<bool>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixed: Option<bool>,
 }
 
 /// A parameter of an effect defined by a formula.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct UserParameterEntry {
-    pub(super) name: String,
-    pub(super) nominal: Option<f64>,
-    pub(super) min: f64,
-    pub(super) max: f64,
-    pub(super) fixed: Option<bool>,
+pub struct UserParameterEntry {
+    pub name: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub nominal: Option<f64>,
+    pub min: f64,
+    pub max: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixed: Option<bool>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct DiagnosisSection {
-    pub(super) holdout_start: Option<f64>,
-    pub(super) holdout_stop: Option<f64>,
-    pub(super) refit: Option<usize>,
-    pub(super) candidates: Option<Vec<String>>,
+pub struct DiagnosisSection {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub holdout_start: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub holdout_stop: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub candidates: Option<Vec<String>>,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct WindowSection {
-    pub(super) start: f64,
-    pub(super) stop: f64,
+pub struct WindowSection {
+    pub start: f64,
+    pub stop: f64,
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct SearchSection {
+pub struct SearchSection {
     #[serde(default = "default_methods")]
-    pub(super) methods: Vec<Method>,
+    pub methods: Vec<Method>,
     #[serde(default = "default_starts")]
-    pub(super) starts: usize,
+    pub starts: usize,
     #[serde(default = "default_max_evaluations")]
-    pub(super) max_evaluations: usize,
+    pub max_evaluations: usize,
     #[serde(default)]
-    pub(super) seed: u64,
-    pub(super) screening: Option<usize>,
-    pub(super) cma_population: Option<usize>,
+    pub seed: u64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub screening: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub cma_population: Option<usize>,
+}
+
+/// Whether a parameter's scale is the default, which its campaign file need not state.
+fn is_linear(scale: &super::Scale) -> bool {
+    *scale == super::Scale::Lin
 }
 
 /// The methods of a `[search]` that names none.
 pub fn default_methods() -> Vec<Method> {
     vec![Method::NelderMead]
 }
-pub(super) fn default_starts() -> usize {
+pub fn default_starts() -> usize {
     1
 }
-pub(super) fn default_max_evaluations() -> usize {
+pub fn default_max_evaluations() -> usize {
     1000
 }
 
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct SolverSection {
-    pub(super) rtol: Option<f64>,
-    pub(super) atol: Option<f64>,
-    pub(super) max_steps: Option<u64>,
+pub struct SolverSection {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rtol: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub atol: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max_steps: Option<u64>,
+}
+
+impl CampaignSpec {
+    /// The campaign file of this campaign: what a hosted campaign is stored as, and read
+    /// back from, and what a client downloads.
+    pub fn to_toml(&self) -> Result<String, String> {
+        toml::to_string(self).map_err(|e| format!("campaign: {e}"))
+    }
 }

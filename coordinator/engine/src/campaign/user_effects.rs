@@ -2,8 +2,8 @@
 //! defined by a formula (`formula` with `torque` or `output`, and its `parameters`), which
 //! is checked and compiled against the model here and becomes part of it.
 
-use super::file::{EffectEntry, ParameterEntry};
 use super::resolve::Locator;
+use super::spec::{EffectEntry, ParameterEntry};
 use super::{CampaignError, FreeParameter, Scale};
 use calib_model::user_effects::{self, place_of, UserEffect, UserParameter};
 use calib_model::{Model, ModelInfo};

@@ -1,96 +1,90 @@
 //! Effects defined by a formula in the Campaign message (`defined_effects`) and in the
-//! campaign file (`[[effects]]` entries with a `formula`), both ways. In the file they follow
+//! campaign (`[[effects]]` entries with a `formula`), both ways. In the campaign they follow
 //! the built-in effects made free (`effects`), in the message's order.
 
+use calib_engine::campaign::spec::{at, EffectEntry, UserParameterEntry};
+use calib_engine::campaign::Scale;
 use calib_proto::v1 as pb;
-use toml::{Table, Value};
 
 /// Whether an `[[effects]]` entry defines an effect (rather than freeing a built-in one):
 /// the loader's rule.
-pub fn is_defined(entry: &Table) -> bool {
-    ["formula", "torque", "output"]
-        .iter()
-        .any(|k| entry.contains_key(*k))
+pub fn is_defined(entry: &EffectEntry) -> bool {
+    entry.formula.is_some() || entry.torque.is_some() || entry.output.is_some()
 }
 
-/// The `[[effects]]` entries of `list`.
-pub fn tables(list: &[pb::DefinedEffect]) -> Vec<Value> {
-    list.iter().map(|e| Value::Table(table(e))).collect()
-}
-
-fn table(e: &pb::DefinedEffect) -> Table {
-    let mut t = Table::new();
-    t.insert("name".into(), e.name.clone().into());
-    if !e.torque.is_empty() {
-        t.insert("torque".into(), e.torque.clone().into());
-    }
-    if !e.output.is_empty() {
-        t.insert("output".into(), e.output.clone().into());
-    }
-    t.insert("formula".into(), e.formula.clone().into());
-    let parameters: Vec<Value> = e
-        .parameters
-        .iter()
-        .map(|p| {
-            let mut t = Table::new();
-            t.insert("name".into(), p.name.clone().into());
-            if let Some(n) = p.nominal {
-                t.insert("nominal".into(), n.into());
-            }
-            t.insert("min".into(), p.min.into());
-            t.insert("max".into(), p.max.into());
-            if p.fixed {
-                t.insert("fixed".into(), true.into());
-            }
-            Value::Table(t)
-        })
-        .collect();
-    t.insert("parameters".into(), parameters.into());
-    if e.fixed {
-        t.insert("fixed".into(), true.into());
-    }
-    t
-}
-
-/// The messages of the entries of `list` that define an effect ([`is_defined`]).
-pub fn messages(list: &[Table]) -> Vec<pb::DefinedEffect> {
-    list.iter()
-        .filter(|t| is_defined(t))
-        .map(|t| pb::DefinedEffect {
-            name: string(t, "name"),
-            torque: string(t, "torque"),
-            output: string(t, "output"),
-            formula: string(t, "formula"),
-            parameters: t
-                .get("parameters")
-                .and_then(Value::as_array)
-                .map(|a| {
-                    a.iter()
-                        .filter_map(Value::as_table)
-                        .map(|p| pb::DefinedEffectParameter {
-                            name: string(p, "name"),
-                            nominal: float(p, "nominal"),
-                            min: float(p, "min").unwrap_or_default(),
-                            max: float(p, "max").unwrap_or_default(),
-                            fixed: flag(p, "fixed"),
-                        })
-                        .collect()
+/// The `[[effects]]` entry of a definition.
+pub fn entry(e: &pb::DefinedEffect) -> EffectEntry {
+    let place = |s: &String| Some(s.clone()).filter(|s| !s.is_empty()).map(at);
+    EffectEntry {
+        name: at(e.name.clone()),
+        nominal: None,
+        min: None,
+        max: None,
+        scale: Scale::default(),
+        torque: place(&e.torque),
+        output: place(&e.output),
+        formula: Some(at(e.formula.clone())),
+        parameters: Some(
+            e.parameters
+                .iter()
+                .map(|p| {
+                    at(UserParameterEntry {
+                        name: p.name.clone(),
+                        nominal: p.nominal,
+                        min: p.min,
+                        max: p.max,
+                        fixed: p.fixed.then_some(true),
+                    })
                 })
-                .unwrap_or_default(),
-            fixed: flag(t, "fixed"),
-        })
-        .collect()
+                .collect(),
+        ),
+        fixed: e.fixed.then_some(true),
+    }
+}
+
+/// The message of an entry that defines an effect ([`is_defined`]).
+pub fn message(e: &EffectEntry) -> pb::DefinedEffect {
+    let text = |s: &Option<toml::Spanned<String>>| {
+        s.as_ref().map(|s| s.get_ref().clone()).unwrap_or_default()
+    };
+    pb::DefinedEffect {
+        name: e.name.get_ref().clone(),
+        torque: text(&e.torque),
+        output: text(&e.output),
+        formula: text(&e.formula),
+        parameters: e
+            .parameters
+            .iter()
+            .flatten()
+            .map(|p| {
+                let p = p.get_ref();
+                pb::DefinedEffectParameter {
+                    name: p.name.clone(),
+                    nominal: p.nominal,
+                    min: p.min,
+                    max: p.max,
+                    fixed: p.fixed.unwrap_or(false),
+                }
+            })
+            .collect(),
+        fixed: e.fixed.unwrap_or(false),
+    }
 }
 
 /// The effects an `[[effects]]` block defines (what discovery proposes, as it prints it).
 pub fn from_block(text: &str) -> Result<Vec<pb::DefinedEffect>, String> {
-    let root: Table = text.parse().map_err(|e| format!("{e}"))?;
-    let entries: Vec<Table> = root
-        .get("effects")
-        .and_then(Value::as_array)
-        .map(|a| a.iter().filter_map(Value::as_table).cloned().collect())
-        .unwrap_or_default();
-    Ok(messages(&entries))
+    #[derive(serde::Deserialize)]
+    struct Block {
+        #[serde(default)]
+        effects: Vec<EffectEntry>,
+    }
+    let block: Block = toml::from_str(text).map_err(|e| format!("{e}"))?;
+    Ok(block
+        .effects
+        .iter()
+        .filter(|e| is_defined(e))
+        .map(message)
+        .collect())
 }
 
 /// A field of the campaign file's `[[effects]]` as the message names it: the entries past
@@ -129,22 +123,6 @@ pub fn refusal_in_message_fields(c: &pb::Campaign, status: tonic::Status) -> ton
     tonic::Status::new(status.code(), format!("campaign.{named}: {what}"))
 }
 
-fn string(t: &Table, k: &str) -> String {
-    t.get(k)
-        .and_then(Value::as_str)
-        .map(str::to_string)
-        .unwrap_or_default()
-}
-
-fn float(t: &Table, k: &str) -> Option<f64> {
-    t.get(k)
-        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
-}
-
-fn flag(t: &Table, k: &str) -> bool {
-    t.get(k).and_then(Value::as_bool).unwrap_or(false)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -170,10 +148,15 @@ max = 0.1
         assert_eq!(e.parameters[0].nominal, Some(0.006));
         assert_eq!(e.parameters[1].nominal, Some(8.0));
         assert!(e.parameters[1].fixed && !e.parameters[0].fixed && !e.fixed);
-        let mut root = Table::new();
-        root.insert("effects".into(), tables(&defined).into());
+        #[derive(serde::Serialize)]
+        struct Block {
+            effects: Vec<EffectEntry>,
+        }
+        let block = Block {
+            effects: defined.iter().map(entry).collect(),
+        };
         assert_eq!(
-            from_block(&toml::to_string(&root).unwrap()).unwrap(),
+            from_block(&toml::to_string(&block).unwrap()).unwrap(),
             defined
         );
     }
@@ -182,7 +165,7 @@ max = 0.1
     /// `calib submit` sends them) into a campaign file that resolves to the same campaign.
     #[test]
     fn defined_effects_survive_the_message() {
-        use crate::api::spec::{campaign_file, campaign_message};
+        use crate::api::spec::{campaign_message, campaign_spec};
         use calib_engine::campaign::Campaign;
         use std::path::Path;
         let text = r#"
@@ -219,8 +202,9 @@ parameters = [ { name = "a", nominal = 0.001, min = -0.02, max = 0.02 },
             message.defined_effects[0].formula,
             "a * sin(k * armJoint.phi)"
         );
-        let file = campaign_file(&message, Path::new("/data/x.csv"), "time").unwrap();
-        let back = Campaign::parse(&file, Path::new("/srv/c.toml")).unwrap();
+        let spec = campaign_spec(&message, Path::new("/data/x.csv"), "time").unwrap();
+        let back = Campaign::from_spec(spec, Path::new("/srv/c.toml")).unwrap();
+        let file = back.spec.clone();
         let original = Campaign::parse(text, Path::new("/c/x.toml")).unwrap();
         assert_eq!(back.free, original.free);
         assert_eq!(back.base, original.base);

@@ -63,12 +63,12 @@ impl Calibration for CalibrationApi {
         if let Some(problem) = self.early_problems(&campaign).await?.first() {
             return Err(problem.status());
         }
-        let text = self.campaign_file(&campaign).await?;
+        let spec = self.campaign_spec(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let key = Some(request.idempotency_key).filter(|k| !k.is_empty());
         let message = serde_json::to_value(&campaign).ok();
         let (id, started) = self
-            .blocking(move || campaigns.submit_message(&text, key.as_deref(), message))
+            .blocking(move || campaigns.submit_message(spec, key.as_deref(), message))
             .await
             .map_err(|s| defined_effects::refusal_in_message_fields(&campaign, s))?;
         Ok(Response::new(pb::SubmitCampaignResponse { id, started }))
@@ -239,10 +239,10 @@ impl Calibration for CalibrationApi {
         if let Some(problem) = early.iter().find(|p| !p.field.starts_with("search")) {
             return Err(problem.status());
         }
-        let text = self.campaign_file(&campaign).await?;
+        let spec = self.campaign_spec(&campaign).await?;
         let campaigns = self.campaigns.clone();
         let receiver = self
-            .blocking(move || campaigns.sensitivity(&text, settings))
+            .blocking(move || campaigns.sensitivity(spec, settings))
             .await?;
         Ok(Response::new(follow_analysis(receiver)))
     }

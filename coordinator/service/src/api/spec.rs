@@ -1,48 +1,51 @@
-//! The campaign message of the Calibration API and the campaign file it mirrors, both ways:
-//! the coordinator writes a file from a message for the one campaign loader; clients
-//! (`calib submit`) write a message from a file.
+//! The campaign message of the Calibration API and the one campaign type, both ways: the
+//! coordinator converts a message into a [`CampaignSpec`], field by field, which the
+//! campaign's one resolver checks; clients (`calib submit`) convert a campaign file's spec
+//! into a message. No campaign text passes between the two.
 
+use calib_engine::campaign::spec::{
+    at, default_max_evaluations, default_starts, CampaignSpec, DiagnosisSection, EffectEntry,
+    ExperimentEntry, InputEntry, MeasurementSection, ModelSection, OutputEntry, ParameterEntry,
+    SearchSection, SolverSection, Spanned, WindowSection,
+};
+use calib_engine::campaign::{Method, Scale};
 use calib_proto::v1 as pb;
+use serde::de::IntoDeserializer;
+use serde::Deserialize;
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use toml::{Table, Value};
 
-/// The campaign file of `c`, its measurement the dataset file `file` with its time in
-/// `time_column`; or the field that cannot be written as one.
-pub fn campaign_file(c: &pb::Campaign, file: &Path, time_column: &str) -> Result<String, String> {
-    campaign_file_on(c, file, time_column, None)
-}
-
-/// [`campaign_file`], its model the FMU archive at `fmu` when there is one (run through
-/// `c.fmu_interface`), else the hosted model `c.model`.
-pub fn campaign_file_on(
+/// The campaign of `c`, its measurement the dataset file `file` with its time in
+/// `time_column`; or the field that cannot be converted ("campaign.<field>: <what>").
+pub fn campaign_spec(
     c: &pb::Campaign,
     file: &Path,
     time_column: &str,
-    fmu: Option<&Path>,
-) -> Result<String, String> {
+) -> Result<CampaignSpec, String> {
     let record = Record {
         file: file.to_path_buf(),
         time_column: time_column.to_string(),
     };
-    campaign_file_with(c, Some(&record), &[], fmu)
+    campaign_spec_with(c, Some(&record), &[], None)
 }
 
-/// A dataset as a campaign file names it: its file and time column.
+/// A dataset as a campaign names it: its file and time column.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Record {
     pub file: PathBuf,
     pub time_column: String,
 }
 
-/// The campaign file of `c`: its one record `record` (the dataset `c.dataset_id` names), or,
-/// for a campaign of several experiments, `experiments[k]` the record of
-/// `c.experiments[k]`; its model the FMU archive at `fmu` when there is one.
-pub fn campaign_file_with(
+/// The campaign of `c`: its one record `record` (the dataset `c.dataset_id` names), or, for
+/// a campaign of several experiments, `experiments[k]` the record of `c.experiments[k]`;
+/// its model the FMU archive at `fmu` when there is one (run through `c.fmu_interface`),
+/// else the hosted model `c.model`.
+pub fn campaign_spec_with(
     c: &pb::Campaign,
     record: Option<&Record>,
     experiments: &[Record],
     fmu: Option<&Path>,
-) -> Result<String, String> {
+) -> Result<CampaignSpec, String> {
     if experiments.len() != c.experiments.len() {
         return Err(format!(
             "campaign.experiments: {} experiments for {} records",
@@ -50,266 +53,243 @@ pub fn campaign_file_with(
             experiments.len()
         ));
     }
-    let mut root = Table::new();
-    if !c.name.is_empty() {
-        root.insert("name".into(), c.name.clone().into());
-    }
-    let model = model_table(c, fmu);
-    root.insert("model".into(), model.into());
-    if let Some(record) = record {
-        let mut measurement = Table::new();
-        measurement.insert(
-            "file".into(),
-            record.file.to_string_lossy().into_owned().into(),
-        );
-        measurement.insert("time_column".into(), record.time_column.clone().into());
-        root.insert("measurement".into(), measurement.into());
-    }
-    root.insert("outputs".into(), outputs(&c.outputs).into());
-    if !c.inputs.is_empty() {
-        root.insert("inputs".into(), inputs(&c.inputs).into());
-    }
-    root.insert("parameters".into(), parameters(&c.parameters).into());
-    if !c.effects.is_empty() || !c.defined_effects.is_empty() {
-        let mut effects = parameters(&c.effects);
-        effects.extend(super::defined_effects::tables(&c.defined_effects));
-        root.insert("effects".into(), effects.into());
-    }
-    if c.window_start != 0.0 || c.window_stop != 0.0 {
-        let mut w = Table::new();
-        w.insert("start".into(), c.window_start.into());
-        w.insert("stop".into(), c.window_stop.into());
-        root.insert("window".into(), w.into());
-    }
-    if !c.windows.is_empty() {
-        root.insert("windows".into(), windows(&c.windows).into());
-    }
-    if !c.experiments.is_empty() {
-        let list: Vec<Value> = c
+    let mut effects: Vec<_> = parameters(&c.effects, "effects")?
+        .into_iter()
+        .map(|p| at(builtin_effect(p.into_inner())))
+        .collect();
+    effects.extend(
+        c.defined_effects
+            .iter()
+            .map(|e| at(super::defined_effects::entry(e))),
+    );
+    Ok(CampaignSpec {
+        name: Some(c.name.clone()).filter(|n| !n.is_empty()).map(at),
+        model: at(model_section(c, fmu)),
+        measurement: record.map(|r| MeasurementSection {
+            file: at(path_text(&r.file)),
+            time_column: r.time_column.clone(),
+        }),
+        outputs: outputs(&c.outputs),
+        inputs: inputs(&c.inputs),
+        parameters: parameters(&c.parameters, "parameters")?,
+        effects,
+        diagnosis: c.diagnosis.as_ref().map(diagnosis_section).transpose()?,
+        window: (c.window_start != 0.0 || c.window_stop != 0.0).then(|| {
+            at(WindowSection {
+                start: c.window_start,
+                stop: c.window_stop,
+            })
+        }),
+        windows: (!c.windows.is_empty()).then(|| windows(&c.windows)),
+        experiments: c
             .experiments
             .iter()
             .zip(experiments)
-            .map(|(e, record)| experiment(e, record).into())
-            .collect();
-        root.insert("experiments".into(), list.into());
-    }
-    if let Some(search) = &c.search {
-        root.insert("search".into(), search_table(search)?.into());
-    }
-    if c.rtol.is_some() || c.atol.is_some() || c.max_steps.is_some() {
-        root.insert("solver".into(), solver_table(c)?.into());
-    }
-    if let Some(d) = &c.diagnosis {
-        root.insert("diagnosis".into(), diagnosis_table(d)?.into());
-    }
-    toml::to_string(&root).map_err(|e| format!("campaign: {e}"))
+            .enumerate()
+            .map(|(k, (e, record))| experiment(k, e, record).map(at))
+            .collect::<Result<_, _>>()?,
+        search: c.search.as_ref().map(search_section).transpose()?,
+        solver: (c.rtol.is_some() || c.atol.is_some() || c.max_steps.is_some())
+            .then(|| solver_section(c))
+            .transpose()?,
+    })
 }
 
-/// The `[model]` table: a built-in model by name or an FMU archive, its times and fixed
-/// parameters.
-fn model_table(c: &pb::Campaign, fmu: Option<&Path>) -> Table {
-    let mut model = Table::new();
-    match fmu {
-        Some(path) => {
-            model.insert("fmu".into(), path.to_string_lossy().into_owned().into());
-            if !c.fmu_interface.is_empty() {
-                model.insert("interface".into(), c.fmu_interface.clone().into());
-            }
-        }
-        None => {
-            model.insert("name".into(), c.model.clone().into());
-        }
+/// The `[model]` section: a built-in model by name or an FMU archive, its times and fixed
+/// values.
+fn model_section(c: &pb::Campaign, fmu: Option<&Path>) -> ModelSection {
+    let (name, fmu, interface) = match fmu {
+        Some(path) => (
+            None,
+            Some(at(path_text(path))),
+            Some(c.fmu_interface.clone())
+                .filter(|i| !i.is_empty())
+                .map(at),
+        ),
+        None => (Some(at(c.model.clone())), None, None),
+    };
+    ModelSection {
+        name,
+        fmu,
+        interface,
+        stop_time: Some(c.stop_time).filter(|t| *t != 0.0).map(at),
+        start_time: Some(c.start_time).filter(|t| *t != 0.0).map(at),
+        step: c.step.map(at),
+        parameters: values(&c.model_parameters),
     }
-    if c.stop_time != 0.0 {
-        model.insert("stop_time".into(), c.stop_time.into());
-    }
-    if c.start_time != 0.0 {
-        model.insert("start_time".into(), c.start_time.into());
-    }
-    if let Some(step) = c.step {
-        model.insert("step".into(), step.into());
-    }
-    if !c.model_parameters.is_empty() {
-        let fixed: Table = c
-            .model_parameters
-            .iter()
-            .map(|(k, v)| (k.clone(), Value::from(*v)))
-            .collect();
-        model.insert("parameters".into(), fixed.into());
-    }
-    model
 }
 
-/// The `[search]` table.
-fn search_table(s: &pb::Search) -> Result<Table, String> {
-    let mut t = Table::new();
-    if !s.methods.is_empty() {
-        let methods: Vec<Value> = s.methods.iter().map(|m| m.clone().into()).collect();
-        t.insert("methods".into(), methods.into());
-    }
-    if let Some(n) = s.starts {
-        t.insert("starts".into(), integer("search.starts", n)?);
-    }
-    if let Some(n) = s.max_evaluations {
-        t.insert(
-            "max_evaluations".into(),
-            integer("search.max_evaluations", n)?,
-        );
-    }
-    t.insert("seed".into(), integer("search.seed", s.seed)?);
-    if let Some(n) = s.screening {
-        t.insert("screening".into(), integer("search.screening", n)?);
-    }
-    if let Some(n) = s.cma_population {
-        t.insert(
-            "cma_population".into(),
-            integer("search.cma_population", n)?,
-        );
-    }
-    Ok(t)
+fn path_text(path: &Path) -> String {
+    path.to_string_lossy().into_owned()
 }
 
-/// The `[solver]` table.
-fn solver_table(c: &pb::Campaign) -> Result<Table, String> {
-    let mut t = Table::new();
-    if let Some(v) = c.rtol {
-        t.insert("rtol".into(), v.into());
-    }
-    if let Some(v) = c.atol {
-        t.insert("atol".into(), v.into());
-    }
-    if let Some(n) = c.max_steps {
-        t.insert("max_steps".into(), integer("max_steps", n)?);
-    }
-    Ok(t)
-}
-
-/// The `[diagnosis]` table.
-fn diagnosis_table(d: &pb::DiagnosisSettings) -> Result<Table, String> {
-    let mut t = Table::new();
-    if let Some(v) = d.holdout_start {
-        t.insert("holdout_start".into(), v.into());
-    }
-    if let Some(v) = d.holdout_stop {
-        t.insert("holdout_stop".into(), v.into());
-    }
-    if let Some(n) = d.refit {
-        t.insert("refit".into(), integer("diagnosis.refit", n)?);
-    }
-    if !d.candidates.is_empty() {
-        let list: Vec<Value> = d.candidates.iter().map(|c| c.clone().into()).collect();
-        t.insert("candidates".into(), list.into());
-    }
-    Ok(t)
-}
-
-/// One `[[experiments]]` entry: its record, one `window` or several `windows`.
-fn experiment(e: &pb::Experiment, record: &Record) -> Table {
-    let mut t = Table::new();
-    t.insert("name".into(), e.name.clone().into());
-    t.insert(
-        "file".into(),
-        record.file.to_string_lossy().into_owned().into(),
-    );
-    t.insert("time_column".into(), record.time_column.clone().into());
-    match e.windows.as_slice() {
-        // No interval: the campaign's check names the experiment's window missing.
-        [] => {}
-        [w] => {
-            let mut window = Table::new();
-            window.insert("start".into(), w.start.into());
-            window.insert("stop".into(), w.stop.into());
-            t.insert("window".into(), window.into());
-        }
-        several => {
-            t.insert("windows".into(), windows(several).into());
-        }
-    }
-    if e.stop_time != 0.0 {
-        t.insert("stop_time".into(), e.stop_time.into());
-    }
-    if !e.fixed.is_empty() {
-        let fixed: Table = e
-            .fixed
-            .iter()
-            .map(|(k, v)| (k.clone(), Value::from(*v)))
-            .collect();
-        t.insert("fixed".into(), fixed.into());
-    }
-    if !e.inputs.is_empty() {
-        t.insert("inputs".into(), inputs(&e.inputs).into());
-    }
-    if !e.outputs.is_empty() {
-        t.insert("outputs".into(), outputs(&e.outputs).into());
-    }
-    if !e.parameters.is_empty() {
-        t.insert("parameters".into(), parameters(&e.parameters).into());
-    }
-    t
-}
-
-fn windows(list: &[pb::Window]) -> Vec<Value> {
-    list.iter()
-        .map(|w| Value::Array(vec![w.start.into(), w.stop.into()]))
+/// A map of fixed values as the spec holds it.
+fn values<'a>(
+    map: impl IntoIterator<Item = (&'a String, &'a f64)>,
+) -> BTreeMap<Spanned<String>, Spanned<f64>> {
+    map.into_iter()
+        .map(|(k, v)| (at(k.clone()), at(*v)))
         .collect()
 }
 
-fn outputs(list: &[pb::Output]) -> Vec<Value> {
+/// The `[search]` section; a method, starts or budget the spec cannot hold is refused.
+fn search_section(s: &pb::Search) -> Result<Spanned<SearchSection>, String> {
+    let methods = s
+        .methods
+        .iter()
+        .enumerate()
+        .map(|(k, m)| named::<Method>(m, &format!("search.methods[{k}]")))
+        .collect::<Result<_, _>>()?;
+    Ok(at(SearchSection {
+        methods,
+        starts: match s.starts {
+            Some(n) => integer("search.starts", n)?,
+            None => default_starts(),
+        },
+        max_evaluations: match s.max_evaluations {
+            Some(n) => integer("search.max_evaluations", n)?,
+            None => default_max_evaluations(),
+        },
+        seed: integer::<u64>("search.seed", s.seed)?,
+        screening: s
+            .screening
+            .map(|n| integer("search.screening", n))
+            .transpose()?,
+        cma_population: s
+            .cma_population
+            .map(|n| integer("search.cma_population", n))
+            .transpose()?,
+    }))
+}
+
+/// The `[solver]` section.
+fn solver_section(c: &pb::Campaign) -> Result<Spanned<SolverSection>, String> {
+    Ok(at(SolverSection {
+        rtol: c.rtol,
+        atol: c.atol,
+        max_steps: c.max_steps.map(|n| integer("max_steps", n)).transpose()?,
+    }))
+}
+
+/// The `[diagnosis]` section.
+fn diagnosis_section(d: &pb::DiagnosisSettings) -> Result<Spanned<DiagnosisSection>, String> {
+    Ok(at(DiagnosisSection {
+        holdout_start: d.holdout_start,
+        holdout_stop: d.holdout_stop,
+        refit: d.refit.map(|n| integer("diagnosis.refit", n)).transpose()?,
+        candidates: (!d.candidates.is_empty()).then(|| d.candidates.clone()),
+    }))
+}
+
+/// Experiment `k`: its record, one `window` or several `windows`.
+fn experiment(k: usize, e: &pb::Experiment, record: &Record) -> Result<ExperimentEntry, String> {
+    let (window, windows) = match e.windows.as_slice() {
+        // No interval: the campaign's check names the experiment's window missing.
+        [] => (None, None),
+        [w] => (
+            Some(at(WindowSection {
+                start: w.start,
+                stop: w.stop,
+            })),
+            None,
+        ),
+        several => (None, Some(windows(several))),
+    };
+    Ok(ExperimentEntry {
+        name: at(e.name.clone()),
+        file: at(path_text(&record.file)),
+        time_column: record.time_column.clone(),
+        stop_time: Some(e.stop_time).filter(|t| *t != 0.0).map(at),
+        window,
+        windows,
+        fixed: values(&e.fixed),
+        inputs: inputs(&e.inputs),
+        outputs: outputs(&e.outputs),
+        parameters: parameters(&e.parameters, &format!("experiments[{k}].parameters"))?,
+    })
+}
+
+fn windows(list: &[pb::Window]) -> Spanned<Vec<[f64; 2]>> {
+    at(list.iter().map(|w| [w.start, w.stop]).collect())
+}
+
+fn outputs(list: &[pb::Output]) -> Vec<Spanned<OutputEntry>> {
     list.iter()
         .map(|o| {
-            let mut t = Table::new();
-            t.insert("model".into(), o.model.clone().into());
-            t.insert("measured".into(), o.measured.clone().into());
-            if let Some(w) = o.weight {
-                t.insert("weight".into(), w.into());
-            }
-            if let Some(s) = o.sigma {
-                t.insert("sigma".into(), s.into());
-            }
-            if !o.scale.is_empty() {
-                t.insert("scale".into(), o.scale.clone().into());
-            }
-            t.into()
+            at(OutputEntry {
+                model: at(o.model.clone()),
+                measured: o.measured.clone(),
+                weight: o.weight.map(at),
+                sigma: o.sigma.map(at),
+                scale: Some(o.scale.clone()).filter(|s| !s.is_empty()).map(at),
+            })
         })
         .collect()
 }
 
-fn inputs(list: &[pb::Input]) -> Vec<Value> {
+fn inputs(list: &[pb::Input]) -> Vec<Spanned<InputEntry>> {
     list.iter()
         .map(|i| {
-            let mut t = Table::new();
-            t.insert("model".into(), i.model.clone().into());
-            t.insert("measured".into(), i.measured.clone().into());
-            if !i.interpolation.is_empty() {
-                t.insert("interpolation".into(), i.interpolation.clone().into());
-            }
-            t.into()
+            at(InputEntry {
+                model: at(i.model.clone()),
+                measured: i.measured.clone(),
+                interpolation: Some(i.interpolation.clone())
+                    .filter(|s| !s.is_empty())
+                    .map(at),
+            })
         })
         .collect()
 }
 
-fn parameters(list: &[pb::Parameter]) -> Vec<Value> {
+/// The parameters of `list`, `field` naming the list in errors.
+fn parameters(list: &[pb::Parameter], field: &str) -> Result<Vec<Spanned<ParameterEntry>>, String> {
     list.iter()
-        .map(|p| {
-            let mut t = Table::new();
-            t.insert("name".into(), p.name.clone().into());
-            if let Some(n) = p.nominal {
-                t.insert("nominal".into(), n.into());
-            }
-            t.insert("min".into(), p.min.into());
-            t.insert("max".into(), p.max.into());
-            if !p.scale.is_empty() {
-                t.insert("scale".into(), p.scale.clone().into());
-            }
-            t.into()
+        .enumerate()
+        .map(|(k, p)| {
+            let scale = match p.scale.as_str() {
+                "" => Scale::default(),
+                scale => named::<Scale>(scale, &format!("{field}[{k}].scale"))?,
+            };
+            Ok(at(ParameterEntry {
+                name: at(p.name.clone()),
+                nominal: p.nominal,
+                min: p.min,
+                max: p.max,
+                scale,
+            }))
         })
         .collect()
 }
 
-fn integer(field: &str, n: u64) -> Result<Value, String> {
+/// A built-in effect made free, as its `[[effects]]` entry.
+fn builtin_effect(p: ParameterEntry) -> EffectEntry {
+    EffectEntry {
+        name: p.name,
+        nominal: p.nominal,
+        min: Some(p.min),
+        max: Some(p.max),
+        scale: p.scale,
+        torque: None,
+        output: None,
+        formula: None,
+        parameters: None,
+        fixed: None,
+    }
+}
+
+/// `name` read as the campaign file reads it (`Method`, `Scale`), or the refusal naming
+/// `field` in the campaign file's words.
+fn named<T: for<'de> Deserialize<'de>>(name: &str, field: &str) -> Result<T, String> {
+    T::deserialize(name.into_deserializer())
+        .map_err(|e: serde::de::value::Error| format!("campaign.{field}: {e}"))
+}
+
+/// `n` as the spec holds it; what a campaign file cannot hold (past `i64`) is refused.
+fn integer<T: TryFrom<u64>>(field: &str, n: u64) -> Result<T, String> {
     i64::try_from(n)
-        .map(Value::from)
-        .map_err(|_| format!("campaign.{field}: {n} is too large"))
+        .ok()
+        .and_then(|_| T::try_from(n).ok())
+        .ok_or_else(|| format!("campaign.{field}: {n} is too large"))
 }
 
 /// The Calibration API's campaign message for a campaign file's text, on dataset `dataset`.
@@ -327,210 +307,185 @@ pub fn campaign_message_on(
     dataset: &str,
     experiments: &[String],
 ) -> Result<pb::Campaign, String> {
-    let root: toml::Table = text.parse().map_err(|e| format!("{e}"))?;
-    let list = |k: &str| tables(&root, k);
-    let parameters = |k: &str| parameter_messages(&tables(&root, k));
-    let model = table(root.get("model"));
-    let window = table(root.get("window"));
-    let solver = table(root.get("solver"));
-    let search = root
-        .get("search")
-        .and_then(|v| v.as_table())
-        .map(search_message);
-    Ok(pb::Campaign {
-        name: string(&root, "name"),
-        model: string(&model, "name"),
-        // The FMU itself is named by the id its upload answers, which the caller sets.
-        fmu_id: String::new(),
-        fmu_interface: string(&model, "interface"),
-        stop_time: float(&model, "stop_time").unwrap_or_default(),
-        start_time: float(&model, "start_time").unwrap_or_default(),
-        step: float(&model, "step"),
-        model_parameters: numbers(&table(model.get("parameters"))),
-        dataset_id: if root.contains_key("experiments") {
-            String::new()
-        } else {
-            dataset.to_string()
-        },
-        outputs: output_messages(&list("outputs")),
-        inputs: input_messages(&list("inputs")),
-        parameters: parameters("parameters"),
-        effects: parameter_messages(
-            &list("effects")
-                .into_iter()
-                .filter(|e| !super::defined_effects::is_defined(e))
-                .collect::<Vec<_>>(),
-        ),
-        defined_effects: super::defined_effects::messages(&list("effects")),
-        window_start: float(&window, "start").unwrap_or_default(),
-        window_stop: float(&window, "stop").unwrap_or_default(),
-        windows: window_messages(root.get("windows")),
-        experiments: list("experiments")
-            .iter()
-            .enumerate()
-            .map(|(k, e)| experiment_message(e, experiments.get(k)))
-            .collect(),
-        search,
-        rtol: float(&solver, "rtol"),
-        atol: float(&solver, "atol"),
-        max_steps: uint(&solver, "max_steps"),
-        diagnosis: root
-            .get("diagnosis")
-            .and_then(|v| v.as_table())
-            .map(diagnosis_message),
-    })
+    let spec = CampaignSpec::parse(text, Path::new("campaign.toml")).map_err(|e| e.to_string())?;
+    Ok(message_of(&spec, dataset, experiments))
 }
 
-/// A file's `[search]` as its message.
-fn search_message(s: &Table) -> pb::Search {
-    pb::Search {
-        // A file's [search] without `methods` takes its documented default, which the
-        // message states: the API refuses an empty list.
-        methods: strings(s, "methods").unwrap_or_else(|| {
-            calib_engine::campaign::default_methods()
-                .iter()
-                .map(|m| m.name().to_string())
-                .collect()
+/// The message of `spec`, on dataset `dataset` (its experiments' on `experiments`).
+pub fn message_of(spec: &CampaignSpec, dataset: &str, experiments: &[String]) -> pb::Campaign {
+    let model = spec.model.get_ref();
+    let window = spec.window.as_ref().map(|w| w.get_ref());
+    let solver = spec.solver.as_ref().map(|s| s.get_ref());
+    let (effects, defined): (Vec<_>, Vec<_>) = spec
+        .effects
+        .iter()
+        .map(|e| e.get_ref())
+        .partition(|e| !super::defined_effects::is_defined(e));
+    pb::Campaign {
+        name: text_of(&spec.name),
+        model: text_of(&model.name),
+        // The FMU itself is named by the id its upload answers, which the caller sets.
+        fmu_id: String::new(),
+        fmu_interface: text_of(&model.interface),
+        stop_time: number_of(&model.stop_time).unwrap_or_default(),
+        start_time: number_of(&model.start_time).unwrap_or_default(),
+        step: number_of(&model.step),
+        model_parameters: value_map(&model.parameters),
+        dataset_id: if spec.experiments.is_empty() {
+            dataset.to_string()
+        } else {
+            String::new()
+        },
+        outputs: output_messages(&spec.outputs),
+        inputs: input_messages(&spec.inputs),
+        parameters: parameter_messages(spec.parameters.iter().map(|p| p.get_ref())),
+        effects: effects
+            .iter()
+            .map(|e| pb::Parameter {
+                name: e.name.get_ref().clone(),
+                nominal: e.nominal,
+                min: e.min.unwrap_or_default(),
+                max: e.max.unwrap_or_default(),
+                scale: scale_name(e.scale),
+            })
+            .collect(),
+        defined_effects: defined
+            .into_iter()
+            .map(super::defined_effects::message)
+            .collect(),
+        window_start: window.map_or(0.0, |w| w.start),
+        window_stop: window.map_or(0.0, |w| w.stop),
+        windows: window_messages(&spec.windows),
+        experiments: spec
+            .experiments
+            .iter()
+            .enumerate()
+            .map(|(k, e)| experiment_message(e.get_ref(), experiments.get(k)))
+            .collect(),
+        search: spec.search.as_ref().map(|s| search_message(s.get_ref())),
+        rtol: solver.and_then(|s| s.rtol),
+        atol: solver.and_then(|s| s.atol),
+        max_steps: solver.and_then(|s| s.max_steps),
+        diagnosis: spec.diagnosis.as_ref().map(|d| {
+            let d = d.get_ref();
+            pb::DiagnosisSettings {
+                holdout_start: d.holdout_start,
+                holdout_stop: d.holdout_stop,
+                refit: d.refit.map(|n| n as u64),
+                candidates: d.candidates.clone().unwrap_or_default(),
+            }
         }),
-        starts: uint(s, "starts"),
-        max_evaluations: uint(s, "max_evaluations"),
-        seed: uint(s, "seed").unwrap_or_default(),
-        screening: uint(s, "screening"),
-        cma_population: uint(s, "cma_population"),
     }
 }
 
-/// One `[[experiments]]` entry as its message, its record the dataset `dataset` names.
-fn experiment_message(e: &Table, dataset: Option<&String>) -> pb::Experiment {
-    let mut windows = window_messages(e.get("windows"));
-    if let Some(w) = e.get("window").and_then(|v| v.as_table()) {
+/// A spec's `[search]` as its message (a file's default methods stated: the API refuses an
+/// empty list).
+fn search_message(s: &SearchSection) -> pb::Search {
+    pb::Search {
+        methods: s.methods.iter().map(|m| m.name().to_string()).collect(),
+        starts: Some(s.starts as u64),
+        max_evaluations: Some(s.max_evaluations as u64),
+        seed: s.seed,
+        screening: s.screening.map(|n| n as u64),
+        cma_population: s.cma_population.map(|n| n as u64),
+    }
+}
+
+/// One experiment as its message, its record the dataset `dataset` names.
+fn experiment_message(e: &ExperimentEntry, dataset: Option<&String>) -> pb::Experiment {
+    let mut windows = window_messages(&e.windows);
+    if let Some(w) = &e.window {
+        let w = w.get_ref();
         windows.insert(
             0,
             pb::Window {
-                start: float(w, "start").unwrap_or_default(),
-                stop: float(w, "stop").unwrap_or_default(),
+                start: w.start,
+                stop: w.stop,
             },
         );
     }
     pb::Experiment {
-        name: string(e, "name"),
+        name: e.name.get_ref().clone(),
         dataset_id: dataset.cloned().unwrap_or_default(),
         windows,
-        stop_time: float(e, "stop_time").unwrap_or_default(),
-        fixed: numbers(&table(e.get("fixed"))),
-        inputs: input_messages(&tables(e, "inputs")),
-        outputs: output_messages(&tables(e, "outputs")),
-        parameters: parameter_messages(&tables(e, "parameters")),
+        stop_time: number_of(&e.stop_time).unwrap_or_default(),
+        fixed: value_map(&e.fixed),
+        inputs: input_messages(&e.inputs),
+        outputs: output_messages(&e.outputs),
+        parameters: parameter_messages(e.parameters.iter().map(|p| p.get_ref())),
     }
 }
 
-/// A file's `[diagnosis]` as its message.
-fn diagnosis_message(d: &Table) -> pb::DiagnosisSettings {
-    pb::DiagnosisSettings {
-        holdout_start: float(d, "holdout_start"),
-        holdout_stop: float(d, "holdout_stop"),
-        refit: uint(d, "refit"),
-        candidates: strings(d, "candidates").unwrap_or_default(),
+fn text_of(v: &Option<Spanned<String>>) -> String {
+    v.as_ref().map(|s| s.get_ref().clone()).unwrap_or_default()
+}
+
+fn number_of(v: &Option<Spanned<f64>>) -> Option<f64> {
+    v.as_ref().map(|n| *n.get_ref())
+}
+
+fn value_map<M: FromIterator<(String, f64)>>(map: &BTreeMap<Spanned<String>, Spanned<f64>>) -> M {
+    map.iter()
+        .map(|(k, v)| (k.get_ref().clone(), *v.get_ref()))
+        .collect()
+}
+
+/// A parameter's scale as the message names it: the default (linear) as no name.
+fn scale_name(scale: Scale) -> String {
+    match scale {
+        Scale::Lin => String::new(),
+        Scale::Log10 => "log10".into(),
     }
 }
 
-/// The table at `v`, or an empty one.
-fn table(v: Option<&toml::Value>) -> Table {
-    v.and_then(|v| v.as_table()).cloned().unwrap_or_default()
-}
-
-fn uint(t: &Table, k: &str) -> Option<u64> {
-    t.get(k).and_then(|v| v.as_integer()).map(|i| i as u64)
-}
-
-fn float(t: &Table, k: &str) -> Option<f64> {
-    t.get(k)
-        .and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
-}
-
-fn string(t: &Table, k: &str) -> String {
-    t.get(k)
-        .and_then(|v| v.as_str())
-        .map(str::to_string)
-        .unwrap_or_default()
-}
-
-/// The strings of the array `k` of `t`, others left out; `None` when `k` is no array, so
-/// each caller picks its own default.
-fn strings(t: &Table, k: &str) -> Option<Vec<String>> {
-    t.get(k).and_then(|v| v.as_array()).map(|a| {
-        a.iter()
-            .filter_map(|v| v.as_str().map(str::to_string))
-            .collect()
+fn parameter_messages<'a>(list: impl Iterator<Item = &'a ParameterEntry>) -> Vec<pb::Parameter> {
+    list.map(|p| pb::Parameter {
+        name: p.name.get_ref().clone(),
+        nominal: p.nominal,
+        min: p.min,
+        max: p.max,
+        scale: scale_name(p.scale),
     })
+    .collect()
 }
 
-/// The tables of the array `k` of `t` (`[[outputs]]`, an experiment's `inputs = [...]`).
-fn tables(t: &Table, k: &str) -> Vec<Table> {
-    t.get(k)
-        .and_then(|v| v.as_array())
-        .map(|a| a.iter().filter_map(|v| v.as_table().cloned()).collect())
-        .unwrap_or_default()
-}
-
-/// A table of numbers (fixed values) as a map.
-fn numbers<M: FromIterator<(String, f64)>>(t: &Table) -> M {
-    t.iter()
-        .filter_map(|(k, v)| {
-            v.as_float()
-                .or_else(|| v.as_integer().map(|i| i as f64))
-                .map(|f| (k.clone(), f))
-        })
-        .collect()
-}
-
-fn parameter_messages(list: &[Table]) -> Vec<pb::Parameter> {
+fn output_messages(list: &[Spanned<OutputEntry>]) -> Vec<pb::Output> {
     list.iter()
-        .map(|p| pb::Parameter {
-            name: string(p, "name"),
-            nominal: float(p, "nominal"),
-            min: float(p, "min").unwrap_or_default(),
-            max: float(p, "max").unwrap_or_default(),
-            scale: string(p, "scale"),
+        .map(|o| {
+            let o = o.get_ref();
+            pb::Output {
+                model: o.model.get_ref().clone(),
+                measured: o.measured.clone(),
+                weight: number_of(&o.weight),
+                sigma: number_of(&o.sigma),
+                scale: text_of(&o.scale),
+            }
         })
         .collect()
 }
 
-fn output_messages(list: &[Table]) -> Vec<pb::Output> {
+fn input_messages(list: &[Spanned<InputEntry>]) -> Vec<pb::Input> {
     list.iter()
-        .map(|o| pb::Output {
-            model: string(o, "model"),
-            measured: string(o, "measured"),
-            weight: float(o, "weight"),
-            sigma: float(o, "sigma"),
-            scale: string(o, "scale"),
+        .map(|i| {
+            let i = i.get_ref();
+            pb::Input {
+                model: i.model.get_ref().clone(),
+                measured: i.measured.clone(),
+                interpolation: text_of(&i.interpolation),
+            }
         })
         .collect()
 }
 
-fn input_messages(list: &[Table]) -> Vec<pb::Input> {
-    list.iter()
-        .map(|i| pb::Input {
-            model: string(i, "model"),
-            measured: string(i, "measured"),
-            interpolation: string(i, "interpolation"),
-        })
-        .collect()
-}
-
-/// `[[a, b], ...]` as windows.
-fn window_messages(v: Option<&Value>) -> Vec<pb::Window> {
-    v.and_then(|v| v.as_array())
-        .map(|a| {
-            a.iter()
-                .filter_map(|pair| {
-                    let pair = pair.as_array()?;
-                    let number =
-                        |v: &Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
-                    Some(pb::Window {
-                        start: number(pair.first()?)?,
-                        stop: number(pair.get(1)?)?,
-                    })
+fn window_messages(windows: &Option<Spanned<Vec<[f64; 2]>>>) -> Vec<pb::Window> {
+    windows
+        .as_ref()
+        .map(|w| {
+            w.get_ref()
+                .iter()
+                .map(|[start, stop]| pb::Window {
+                    start: *start,
+                    stop: *stop,
                 })
                 .collect()
         })
@@ -540,9 +495,10 @@ fn window_messages(v: Option<&Value>) -> Vec<pb::Window> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use calib_engine::campaign::Campaign;
 
-    /// An FMU campaign's start time and communication step travel through the message and
-    /// back into the file the coordinator loads.
+    /// An FMU campaign's start time and communication step travel through the message into
+    /// the campaign, and into the campaign file it is stored as.
     #[test]
     fn an_fmus_start_time_and_step_survive_the_message() {
         let text = r#"
@@ -555,22 +511,22 @@ step = 0.01
 "#;
         let message = campaign_message(text, "d").unwrap();
         assert_eq!((message.start_time, message.step), (2.0, Some(0.01)));
-        let file = campaign_file_on(
-            &message,
-            Path::new("/data/x.csv"),
-            "time",
-            Some(Path::new("/fmus/v.fmu")),
-        )
-        .unwrap();
-        let back: Table = file.parse().unwrap();
-        let model = back["model"].as_table().unwrap();
-        assert_eq!(model["start_time"].as_float(), Some(2.0));
-        assert_eq!(model["step"].as_float(), Some(0.01));
+        let record = Record {
+            file: "/data/x.csv".into(),
+            time_column: "time".into(),
+        };
+        let fmu = Path::new("/fmus/v.fmu");
+        let spec = campaign_spec_with(&message, Some(&record), &[], Some(fmu)).unwrap();
+        let model = spec.model.get_ref();
+        assert_eq!(number_of(&model.start_time), Some(2.0));
+        assert_eq!(number_of(&model.step), Some(0.01));
+        assert_eq!(text_of(&model.fmu), "/fmus/v.fmu");
+        let back = CampaignSpec::parse(&spec.to_toml().unwrap(), Path::new("c.toml")).unwrap();
+        assert_eq!(number_of(&back.model.get_ref().step), Some(0.01));
         let plain = campaign_message("[model]\nname = \"furuta\"\n", "d").unwrap();
-        let file = campaign_file(&plain, Path::new("/data/x.csv"), "time").unwrap();
-        let back: Table = file.parse().unwrap();
-        let model = back["model"].as_table().unwrap();
-        assert!(!model.contains_key("start_time") && !model.contains_key("step"));
+        let spec = campaign_spec(&plain, Path::new("/data/x.csv"), "time").unwrap();
+        let model = spec.model.get_ref();
+        assert!(model.start_time.is_none() && model.step.is_none());
     }
 
     /// A campaign file's `[search]` without `methods` keeps its documented default, stated in
@@ -589,10 +545,46 @@ step = 0.01
         assert_eq!(none.search, None);
     }
 
-    /// Inputs, disjoint windows and experiments travel through the message and back into a
-    /// campaign file that resolves to the same campaign.
+    /// What the spec cannot hold is refused naming the message's field: an unknown method
+    /// or scale, a number past what a campaign file holds.
     #[test]
-    fn inputs_windows_and_experiments_survive_the_message() {
+    fn a_message_the_spec_cannot_hold_is_refused_at_its_field() {
+        let record = Path::new("/data/x.csv");
+        let mut message = campaign_message("[model]\nname = \"furuta\"\n", "d").unwrap();
+        message.search = Some(pb::Search {
+            methods: vec!["nelder-mead".into(), "simplex".into()],
+            ..Default::default()
+        });
+        let error = campaign_spec(&message, record, "time").unwrap_err();
+        assert!(error.starts_with("campaign.search.methods[1]: "), "{error}");
+        assert!(error.contains("simplex"), "{error}");
+        message.search = Some(pb::Search {
+            methods: vec!["powell".into()],
+            screening: Some(u64::MAX),
+            ..Default::default()
+        });
+        let error = campaign_spec(&message, record, "time").unwrap_err();
+        assert!(error.starts_with("campaign.search.screening: "), "{error}");
+        message.search = None;
+        message.parameters = vec![pb::Parameter {
+            name: "armFriction".into(),
+            min: 0.0,
+            max: 1.0,
+            scale: "log2".into(),
+            ..Default::default()
+        }];
+        let error = campaign_spec(&message, record, "time").unwrap_err();
+        assert!(
+            error.starts_with("campaign.parameters[0].scale: "),
+            "{error}"
+        );
+    }
+
+    /// Inputs, disjoint windows, experiments and effects travel through the message into a
+    /// campaign that resolves to the campaign of the file; the campaign file it keeps reads
+    /// back to the same campaign and to the same message.
+    #[test]
+    fn a_campaign_file_through_the_message_resolves_to_the_same_campaign() {
         let text = r#"
 name = "two"
 [model]
@@ -600,14 +592,25 @@ name = "furuta"
 [[outputs]]
 model = "armJoint.phi"
 measured = "arm"
+scale = "variance"
 [[inputs]]
 model = "armTorque"
 measured = "u"
 interpolation = "hold"
 [[parameters]]
 name = "armFriction"
-min = 0.0
+min = 1e-4
 max = 0.9
+scale = "log10"
+[[effects]]
+name = "viscous_friction.pendulum"
+min = 0.0
+max = 0.1
+[[effects]]
+name = "cogging.arm"
+torque = "armJoint"
+formula = "a * sin(8 * armJoint.phi)"
+parameters = [ { name = "a", nominal = 0.001, min = -0.02, max = 0.02 } ]
 [[experiments]]
 name = "swing"
 file = "swing.csv"
@@ -626,6 +629,20 @@ name = "theta0"
 nominal = 1.0
 min = 0.0
 max = 3.2
+[search]
+methods = ["nelder-mead", "cma-es"]
+starts = 3
+max_evaluations = 200
+seed = 7
+cma_population = 12
+[solver]
+rtol = 1e-7
+max_steps = 50000
+[diagnosis]
+holdout_start = 20.0
+holdout_stop = 25.0
+refit = 2
+candidates = ["viscous_friction.arm"]
 "#;
         let ids = ["a".repeat(64), "b".repeat(64)];
         let message = campaign_message_on(text, "ignored", &ids).unwrap();
@@ -634,6 +651,11 @@ max = 3.2
             "the experiments name their datasets"
         );
         assert_eq!(message.inputs[0].interpolation, "hold");
+        assert_eq!(message.parameters[0].scale, "log10");
+        assert_eq!(
+            (message.effects.len(), message.defined_effects.len()),
+            (1, 1)
+        );
         let [swing, driven] = &message.experiments[..] else {
             panic!("two experiments: {:?}", message.experiments);
         };
@@ -642,10 +664,8 @@ max = 3.2
             (&*ids[0], 25.0)
         );
         assert_eq!(swing.fixed.get("theta0"), Some(&0.5));
-        assert_eq!(swing.inputs[0].interpolation, "linear");
         let windows: Vec<(f64, f64)> = driven.windows.iter().map(|w| (w.start, w.stop)).collect();
         assert_eq!(windows, [(0.0, 1.0), (2.0, 10.0)]);
-        assert_eq!(driven.outputs[0].sigma, Some(0.01));
         assert_eq!(driven.parameters[0].nominal, Some(1.0));
 
         let records = [
@@ -658,32 +678,40 @@ max = 3.2
                 time_column: "t".into(),
             },
         ];
-        let file = campaign_file_with(&message, None, &records, None).unwrap();
+        let spec = campaign_spec_with(&message, None, &records, None).unwrap();
         let at = Path::new("/srv/submitted.toml");
-        let back = calib_engine::campaign::Campaign::parse(&file, at).unwrap();
-        let original =
-            calib_engine::campaign::Campaign::parse(text, Path::new("/c/x.toml")).unwrap();
-        assert_eq!(back.free, original.free);
-        assert_eq!(back.inputs, original.inputs);
-        assert_eq!(back.base, original.base);
-        assert_eq!(back.measurement_file, Path::new("/srv/datasets/a.csv"));
-        let (b, o) = (&back.more[0], &original.more[0]);
-        assert_eq!(
-            (&b.windows, &b.outputs, &b.inputs, &b.base, b.stop_time),
-            (&o.windows, &o.outputs, &o.inputs, &o.base, o.stop_time)
-        );
-        assert_eq!(
-            (b.measurement_file.as_path(), b.time_column.as_str()),
-            (Path::new("/srv/datasets/b.csv"), "t")
-        );
-        // The message itself survives the round trip.
-        assert_eq!(campaign_message_on(&file, "", &ids).unwrap(), message);
+        let built = Campaign::from_spec(spec, at).unwrap();
+        let original = Campaign::parse(text, Path::new("/c/x.toml")).unwrap();
+        let stored = Campaign::parse(&built.spec, at).unwrap();
+        for back in [&built, &stored] {
+            assert_eq!(back.free, original.free);
+            assert_eq!(back.inputs, original.inputs);
+            assert_eq!(back.outputs, original.outputs);
+            assert_eq!(back.base, original.base);
+            assert_eq!(back.search, original.search);
+            assert_eq!(back.solver, original.solver);
+            assert_eq!(back.diagnosis, original.diagnosis);
+            assert_eq!(back.model.user_effects(), original.model.user_effects());
+            assert_eq!(back.measurement_file, Path::new("/srv/datasets/a.csv"));
+            let (b, o) = (&back.more[0], &original.more[0]);
+            assert_eq!(
+                (&b.windows, &b.outputs, &b.inputs, &b.base, b.stop_time),
+                (&o.windows, &o.outputs, &o.inputs, &o.base, o.stop_time)
+            );
+            assert_eq!(
+                (b.measurement_file.as_path(), b.time_column.as_str()),
+                (Path::new("/srv/datasets/b.csv"), "t")
+            );
+        }
+        // The campaign file it keeps gives back the message.
+        assert_eq!(campaign_message_on(&built.spec, "", &ids).unwrap(), message);
         // So do disjoint windows of one record.
         let one = "windows = [[0.0, 5.0], [10.0, 40.0]]\n[model]\nname = \"furuta\"\n";
         let message = campaign_message(one, "d").unwrap();
         assert_eq!(message.windows.len(), 2);
-        let file = campaign_file(&message, Path::new("/data/x.csv"), "time").unwrap();
+        let spec = campaign_spec(&message, Path::new("/data/x.csv"), "time").unwrap();
+        let file = spec.to_toml().unwrap();
         assert_eq!(campaign_message(&file, "d").unwrap(), message);
-        assert!(campaign_file_with(&message, None, &records, None).is_err());
+        assert!(campaign_spec_with(&message, None, &records, None).is_err());
     }
 }

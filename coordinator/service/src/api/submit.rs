@@ -8,7 +8,7 @@ use super::validation::{
 };
 use super::{defined_effects, spec, CalibrationApi};
 use crate::hosting::datasets::DatasetInfo;
-use calib_engine::campaign::MAX_EXPERIMENTS;
+use calib_engine::campaign::{CampaignSpec, MAX_EXPERIMENTS};
 use calib_model::fmu;
 use calib_proto::v1 as pb;
 use tonic::Status;
@@ -87,14 +87,14 @@ impl CalibrationApi {
                 tonic::Code::InvalidArgument | tonic::Code::NotFound
             )
         };
-        let text = match self.campaign_file(c).await {
-            Ok(text) => text,
+        let spec = match self.campaign_spec(c).await {
+            Ok(spec) => spec,
             Err(s) if refused(&s) => return Ok(vec![Problem::of_refusal(&s)]),
             Err(s) => return Err(s),
         };
         let campaigns = self.campaigns.clone();
         match self
-            .blocking(move || campaigns.check(&text).map(|_| ()))
+            .blocking(move || campaigns.check(spec).map(|_| ()))
             .await
         {
             Ok(()) => Ok(Vec::new()),
@@ -115,9 +115,12 @@ impl CalibrationApi {
         }
     }
 
-    /// The campaign file of a campaign message, its records the uploaded datasets it names:
+    /// The campaign of a campaign message, its records the uploaded datasets it names:
     /// `dataset_id`, or each experiment's.
-    pub(super) async fn campaign_file(&self, campaign: &pb::Campaign) -> Result<String, Status> {
+    pub(super) async fn campaign_spec(
+        &self,
+        campaign: &pb::Campaign,
+    ) -> Result<CampaignSpec, Status> {
         let (record, experiments) = self.records(campaign).await?;
         if campaign.fmu_id.is_empty() {
             if fmu::interface_in_name(&campaign.model).is_some() {
@@ -127,11 +130,11 @@ impl CalibrationApi {
                     campaign.model
                 )));
             }
-            return spec::campaign_file_with(campaign, record.as_ref(), &experiments, None)
+            return spec::campaign_spec_with(campaign, record.as_ref(), &experiments, None)
                 .map_err(Status::invalid_argument);
         }
         let (campaign, archive) = self.on_fmu(campaign).await?;
-        spec::campaign_file_with(&campaign, record.as_ref(), &experiments, Some(&archive))
+        spec::campaign_spec_with(&campaign, record.as_ref(), &experiments, Some(&archive))
             .map_err(Status::invalid_argument)
     }
 

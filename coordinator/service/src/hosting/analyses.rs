@@ -13,7 +13,7 @@ use super::{Campaigns, Phase};
 use calib_analysis::profile;
 use calib_analysis::sensitivity::{self, report, Methods, Settings};
 use calib_engine::calibration;
-use calib_engine::campaign::Campaign;
+use calib_engine::campaign::{Campaign, CampaignSpec};
 use calib_engine::error::{Error, Result};
 use calib_engine::store::{hex, unhex32};
 use calib_model::content_hash::ContentHasher;
@@ -64,15 +64,15 @@ struct Finished {
 }
 
 impl Campaigns {
-    /// Follow the sensitivity analysis of the campaign file `spec` with `settings`,
-    /// starting it unless it is under way or done.
+    /// Follow the sensitivity analysis of the campaign `spec` with `settings`, starting it
+    /// unless it is under way or done.
     pub fn sensitivity(
         self: &Arc<Self>,
-        spec: &str,
+        spec: CampaignSpec,
         settings: Settings,
     ) -> Result<watch::Receiver<AnalysisSnapshot>> {
         settings.check()?;
-        let campaign = Campaign::parse(spec, &self.source())?;
+        let campaign = Campaign::from_spec(spec, &self.source())?;
         if campaign.free.is_empty() {
             return Err(Error::InvalidRequest(
                 "campaign.parameters: no free parameter to analyse".into(),

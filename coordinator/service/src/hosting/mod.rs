@@ -26,7 +26,7 @@ mod running;
 
 use calib_analysis::report;
 use calib_engine::calibration::{self, Calibration};
-use calib_engine::campaign::Campaign;
+use calib_engine::campaign::{Campaign, CampaignSpec};
 use calib_engine::error::{Error, Result};
 use calib_engine::evaluator::CacheStats;
 use calib_engine::evaluator::{Evaluator, Fault, FaultKind, Simulator};
@@ -271,21 +271,24 @@ impl Campaigns {
         message
     }
 
-    /// The campaign file `spec` resolved, its measurement loaded, and both checked against
+    /// The campaign `spec` resolved, its measurement loaded, and both checked against
     /// each other (the window and the weights against the data), as [`Campaigns::submit`]
     /// checks a campaign before starting it; nothing is started.
-    pub fn check(&self, spec: &str) -> Result<(Campaign, calib_engine::measurement::Measurement)> {
-        let campaign = Campaign::parse(spec, &self.source())?;
+    pub fn check(
+        &self,
+        spec: CampaignSpec,
+    ) -> Result<(Campaign, calib_engine::measurement::Measurement)> {
+        let campaign = Campaign::from_spec(spec, &self.source())?;
         let measurement = calibration::load_measurement(&campaign)?;
         Objective::new(&campaign, &measurement)?;
         Ok((campaign, measurement))
     }
 
-    /// Start the campaign file `spec` (its measurement a dataset of this coordinator),
-    /// unless it is known already; its id, and whether it was started now.
+    /// Start the campaign `spec` (its measurement a dataset of this coordinator), unless it
+    /// is known already; its id, and whether it was started now.
     pub fn submit(
         self: &Arc<Self>,
-        spec: &str,
+        spec: CampaignSpec,
         idempotency_key: Option<&str>,
     ) -> Result<(String, bool)> {
         self.submit_message(spec, idempotency_key, None)
@@ -295,7 +298,7 @@ impl Campaigns {
     /// written from, unless the campaign has one already: what a client reopening it edits.
     pub fn submit_message(
         self: &Arc<Self>,
-        spec: &str,
+        spec: CampaignSpec,
         idempotency_key: Option<&str>,
         message: Option<serde_json::Value>,
     ) -> Result<(String, bool)> {

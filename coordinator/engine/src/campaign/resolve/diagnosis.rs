@@ -1,6 +1,6 @@
 //! How `calib diagnose` treats the campaign: its `[diagnosis]` section.
 
-use super::super::file::DiagnosisSection;
+use super::super::spec::DiagnosisSection;
 use super::super::{CampaignError, DiagnosisSettings};
 use super::Locator;
 use crate::limits;

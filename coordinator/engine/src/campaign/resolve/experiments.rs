@@ -2,7 +2,7 @@
 //! `[[experiments]]`, each with its file, windows, outputs and inputs (the campaign's unless
 //! it lists its own), and values fixed or free in it alone.
 
-use super::super::file::{
+use super::super::spec::{
     ExperimentEntry, InputEntry, MeasurementSection, ModelSection, OutputEntry, WindowSection,
 };
 use super::super::{CampaignError, Experiment, FreeParameter};
@@ -250,7 +250,7 @@ fn own_fixed(
 /// experiment already.
 #[allow(clippy::too_many_arguments)]
 fn own_free(
-    parameters: &[Spanned<super::super::file::ParameterEntry>],
+    parameters: &[Spanned<super::super::spec::ParameterEntry>],
     name: &str,
     here: &str,
     own_fixed: &[usize],

@@ -1,7 +1,7 @@
 //! The record's columns mapped to the model: outputs compared (with their weights and
 //! scales) and inputs driven.
 
-use super::super::file::{InputEntry, OutputEntry};
+use super::super::spec::{InputEntry, OutputEntry};
 use super::super::{CampaignError, InputMapping, Interpolation, OutputMapping, OutputScale};
 use super::Locator;
 use crate::limits;

@@ -9,7 +9,7 @@ mod parameters;
 mod search;
 mod windows;
 
-use super::file::{CampaignFile, ParameterEntry};
+use super::spec::{CampaignSpec, ParameterEntry};
 use super::user_effects;
 use super::{Campaign, CampaignError, FreeParameter};
 use crate::limits;
@@ -23,20 +23,25 @@ use search::resolve_search;
 use std::path::{Path, PathBuf};
 use toml::Spanned;
 
-/// Where a campaign's text came from, to turn byte offsets into located errors.
+/// Where a campaign came from, to turn byte offsets into located errors: the text of a
+/// campaign file, or none for a campaign built from a message (its errors name a field, no
+/// line).
 pub(super) struct Locator<'a> {
-    pub(super) text: &'a str,
+    pub(super) text: Option<&'a str>,
     pub(super) path: &'a Path,
 }
 
 impl Locator<'_> {
-    pub(super) fn line(&self, offset: usize) -> usize {
-        let end = offset.min(self.text.len());
-        self.text.as_bytes()[..end]
-            .iter()
-            .filter(|b| **b == b'\n')
-            .count()
-            + 1
+    pub(super) fn line(&self, offset: usize) -> Option<usize> {
+        let text = self.text?;
+        let end = offset.min(text.len());
+        Some(
+            text.as_bytes()[..end]
+                .iter()
+                .filter(|b| **b == b'\n')
+                .count()
+                + 1,
+        )
     }
 
     pub(super) fn error<T>(
@@ -47,7 +52,7 @@ impl Locator<'_> {
     ) -> Result<T, CampaignError> {
         Err(CampaignError {
             file: self.path.to_path_buf(),
-            line: Some(self.line(span.start)),
+            line: self.line(span.start),
             field: field.to_string(),
             message,
         })
@@ -64,8 +69,13 @@ impl Locator<'_> {
     }
 }
 
-/// The campaign `file` resolved against the model it names; `at` locates its mistakes.
-pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, CampaignError> {
+/// The campaign `file` resolved against the model it names; `at` locates its mistakes;
+/// `spec` is its campaign file's text, which the campaign keeps.
+pub(super) fn resolve(
+    file: CampaignSpec,
+    at: &Locator,
+    spec: String,
+) -> Result<Campaign, CampaignError> {
     check_counts(&file, at)?;
     let model_span = file.model.span();
     let model_section = file.model.into_inner();
@@ -121,7 +131,7 @@ pub(super) fn resolve(file: CampaignFile, at: &Locator) -> Result<Campaign, Camp
     Ok(Campaign {
         name,
         source: Some(at.path.to_path_buf()),
-        spec: at.text.to_string(),
+        spec,
         model,
         stop_time: first.stop_time,
         base: first.base,
@@ -213,7 +223,7 @@ fn resolve_name(name: Option<Spanned<String>>, at: &Locator) -> Result<String, C
 }
 
 /// The lists of a campaign held to their limits, before any of them is resolved.
-fn check_counts(file: &CampaignFile, at: &Locator) -> Result<(), CampaignError> {
+fn check_counts(file: &CampaignSpec, at: &Locator) -> Result<(), CampaignError> {
     let free = file.parameters.len() + file.effects.len();
     if let Err(e) = limits::at_most(
         free,

@@ -1,7 +1,7 @@
 //! The model a campaign names (hosted, or an FMU), its fixed values and its solver and time
 //! settings.
 
-use super::super::file::{ModelSection, SolverSection};
+use super::super::spec::{ModelSection, SolverSection};
 use super::super::CampaignError;
 use super::Locator;
 use calib_model::fmu::{self, Interface};

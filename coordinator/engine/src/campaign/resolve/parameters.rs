@@ -1,7 +1,7 @@
 //! The free parameters: `[[parameters]]` and built-in `[[effects]]` entries, each checked
 //! against the model, its bounds and what else the campaign frees or fixes.
 
-use super::super::file::ParameterEntry;
+use super::super::spec::ParameterEntry;
 use super::super::{CampaignError, FreeParameter, Scale};
 use super::Locator;
 use calib_model::validate;

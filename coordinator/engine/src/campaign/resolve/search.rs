@@ -1,6 +1,6 @@
 //! How the optimisers search: the `[search]` section held to its limits.
 
-use super::super::file::{default_max_evaluations, default_methods, default_starts, SearchSection};
+use super::super::spec::{default_max_evaluations, default_methods, default_starts, SearchSection};
 use super::super::{CampaignError, Search};
 use super::Locator;
 use crate::limits;

@@ -1,6 +1,6 @@
 //! The fitted intervals of a record and the end of its simulated horizon.
 
-use super::super::file::WindowSection;
+use super::super::spec::WindowSection;
 use super::super::CampaignError;
 use super::Locator;
 use crate::limits;
