@@ -7,11 +7,12 @@
 //! one value per key in `evaluations`. Both are read by every lookup. sled allows one open
 //! database per path per process: open it once and share the [`SledStore`].
 //!
-//! Durability: `flush` fsyncs and blocks, so it runs on the calling (run) thread, never on
-//! an async runtime, and writes are grouped: a writer that finds a flush in progress waits
-//! for the next one, which then covers every write made meanwhile (group commit). Many
-//! runs writing at once therefore share a few flushes instead of queueing one each.
-//! `flush_async` is not used (it can deadlock in 0.34).
+//! Durability: each write is flushed (fsynced) before it returns. `flush` blocks, so it runs
+//! on the calling thread, never on an async runtime. Writes do not need grouping here: a
+//! process has one writer of evaluations, its dispatcher's (one per coordinator, one per
+//! command; see [`super::evaluator`]), which writes a whole round per value and per flush;
+//! campaign records are written only as a campaign starts and ends. `flush_async` is not
+//! used (it can deadlock in 0.34).
 
 use super::batch_log::BatchLog;
 use super::damage::{self, guarded};
@@ -25,7 +26,6 @@ use super::{
 use crate::objective::Evaluation;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Condvar, Mutex};
 
 const LAYOUT_KEY: &[u8] = b"layout";
 /// Layouts this version opens: 1 (no evaluation batches) is taken as it is and marked 2.
@@ -47,28 +47,12 @@ pub struct SledStore {
     meta: sled::Tree,
     /// Which keys `evaluations` may hold: new points skip the lookup in sled.
     evaluation_keys: KeyFilter,
-    commits: GroupCommit,
     /// Lookup counts not yet added to `meta`.
     pending_hits: AtomicU64,
     pending_misses: AtomicU64,
     flushes: AtomicU64,
     /// Evaluation lookups that reached sled.
     sled_lookups: AtomicU64,
-}
-
-#[derive(Default)]
-struct GroupCommit {
-    state: Mutex<CommitState>,
-    flushed: Condvar,
-}
-
-#[derive(Default)]
-struct CommitState {
-    /// Writes that asked to be made durable, numbered from 1.
-    requested: u64,
-    /// Every write numbered up to this one is durable.
-    durable: u64,
-    flushing: bool,
 }
 
 impl SledStore {
@@ -109,7 +93,6 @@ impl SledStore {
             meta: tree("meta")?,
             path: path.to_path_buf(),
             db,
-            commits: GroupCommit::default(),
             pending_hits: AtomicU64::new(0),
             pending_misses: AtomicU64::new(0),
             flushes: AtomicU64::new(0),
@@ -183,33 +166,9 @@ impl SledStore {
         }
     }
 
-    /// Return once everything written before the call is on disk, sharing the flush with
-    /// every other writer waiting at the same time.
+    /// Return once everything written before the call is on disk.
     fn make_durable(&self) -> Result<(), StoreError> {
-        let mut state = self.commits.state.lock().expect("commit lock");
-        state.requested += 1;
-        let ticket = state.requested;
-        loop {
-            if state.durable >= ticket {
-                return Ok(());
-            }
-            if state.flushing {
-                state = self.commits.flushed.wait(state).expect("commit lock");
-                continue;
-            }
-            // Flush for every write requested so far (ours included).
-            state.flushing = true;
-            let covered = state.requested;
-            drop(state);
-            let flushed = self.guard(|| self.flush_now());
-            state = self.commits.state.lock().expect("commit lock");
-            state.flushing = false;
-            if flushed.is_ok() {
-                state.durable = state.durable.max(covered);
-            }
-            self.commits.flushed.notify_all();
-            flushed?;
-        }
+        self.guard(|| self.flush_now())
     }
 
     /// Add the pending lookup counts to `meta` and fsync.
