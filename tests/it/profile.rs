@@ -4,10 +4,12 @@
 
 use crate::common::cluster::*;
 use crate::common::*;
-use calib_analysis::profile::{profile, report, BestFrom, ParameterProfile, Profiles, Settings};
+use calib_analysis::profile::{
+    profile, profile_through, report, BestFrom, ParameterProfile, Profiles, Settings,
+};
 use calib_engine::campaign::Campaign;
 use calib_engine::evaluator::LocalEvaluator;
-use calib_engine::store::{MemoryStore, SledStore};
+use calib_engine::store::{MemoryStore, SharedDispatcher, SledStore};
 
 fn example(name: &str) -> Campaign {
     Campaign::load(&repo().join("examples").join(name)).unwrap()
@@ -247,6 +249,38 @@ fn a_profile_on_workers_equals_the_local_one_and_a_rerun_simulates_nothing() {
     );
     assert_eq!(again.stats.trajectories, 1 + 2 * 2);
     assert_eq!(again.profiles, local.profiles);
+}
+
+/// A profile through a dispatcher others share (a coordinator's), on a store without the
+/// campaign's best point: the calibration it runs first goes through the same dispatcher,
+/// so every point it simulates is that dispatcher's, and the numbers are the local ones.
+#[test]
+fn a_profile_through_a_shared_dispatcher_calibrates_through_it_too() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(
+        dir.path(),
+        "clean.toml",
+        &clean_campaign("methods = [\"powell\"]\nstarts = 2\nmax_evaluations = 400\nseed = 1"),
+    );
+    let campaign = Campaign::load(&file).unwrap();
+    let settings = Settings::default();
+    let local = profile(&campaign, &LocalEvaluator, &MemoryStore::new(), &settings).unwrap();
+    let store = std::sync::Arc::new(MemoryStore::new());
+    let dispatcher = SharedDispatcher::start(std::sync::Arc::new(LocalEvaluator), store.clone());
+    let evaluator = dispatcher.evaluator();
+    let shared =
+        profile_through(&campaign, &LocalEvaluator, &evaluator, &*store, &settings).unwrap();
+    assert_eq!(shared.best_from, BestFrom::Calibrated);
+    assert_eq!(shared.best, local.best);
+    assert_eq!(shared.profiles, local.profiles);
+    assert_eq!(shared.stats, local.stats, "the profile's own evaluations");
+    let calibration = shared.calibration.unwrap();
+    assert!(calibration.simulated > 0);
+    // The calibration's points and the profile's, all through the shared dispatcher.
+    assert_eq!(
+        evaluator.stats().simulated,
+        calibration.simulated + shared.stats.evaluations.simulated
+    );
 }
 
 #[test]

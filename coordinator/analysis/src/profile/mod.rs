@@ -45,7 +45,9 @@ pub mod walk;
 use crate::residuals::jacobian::parameter_jacobian;
 use crate::residuals::uncertainty::{self, Interval};
 use crate::residuals::whiteness::{autocorrelation, effective_samples};
-use calib_engine::calibration::{calibrate_with_store, load_measurement};
+use calib_engine::calibration::{
+    calibrate_through, calibrate_with_store, load_measurement, Calibration,
+};
 use calib_engine::campaign::{Campaign, FreeParameter, Scale};
 use calib_engine::error::{Error, Result};
 use calib_engine::evaluator::{CacheStats, Evaluator, Simulator};
@@ -536,16 +538,16 @@ pub fn local_statistics(
 
 /// The point to profile around, its objective, where it came from and, when a calibration
 /// had to find it first (the store holds no finished one), that calibration's statistics.
-fn best_point<E: Evaluator + Simulator>(
+fn best_point(
     campaign: &Campaign,
-    engine: &E,
     store: &dyn Store,
     dataset: &[u8; 32],
+    calibrate: Calibrate<'_>,
 ) -> Result<(Vec<f64>, f64, BestFrom, Option<CacheStats>)> {
     Ok(match stored_best(campaign, dataset, store)? {
         Some((point, objective)) => (point, objective, BestFrom::Store, None),
         None => {
-            let c = calibrate_with_store(campaign, engine, store, &Silent)?;
+            let c = calibrate()?;
             let best = c.best_run();
             (
                 best.point.clone(),
@@ -587,12 +589,12 @@ pub fn profile<E: Evaluator + Simulator>(
     let through = |f: &mut dyn FnMut(&StoredEngine<'_, E>)| {
         StoredEngine::with(engine, store, |stored| f(stored))
     };
-    profile_with(campaign, engine, store, settings, &through)
+    let calibrate = || calibrate_with_store(campaign, engine, store, &Silent);
+    profile_with(campaign, store, settings, &through, &calibrate)
 }
 
-/// [`profile`], its own evaluations through `evaluator`: one of a dispatcher over `store`
-/// that others share (a coordinator's). A best point the store lacks is calibrated with a
-/// dispatcher of its own, so that its evaluations are counted apart.
+/// [`profile`], every evaluation through `evaluator`: one of a dispatcher over `store` that
+/// others share (a coordinator's), the calibration of a best point the store lacks too.
 pub fn profile_through<E: Evaluator + Simulator>(
     campaign: &Campaign,
     engine: &E,
@@ -603,18 +605,22 @@ pub fn profile_through<E: Evaluator + Simulator>(
     let through = |f: &mut dyn FnMut(&StoredEngine<'_, E>)| {
         f(&StoredEngine::over(evaluator, engine));
     };
-    profile_with(campaign, engine, store, settings, &through)
+    let calibrate = || calibrate_through(campaign, &evaluator, store, &Silent);
+    profile_with(campaign, store, settings, &through, &calibrate)
 }
 
 /// Runs a closure with the engine a profile's own evaluations go through.
 type Through<'r, E> = &'r dyn Fn(&mut dyn FnMut(&StoredEngine<'_, E>));
 
+/// Calibrates the campaign whose best point the store lacks.
+type Calibrate<'r> = &'r dyn Fn() -> Result<Calibration>;
+
 fn profile_with<E: Evaluator + Simulator>(
     campaign: &Campaign,
-    engine: &E,
     store: &dyn Store,
     settings: &Settings,
     through: Through<'_, E>,
+    calibrate: Calibrate<'_>,
 ) -> Result<Profiles> {
     let started = Instant::now();
     settings.check()?;
@@ -631,7 +637,7 @@ fn profile_with<E: Evaluator + Simulator>(
     }
     let objective = Objective::new(campaign, &measurement)?;
     let (point, best_objective, best_from, calibration) =
-        best_point(campaign, engine, store, &dataset)?;
+        best_point(campaign, store, &dataset, calibrate)?;
     let mut ran = None;
     through(&mut |stored| {
         let outcome = (|| {

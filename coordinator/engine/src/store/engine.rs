@@ -23,6 +23,8 @@ pub struct EngineStats {
 /// Evaluations through a store, trajectories straight from the inner engine.
 pub struct StoredEngine<'a, E> {
     evaluator: &'a dyn Stored,
+    /// The evaluator's counts when this engine began: what came before is not its own.
+    base: CacheStats,
     inner: &'a E,
     trajectories: AtomicU64,
 }
@@ -37,18 +39,26 @@ impl<'a, E: Evaluator + Simulator> StoredEngine<'a, E> {
     }
 
     /// An engine that evaluates through `evaluator` (one of a dispatcher others share, a
-    /// coordinator's) and simulates trajectories with `inner`.
+    /// coordinator's) and simulates trajectories with `inner`; its counts are the points
+    /// asked from now on (a calibration the evaluator ran before is not this engine's).
     pub fn over(evaluator: &'a dyn Stored, inner: &'a E) -> Self {
         StoredEngine {
             evaluator,
+            base: evaluator.stats(),
             inner,
             trajectories: AtomicU64::new(0),
         }
     }
 
     pub fn stats(&self) -> EngineStats {
+        let (now, base) = (self.evaluator.stats(), self.base);
         EngineStats {
-            evaluations: self.evaluator.stats(),
+            evaluations: CacheStats {
+                requested: now.requested - base.requested,
+                simulated: now.simulated - base.simulated,
+                cached: now.cached - base.cached,
+                failed: now.failed - base.failed,
+            },
             trajectories: self.trajectories.load(Ordering::Relaxed),
         }
     }
