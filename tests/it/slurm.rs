@@ -397,9 +397,11 @@ fn a_campaign_on_slurm_survives_a_cancelled_worker_and_a_resubmitted_coordinator
         started.elapsed().as_secs_f64()
     );
 
-    // The campaign: differential evolution from two starts, a few seconds of work.
+    // The campaign: differential evolution from eight starts, about 16,000 evaluations: long
+    // enough that the cancels at a fifth and at half of it land before its end on a fast
+    // machine too (two starts, 4,041 evaluations, once finished between two polls).
     let search =
-        "methods = [\"differential-evolution\"]\nstarts = 2\nmax_evaluations = 4000\nseed = 5";
+        "methods = [\"differential-evolution\"]\nstarts = 8\nmax_evaluations = 4000\nseed = 5";
     // Folders whose paths hold spaces: the scripts', and the one sbatch runs in (where the
     // deployment's files go).
     let submit_dir = tmp.path().join("submit dir");
