@@ -4,6 +4,7 @@
 //! No network and no async runtime: the engine and the analyses run these models in
 //! process, and `calib-worker` serves them over gRPC.
 
+pub mod command;
 pub mod content_hash;
 pub mod effects;
 pub mod fmu;

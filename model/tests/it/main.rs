@@ -12,6 +12,7 @@ mod reference_fmus;
 mod fmu_crosscheck;
 mod fmu_inputs;
 mod fmu_reference;
+mod pest_instructions;
 mod solver_fingerprints;
 
 /// FMUs exported by tools may keep simulation state in globals of their shared library

@@ -1,0 +1,250 @@
+//! calib's PEST instruction reader against pyemu's (PEST++'s Python tools, no code shared):
+//! PEST++'s own cases, and 200 drawn cases (output files of words and numbers in every
+//! format, instruction files using every form on them), each read alike by both.
+
+use calib_model::command::Instructions;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// pyemu's reading of each (instruction file, output file) pair, by lower-case observation
+/// name; `None` (with the reason) where python3 or pyemu is missing.
+fn pyemu(pairs: &[(PathBuf, PathBuf)]) -> Option<Vec<BTreeMap<String, f64>>> {
+    let mut command = std::process::Command::new("python3");
+    command.arg(repo().join("tests/python/pest_instructions.py"));
+    for (ins, out) in pairs {
+        command.arg(ins).arg(out);
+    }
+    let output = match command.output() {
+        Ok(output) => output,
+        Err(e) => {
+            calib_model::testing::skip(&format!("python3 cannot run: {e}"));
+            return None;
+        }
+    };
+    if output.status.code() == Some(3) {
+        calib_model::testing::skip(&format!(
+            "pyemu is missing ({}): pip install pyemu",
+            String::from_utf8_lossy(&output.stderr).trim()
+        ));
+        return None;
+    }
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    Some(
+        String::from_utf8(output.stdout)
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect(),
+    )
+}
+
+/// calib's reading, by lower-case observation name.
+fn calib(ins: &Path, out: &Path) -> BTreeMap<String, f64> {
+    let text = std::fs::read_to_string(ins).unwrap();
+    let instructions = Instructions::parse(&text, &ins.display().to_string())
+        .unwrap_or_else(|e| panic!("{e}\n{text}"));
+    let output = std::fs::read_to_string(out).unwrap();
+    let values = instructions
+        .read(&output, &out.display().to_string())
+        .unwrap_or_else(|e| panic!("{e}\n{text}\n{output}"));
+    instructions
+        .observations()
+        .iter()
+        .map(|o| o.to_ascii_lowercase())
+        .zip(values)
+        .collect()
+}
+
+#[test]
+fn pestpps_cases_are_read_as_pyemu_reads_them() {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/pestpp/tplins_test_1");
+    let pairs: Vec<(PathBuf, PathBuf)> = [
+        ("out1.dat.ins", "out1_copy.dat"),
+        ("out1dum.dat.ins", "out1_copy.dat"),
+        ("AOC_obs.txt.ins", "AOC_obs_copy.txt"),
+    ]
+    .iter()
+    .map(|(i, o)| (data.join(i), data.join(o)))
+    .collect();
+    let Some(theirs) = pyemu(&pairs) else {
+        return;
+    };
+    for ((ins, out), theirs) in pairs.iter().zip(theirs) {
+        assert_eq!(calib(ins, out), theirs, "{}", ins.display());
+    }
+}
+
+/// A small deterministic generator (SplitMix64).
+struct Draw(u64);
+
+impl Draw {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// A whole number in `0..n`.
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n as u64) as usize
+    }
+}
+
+/// A number as a model might print it.
+fn printed(d: &mut Draw) -> String {
+    let value = (d.next() % 2_000_000) as f64 / 1000.0 - 1000.0;
+    let scale = 10f64.powi(d.below(9) as i32 - 4);
+    let v = value * scale;
+    match d.below(4) {
+        0 => format!("{v:.3}"),
+        1 => format!("{v:.6E}"),
+        2 => format!("{v:.4e}"),
+        _ => format!("{:.2}", v.abs()),
+    }
+}
+
+/// One token of an output line, with its columns (1-based, inclusive).
+struct Token {
+    text: String,
+    number: bool,
+    from: usize,
+    to: usize,
+}
+
+/// An output file of `lines` lines of unique words and numbers, and its tokens by line.
+fn output(d: &mut Draw, case: usize, lines: usize) -> (String, Vec<Vec<Token>>) {
+    let (mut text, mut rows) = (String::new(), Vec::new());
+    for line in 0..lines {
+        let mut row = String::new();
+        let mut tokens = Vec::new();
+        for k in 0..2 + d.below(6) {
+            row.push_str(&" ".repeat(1 + d.below(4)));
+            let (token, number) = if k % 2 == 0 || d.below(3) == 0 {
+                (format!("w{case}x{line}y{k}"), false)
+            } else {
+                (printed(d), true)
+            };
+            let from = row.len() + 1;
+            row.push_str(&token);
+            tokens.push(Token {
+                to: row.len(),
+                from,
+                text: token,
+                number,
+            });
+        }
+        text.push_str(&row);
+        text.push('\n');
+        rows.push(tokens);
+    }
+    (text, rows)
+}
+
+/// An instruction file reading some of the numbers of `rows`, each reached by one of the
+/// forms: a secondary marker then `!obs!`, fixed and semi-fixed columns, whitespace, a
+/// dummy; each line reached by a line advance or a primary marker. (pyemu has no tab `tN`;
+/// the reader's own tests hold it.)
+fn instructions(d: &mut Draw, rows: &[Vec<Token>]) -> String {
+    let mut ins = String::from("pif @\n");
+    let mut last = None::<usize>;
+    let mut obs = 0;
+    for (r, tokens) in rows.iter().enumerate() {
+        if !tokens.iter().any(|t| t.number) || d.below(4) == 0 {
+            continue;
+        }
+        let mut items = Vec::new();
+        let mut cursor = 0; // columns before this one are read
+                            // Reach the line: a line advance, or a primary marker on its first word.
+        match (last, d.below(2)) {
+            (_, 0) if !tokens[0].number => {
+                items.push(format!("@{}@", tokens[0].text));
+                cursor = tokens[0].to;
+            }
+            (Some(l), _) => items.push(format!("l{}", r - l)),
+            (None, _) => items.push(format!("l{}", r + 1)),
+        }
+        last = Some(r);
+        for (k, t) in tokens.iter().enumerate() {
+            if !t.number || t.from <= cursor || d.below(3) == 0 {
+                continue;
+            }
+            obs += 1;
+            let name = if d.below(8) == 0 {
+                "dum".to_string()
+            } else {
+                format!("o{obs}")
+            };
+            let before = if k > 0 { tokens[k - 1].to } else { 0 };
+            let item = match d.below(5) {
+                0 if k > 0 && !tokens[k - 1].number && before > cursor => {
+                    format!("@{}@ !{name}!", tokens[k - 1].text)
+                }
+                1 => {
+                    let from = t.from - d.below(t.from - before);
+                    let to = t.to
+                        + d.below(2)
+                            .min(tokens.get(k + 1).map_or(0, |n| n.from - t.to - 1));
+                    format!("[{name}]{from}:{to}")
+                }
+                2 => {
+                    let from = t.from - d.below(t.from - before.max(cursor));
+                    format!("({name}){from}:{}", t.from + d.below(t.to - t.from + 1))
+                }
+                // `w` from the cursor at the end of the token before lands on this one.
+                3 | 4 if before == cursor => format!("w !{name}!"),
+                _ => format!("[{name}]{}:{}", t.from, t.to),
+            };
+            items.push(item);
+            cursor = t.to;
+        }
+        ins.push_str(&items.join(" "));
+        ins.push('\n');
+    }
+    ins
+}
+
+#[test]
+fn drawn_cases_are_read_as_pyemu_reads_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut d = Draw(20261130);
+    let mut pairs = Vec::new();
+    for case in 0..200 {
+        let lines = 3 + d.below(10);
+        let (text, rows) = output(&mut d, case, lines);
+        let ins = instructions(&mut d, &rows);
+        let (i, o) = (
+            dir.path().join(format!("{case}.ins")),
+            dir.path().join(format!("{case}.out")),
+        );
+        std::fs::write(&i, ins).unwrap();
+        std::fs::write(&o, text).unwrap();
+        pairs.push((i, o));
+    }
+    let Some(theirs) = pyemu(&pairs) else {
+        return;
+    };
+    let mut read = 0;
+    for ((ins, out), theirs) in pairs.iter().zip(theirs) {
+        let ours = calib(ins, out);
+        assert_eq!(
+            ours,
+            theirs,
+            "{}\n{}\n{}",
+            ins.display(),
+            std::fs::read_to_string(ins).unwrap(),
+            std::fs::read_to_string(out).unwrap()
+        );
+        read += ours.len();
+    }
+    assert!(read > 500, "{read} observations read in all");
+}
