@@ -28,17 +28,18 @@ pub const MAX_INSTRUCTION_BYTES: usize = 16 << 20;
 /// Most observations one instruction file reads.
 pub const MAX_OBSERVATIONS: usize = 1 << 20;
 
-/// A mistake in an instruction file, or in reading an output file with one: the file, the
-/// line and the column (1-based) where it was found.
+/// A mistake in a PEST file (a template, an instruction or a control file), or in reading
+/// an output file with an instruction file: the file, the line and the column (1-based)
+/// where it was found.
 #[derive(Debug, Clone, PartialEq)]
-pub struct InstructionError {
+pub struct PestFileError {
     pub file: String,
     pub line: usize,
     pub column: usize,
     pub message: String,
 }
 
-impl fmt::Display for InstructionError {
+impl fmt::Display for PestFileError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
@@ -48,11 +49,11 @@ impl fmt::Display for InstructionError {
     }
 }
 
-impl std::error::Error for InstructionError {}
+impl std::error::Error for PestFileError {}
 
 /// The error of file `file` at a line and column.
-pub(super) fn located(file: &str) -> impl Fn(usize, usize, String) -> InstructionError + '_ {
-    move |line, column, message| InstructionError {
+pub(super) fn located(file: &str) -> impl Fn(usize, usize, String) -> PestFileError + '_ {
+    move |line, column, message| PestFileError {
         file: file.to_string(),
         line,
         column,
@@ -66,7 +67,7 @@ pub(super) fn within(
     limit: usize,
     kind: &str,
     file: &str,
-) -> Result<(), InstructionError> {
+) -> Result<(), PestFileError> {
     if text.len() > limit {
         return Err(located(file)(
             1,
@@ -116,7 +117,7 @@ pub struct Instructions {
 
 impl Instructions {
     /// Parse the instruction file `text`, named `file` in errors.
-    pub fn parse(text: &str, file: &str) -> Result<Instructions, InstructionError> {
+    pub fn parse(text: &str, file: &str) -> Result<Instructions, PestFileError> {
         let error = located(file);
         within(text, MAX_INSTRUCTION_BYTES, "an instruction file", file)?;
         let mut rows = text.lines().enumerate();
@@ -153,7 +154,7 @@ impl Instructions {
 
     /// Read the observations from the output file `output` (named `file` in errors), in the
     /// order [`Instructions::observations`] gives.
-    pub fn read(&self, output: &str, file: &str) -> Result<Vec<f64>, InstructionError> {
+    pub fn read(&self, output: &str, file: &str) -> Result<Vec<f64>, PestFileError> {
         let mut cursor = Cursor {
             rows: output.lines().map(str::as_bytes).collect(),
             current: None,
@@ -165,7 +166,7 @@ impl Instructions {
             for (column, item) in &line.items {
                 let read = cursor
                     .apply(item, advanced)
-                    .map_err(|message| InstructionError {
+                    .map_err(|message| PestFileError {
                         file: self.file.clone(),
                         line: line.number,
                         column: *column,

@@ -2,12 +2,15 @@
 //! input files and its outputs read back, in the formats PEST and PEST++ use for any
 //! simulator (EnergyPlus, MODFLOW, a Python script): template files say where each
 //! parameter's value goes ([`template`]), instruction files where each observation is read
-//! ([`instructions`]).
+//! ([`instructions`]), and a control file (`.pst`) names them with the parameters, the
+//! observations and the command ([`control`]).
 
+pub mod control;
 pub mod instructions;
 pub mod template;
 
-pub use instructions::{InstructionError, Instructions};
+pub use control::ControlFile;
+pub use instructions::{Instructions, PestFileError};
 pub use template::Template;
 
 #[cfg(test)]

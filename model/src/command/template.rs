@@ -9,7 +9,7 @@
 //! digit. A value that does not fit in its space is an error naming the file, the line and
 //! the column.
 
-use super::instructions::{header_marker, located, within, InstructionError};
+use super::instructions::{header_marker, located, within, PestFileError};
 use std::collections::BTreeMap;
 
 /// Largest template file read [bytes].
@@ -42,7 +42,7 @@ enum Piece {
 
 impl Template {
     /// Parse the template file `text`, named `file` in errors.
-    pub fn parse(text: &str, file: &str) -> Result<Template, InstructionError> {
+    pub fn parse(text: &str, file: &str) -> Result<Template, PestFileError> {
         let error = located(file);
         within(text, MAX_TEMPLATE_BYTES, "a template file", file)?;
         let mut rows = text.split_inclusive('\n').enumerate();
@@ -106,7 +106,7 @@ impl Template {
 
     /// The input file with each space holding its parameter's value from `values` (names
     /// compared as PEST does, without regard to case).
-    pub fn write(&self, values: &BTreeMap<String, f64>) -> Result<String, InstructionError> {
+    pub fn write(&self, values: &BTreeMap<String, f64>) -> Result<String, PestFileError> {
         let lower: BTreeMap<String, f64> = values
             .iter()
             .map(|(k, v)| (k.to_ascii_lowercase(), *v))
@@ -118,7 +118,7 @@ impl Template {
                     Piece::Text(text) => out.push_str(text),
                     Piece::Space(k) => {
                         let space = &self.spaces[*k];
-                        let error = |message: String| InstructionError {
+                        let error = |message: String| PestFileError {
                             file: self.file.clone(),
                             line: space.line,
                             column: space.column,

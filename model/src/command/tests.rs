@@ -212,3 +212,74 @@ fn values_fit_their_width_as_closely_as_it_allows() {
     let missing = template.write(&BTreeMap::new()).unwrap_err();
     assert!(missing.message.contains("no value for `k`"), "{missing}");
 }
+
+/// PEST++'s control file: its parameters (fixed and log), observations with weights, the
+/// command, the files, NOPTMAX, and the sections read by nothing named.
+#[test]
+fn pestpps_control_file_is_read() {
+    use super::control::{ControlFile, Transform};
+    let pst = ControlFile::parse(&pestpp("pest.pst"), "pest.pst").unwrap();
+    assert_eq!(pst.parameters.len(), 11);
+    assert_eq!(pst.parameters[0].name, "stage");
+    assert_eq!(pst.parameters[0].transform, Transform::Fixed);
+    assert_eq!(pst.parameters[2].transform, Transform::Log);
+    assert_eq!(
+        pst.parameters[2].initial,
+        "2.5000000000111111".parse().unwrap()
+    );
+    assert_eq!(pst.parameters[1].lower, -5.0e8);
+    assert_eq!(pst.observations.len(), 21);
+    let weighted: Vec<&str> = pst
+        .observations
+        .iter()
+        .filter(|o| o.weight > 0.0)
+        .map(|o| o.name.as_str())
+        .collect();
+    assert_eq!(weighted, ["h01_04", "h01_06"]);
+    assert_eq!(pst.command, "python forward_run.py");
+    assert_eq!(pst.templates.len(), 2);
+    assert_eq!(
+        pst.instructions,
+        [("out1.dat.ins".to_string(), "out1.dat".to_string())]
+    );
+    assert_eq!(pst.noptmax, -1);
+    assert_eq!(
+        pst.ignored,
+        [
+            "singular value decomposition",
+            "parameter groups",
+            "observation groups"
+        ]
+    );
+}
+
+/// PEST's phi of PEST++'s case at its initial values: the templates written with them, the
+/// model's output read with the instruction file, Σ (w·(obs − sim))² over the observations:
+/// two weighted ones, each 0.5 off with weight 10.
+#[test]
+fn pestpps_case_has_the_phi_of_its_weighted_residuals() {
+    use super::control::ControlFile;
+    let pst = ControlFile::parse(&pestpp("pest.pst"), "pest.pst").unwrap();
+    let values = pst.model_values(&BTreeMap::new());
+    let written: Vec<String> = pst
+        .templates
+        .iter()
+        .map(|(tpl, _)| {
+            let template = Template::parse(&pestpp(tpl), tpl).unwrap();
+            template.write(&values).unwrap()
+        })
+        .collect();
+    // k_02 starts at 2.5000000000111111 (in a 14-character space); stage at 1.
+    assert!(written[0].contains(" 2.500000000011 "), "{}", written[0]);
+    assert!(written[1].trim_start().starts_with("1. "), "{}", written[1]);
+    let (ins, _) = &pst.instructions[0];
+    let simulated: BTreeMap<String, f64> = read_by_name(ins, "out1_copy.dat")
+        .into_iter()
+        .map(|(k, v)| (k.to_ascii_lowercase(), v))
+        .collect();
+    let phi = pst.phi(&simulated).unwrap();
+    assert!((phi - 50.0).abs() < 1e-12, "{phi}");
+    let mut short = simulated.clone();
+    short.remove("h01_04");
+    assert!(pst.phi(&short).unwrap_err().contains("h01_04"));
+}

@@ -1,8 +1,9 @@
 //! calib's PEST instruction reader against pyemu's (PEST++'s Python tools, no code shared):
 //! PEST++'s own cases, and 200 drawn cases (output files of words and numbers in every
-//! format, instruction files using every form on them), each read alike by both.
+//! format, instruction files using every form on them), each read alike by both; and PEST's
+//! phi of PEST++'s control file at its initial values, as pyemu computes it.
 
-use calib_model::command::Instructions;
+use calib_model::command::{ControlFile, Instructions};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -247,4 +248,49 @@ fn drawn_cases_are_read_as_pyemu_reads_them() {
         read += ours.len();
     }
     assert!(read > 500, "{read} observations read in all");
+}
+
+/// PEST++'s `tplins_test_1` run as its command runs it (its `forward_run.py` copies the
+/// model's outputs into place): calib's phi from the control file, the instruction file and
+/// the output equals pyemu's from the same files.
+#[test]
+fn pestpps_phi_at_its_initial_values_is_pyemus() {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/pestpp/tplins_test_1");
+    let dir = tempfile::tempdir().unwrap();
+    for f in ["pest.pst", "out1.dat.ins"] {
+        std::fs::copy(data.join(f), dir.path().join(f)).unwrap();
+    }
+    std::fs::copy(data.join("out1_copy.dat"), dir.path().join("out1.dat")).unwrap();
+    let pst_file = dir.path().join("pest.pst");
+    let pst = ControlFile::parse(&std::fs::read_to_string(&pst_file).unwrap(), "pest.pst").unwrap();
+    let mut simulated = BTreeMap::new();
+    for (ins, out) in &pst.instructions {
+        simulated.extend(calib(&dir.path().join(ins), &dir.path().join(out)));
+    }
+    let ours = pst.phi(&simulated).unwrap();
+    let output = std::process::Command::new("python3")
+        .arg(repo().join("tests/python/pest_phi.py"))
+        .arg(&pst_file)
+        .arg(dir.path())
+        .output();
+    let output = match output {
+        Ok(o) if o.status.code() == Some(3) => {
+            return calib_model::testing::skip("pyemu is missing: pip install pyemu")
+        }
+        Ok(o) => o,
+        Err(e) => return calib_model::testing::skip(&format!("python3 cannot run: {e}")),
+    };
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let theirs: serde_json::Value = serde_json::from_slice(&output.stdout).unwrap();
+    assert_eq!(theirs["observations"], pst.observations.len());
+    let theirs = theirs["phi"].as_f64().unwrap();
+    assert!(
+        ((ours - theirs) / theirs).abs() < 1e-12,
+        "calib {ours}, pyemu {theirs}"
+    );
+    assert!((ours - 50.0).abs() < 1e-9, "{ours}");
 }
