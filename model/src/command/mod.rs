@@ -7,11 +7,17 @@
 
 pub mod control;
 pub mod instructions;
+pub mod run;
 pub mod template;
 
 pub use control::ControlFile;
 pub use instructions::{Instructions, PestFileError};
+pub use run::{CommandModel, RunFailure};
 pub use template::Template;
 
 #[cfg(test)]
 mod tests;
+
+#[cfg(test)]
+#[path = "run_tests.rs"]
+mod run_tests;

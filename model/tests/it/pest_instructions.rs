@@ -294,3 +294,60 @@ fn pestpps_phi_at_its_initial_values_is_pyemus() {
     );
     assert!((ours - 50.0).abs() < 1e-9, "{ours}");
 }
+
+/// PEST++'s case run for real: its folder copied into a private run folder, its templates
+/// written with the initial values, its `forward_run.py` run (by python3) and its output read:
+/// the observations give phi 50, and the run folder is gone.
+#[test]
+fn pestpps_case_runs_as_a_command_and_gives_its_phi() {
+    use calib_model::command::{CommandModel, Template};
+    if std::process::Command::new("python3")
+        .arg("-c")
+        .arg("")
+        .status()
+        .is_err()
+    {
+        return calib_model::testing::skip("python3 cannot run");
+    }
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/pestpp/tplins_test_1");
+    let read = |f: &str| std::fs::read_to_string(data.join(f)).unwrap();
+    let pst = ControlFile::parse(&read("pest.pst"), "pest.pst").unwrap();
+    let model = CommandModel {
+        folder: data.clone(),
+        // The case names `python`; Debian's is `python3`.
+        command: pst.command.replace("python ", "python3 "),
+        templates: pst
+            .templates
+            .iter()
+            .map(|(t, f)| (Template::parse(&read(t), t).unwrap(), f.into()))
+            .collect(),
+        instructions: pst
+            .instructions
+            .iter()
+            .map(|(i, f)| (Instructions::parse(&read(i), i).unwrap(), f.into()))
+            .collect(),
+        deadline: std::time::Duration::from_secs(60),
+    };
+    let scratch = tempfile::tempdir().unwrap();
+    let values = model
+        .run(&pst.model_values(&BTreeMap::new()), scratch.path())
+        .unwrap();
+    let names = model.instructions[0].0.observations();
+    let simulated: BTreeMap<String, f64> = names
+        .iter()
+        .map(|n| n.to_ascii_lowercase())
+        .zip(values)
+        .collect();
+    assert_eq!(
+        pst.phi(&simulated).unwrap(),
+        50.000000000000014_f64
+            .min(50.0)
+            .max(pst.phi(&simulated).unwrap())
+    );
+    assert!((pst.phi(&simulated).unwrap() - 50.0).abs() < 1e-9);
+    assert_eq!(
+        std::fs::read_dir(scratch.path()).unwrap().count(),
+        0,
+        "the run folder is removed"
+    );
+}
