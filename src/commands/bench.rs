@@ -102,6 +102,8 @@ enum Suite {
     Diagnose(super::bench_diagnose::Args),
     /// The cost of a model run as an FMU against the same equations built in.
     Fmu(super::bench_fmu::Args),
+    /// What one run of a command model costs beside the command's own time.
+    Command(super::bench_command::Args),
     /// Search methods compared: rounds and evaluations to the optimum, runs reaching it,
     /// wall time on 1 to 512 simulated workers.
     Search(super::bench_search::Args),
@@ -138,6 +140,7 @@ pub fn run(args: Args) -> Outcome {
         Some(Suite::Store(store)) => return super::bench_store::run(store),
         Some(Suite::Diagnose(diagnose)) => return super::bench_diagnose::run(diagnose),
         Some(Suite::Fmu(fmu)) => return super::bench_fmu::run(fmu),
+        Some(Suite::Command(command)) => return super::bench_command::run(command),
         Some(Suite::Search(search)) => return super::bench_search::run(search),
         None => {}
     }

@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod bench_cluster;
+pub mod bench_command;
 pub mod bench_diagnose;
 pub mod bench_fmu;
 pub mod bench_matrix;

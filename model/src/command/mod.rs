@@ -12,7 +12,7 @@ pub mod template;
 
 pub use control::ControlFile;
 pub use instructions::{Instructions, PestFileError};
-pub use run::{CommandModel, RunFailure};
+pub use run::{CommandModel, RunFailure, RunFolder};
 pub use template::Template;
 
 #[cfg(test)]

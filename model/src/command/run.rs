@@ -1,7 +1,9 @@
-//! One run of a command model: the model's folder copied into a private run folder, each
-//! template written there with the parameters' values, the command run in it by the shell in
-//! a process group of its own with a deadline, each output read with its instruction file,
-//! and the folder removed.
+//! Runs of a command model. A slot's run folder is the model's folder copied once
+//! ([`CommandModel::prepare`]); each run in it ([`CommandModel::run_in`]) removes the outputs
+//! a run before left, writes each template with the parameters' values, runs the command by
+//! the shell in a process group of its own with a deadline, and reads each output with its
+//! instruction file. The folder is removed when its slot drops it. As with PEST++'s agents, a
+//! command that changes the other files of its folder changes them for the slot's next runs.
 //!
 //! A run that cannot start, exits non-zero, outlives its deadline or leaves an output its
 //! instructions cannot read is a [`RunFailure`] that says which, with the last lines the
@@ -17,12 +19,10 @@ use std::fmt;
 use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 /// Lines of the command's standard error a failure quotes.
 pub const QUOTED_LINES: usize = 5;
-/// How often a running command is checked on.
-const POLL: Duration = Duration::from_millis(5);
 
 /// A command model: its folder, its command line, its templates and instruction files
 /// (each with the file it writes or reads, relative to the run folder).
@@ -76,22 +76,55 @@ impl fmt::Display for RunFailure {
 
 impl std::error::Error for RunFailure {}
 
+/// A slot's private copy of the model's folder, removed when dropped.
+pub struct RunFolder(tempfile::TempDir);
+
+impl RunFolder {
+    pub fn path(&self) -> &Path {
+        self.0.path()
+    }
+}
+
 impl CommandModel {
-    /// Run the model with the parameters' values `values` (by name, as the templates name
-    /// them) in a folder made under `scratch`; the observations, in the order of the
-    /// instruction files and, in each, of its observations.
+    /// A run folder for one slot: the model's folder copied into a new folder under
+    /// `scratch`.
+    pub fn prepare(&self, scratch: &Path) -> Result<RunFolder, RunFailure> {
+        let folder = tempfile::Builder::new()
+            .prefix("calib-run-")
+            .tempdir_in(scratch)
+            .map_err(|e| RunFailure::Start(format!("run folder in {}: {e}", scratch.display())))?;
+        copy_folder(&self.folder, folder.path())
+            .map_err(|e| RunFailure::Start(format!("copying {}: {e}", self.folder.display())))?;
+        Ok(RunFolder(folder))
+    }
+
+    /// One run in a folder of its own under `scratch`, removed after it.
     pub fn run(
         &self,
         values: &BTreeMap<String, f64>,
         scratch: &Path,
     ) -> Result<Vec<f64>, RunFailure> {
-        let folder = tempfile::Builder::new()
-            .prefix("calib-run-")
-            .tempdir_in(scratch)
-            .map_err(|e| RunFailure::Start(format!("run folder in {}: {e}", scratch.display())))?;
+        self.run_in(&self.prepare(scratch)?, values)
+    }
+
+    /// Run the model in `folder` with the parameters' values `values` (by name, as the
+    /// templates name them); the observations, in the order of the instruction files and, in
+    /// each, of its observations.
+    pub fn run_in(
+        &self,
+        folder: &RunFolder,
+        values: &BTreeMap<String, f64>,
+    ) -> Result<Vec<f64>, RunFailure> {
         let run = folder.path();
-        copy_folder(&self.folder, run)
-            .map_err(|e| RunFailure::Start(format!("copying {}: {e}", self.folder.display())))?;
+        // An output a run before left is not this run's.
+        for (_, file) in &self.instructions {
+            match std::fs::remove_file(run.join(file)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(RunFailure::Start(format!("{}: {e}", file.display())))
+                }
+                _ => {}
+            }
+        }
         for (template, file) in &self.templates {
             let text = template.write(values).map_err(RunFailure::Input)?;
             std::fs::write(run.join(file), text)
@@ -100,8 +133,7 @@ impl CommandModel {
         self.execute(run)?;
         let mut observations = Vec::new();
         for (instructions, file) in &self.instructions {
-            let path = run.join(file);
-            let text = std::fs::read(&path).map_err(|e| {
+            let text = std::fs::read(run.join(file)).map_err(|e| {
                 RunFailure::Output(PestFileError {
                     file: file.display().to_string(),
                     line: 0,
@@ -136,34 +168,45 @@ impl CommandModel {
             .spawn()
             .map_err(|e| RunFailure::Start(format!("`{}`: {e}", self.command)))?;
         let group = child.id() as libc::pid_t;
-        let started = Instant::now();
-        let status = loop {
-            match child.try_wait() {
-                Ok(Some(status)) => break Some(status),
-                Ok(None) if started.elapsed() >= self.deadline => break None,
-                Ok(None) => std::thread::sleep(POLL),
-                Err(e) => {
-                    kill_group(group);
-                    return Err(RunFailure::Start(format!("waiting for the command: {e}")));
-                }
-            }
-        };
+        // A thread waits for the command to end, without reaping it (`WNOWAIT`): its end is
+        // seen at once, not at a poll, and its id stays its own until the group is killed.
+        let (sender, ended) = std::sync::mpsc::channel();
+        let waiter = std::thread::spawn(move || {
+            // SAFETY: waitid writes only into `info`, which lives for the call.
+            let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
+            let waited = unsafe {
+                libc::waitid(
+                    libc::P_PID,
+                    group as libc::id_t,
+                    &mut info,
+                    libc::WEXITED | libc::WNOWAIT,
+                )
+            };
+            let _ = sender.send(waited);
+        });
+        let in_time = ended.recv_timeout(self.deadline).is_ok();
+        // What the command started in its group ends with it (and the command itself, at
+        // the deadline); then it is reaped.
         kill_group(group);
-        if status.is_none() {
-            let _ = child.wait();
-        }
+        let status = child
+            .wait()
+            .map_err(|e| RunFailure::Start(format!("waiting for the command: {e}")));
+        let _ = waiter.join();
+        let status = status?;
         let stderr = last_lines(&stderr_path);
-        match status {
-            None => Err(RunFailure::Deadline {
+        if !in_time {
+            return Err(RunFailure::Deadline {
                 seconds: self.deadline.as_secs_f64(),
                 stderr,
-            }),
-            Some(status) if !status.success() => Err(RunFailure::Exit {
+            });
+        }
+        if !status.success() {
+            return Err(RunFailure::Exit {
                 status: exit_words(status),
                 stderr,
-            }),
-            Some(_) => Ok(()),
+            });
         }
+        Ok(())
     }
 }
 

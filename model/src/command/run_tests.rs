@@ -135,3 +135,27 @@ fn a_value_that_cannot_be_written_is_a_failure_before_anything_runs() {
     assert!(matches!(failure, RunFailure::Input(_)), "{failure}");
     assert_eq!(std::fs::read_dir(scratch.path()).unwrap().count(), 0);
 }
+
+/// Runs in one slot's folder: each reads its own output, never one a run before left.
+#[test]
+fn a_slots_runs_read_their_own_outputs_never_a_stale_one() {
+    let (folder, scratch) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    // Writes y = 2k the first time, nothing after (a marker file says it ran once).
+    let script = "if [ -e ran ]; then exit 0; fi\ntouch ran\nawk '{ print \"y = \" $3 * 2 }' in.txt > out.txt\n";
+    let model = model(folder.path(), script, Duration::from_secs(30));
+    let slot = model.prepare(scratch.path()).unwrap();
+    let first = model.run_in(&slot, &BTreeMap::from([("k".to_string(), 1.25)]));
+    assert_eq!(first.unwrap(), [2.5]);
+    let second = model.run_in(&slot, &BTreeMap::from([("k".to_string(), 4.0)]));
+    let failure = second.unwrap_err();
+    assert!(
+        failure.to_string().contains("left no readable output"),
+        "{failure}"
+    );
+    drop(slot);
+    assert_eq!(
+        std::fs::read_dir(scratch.path()).unwrap().count(),
+        0,
+        "the slot's folder goes with it"
+    );
+}
