@@ -4,9 +4,9 @@
 //! into a message. No campaign text passes between the two.
 
 use calib_engine::campaign::spec::{
-    at, default_max_evaluations, default_starts, CampaignSpec, DiagnosisSection, EffectEntry,
-    ExperimentEntry, InputEntry, MeasurementSection, ModelSection, OutputEntry, ParameterEntry,
-    SearchSection, SolverSection, Spanned, WindowSection,
+    at, default_max_evaluations, default_methods, default_starts, CampaignSpec, DiagnosisSection,
+    EffectEntry, ExperimentEntry, InputEntry, MeasurementSection, ModelSection, OutputEntry,
+    ParameterEntry, SearchSection, SolverSection, Spanned, WindowSection,
 };
 use calib_engine::campaign::{Method, Scale};
 use calib_proto::v1 as pb;
@@ -134,12 +134,17 @@ fn values<'a>(
 
 /// The `[search]` section; a method, starts or budget the spec cannot hold is refused.
 fn search_section(s: &pb::Search) -> Result<Spanned<SearchSection>, String> {
-    let methods = s
-        .methods
-        .iter()
-        .enumerate()
-        .map(|(k, m)| named::<Method>(m, &format!("search.methods[{k}]")))
-        .collect::<Result<_, _>>()?;
+    // No method named is the file's default: the campaign's checks refuse it where a search
+    // runs; an analysis, which runs none, takes the campaign as it is.
+    let methods = if s.methods.is_empty() {
+        default_methods()
+    } else {
+        s.methods
+            .iter()
+            .enumerate()
+            .map(|(k, m)| named::<Method>(m, &format!("search.methods[{k}]")))
+            .collect::<Result<_, _>>()?
+    };
     Ok(at(SearchSection {
         methods,
         starts: match s.starts {
@@ -543,6 +548,12 @@ step = 0.01
         assert_eq!(message.search.unwrap().methods, ["powell"]);
         let none = campaign_message("[model]\nname = \"furuta\"\n", "d").unwrap();
         assert_eq!(none.search, None);
+        // A message naming no method takes the default, as a file without `methods` does
+        // (SubmitCampaign refuses it before; an analysis runs no search).
+        let mut empty = none.clone();
+        empty.search = Some(pb::Search::default());
+        let spec = campaign_spec(&empty, Path::new("/data/x.csv"), "time").unwrap();
+        assert_eq!(spec.search.unwrap().get_ref().methods, default_methods());
     }
 
     /// What the spec cannot hold is refused naming the message's field: an unknown method
