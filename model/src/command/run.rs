@@ -174,13 +174,22 @@ impl CommandModel {
         let waiter = std::thread::spawn(move || {
             // SAFETY: waitid writes only into `info`, which lives for the call.
             let mut info: libc::siginfo_t = unsafe { std::mem::zeroed() };
-            let waited = unsafe {
-                libc::waitid(
-                    libc::P_PID,
-                    group as libc::id_t,
-                    &mut info,
-                    libc::WEXITED | libc::WNOWAIT,
-                )
+            let waited = loop {
+                let waited = unsafe {
+                    libc::waitid(
+                        libc::P_PID,
+                        group as libc::id_t,
+                        &mut info,
+                        libc::WEXITED | libc::WNOWAIT,
+                    )
+                };
+                // Interrupted by a signal: the command has not ended; wait again.
+                if waited == -1
+                    && std::io::Error::last_os_error().kind() == std::io::ErrorKind::Interrupted
+                {
+                    continue;
+                }
+                break waited;
             };
             let _ = sender.send(waited);
         });
